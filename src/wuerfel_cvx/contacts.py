@@ -1,0 +1,127 @@
+"""Finding point-versus-edge contacts: a broad phase and the edge rule.
+
+Broad phase
+    A :class:`scipy.spatial.cKDTree` on square centres keeps square pairs whose
+    bounding circles come within the margin; squares against tables are checked
+    directly (there are few tables).  Only those pairs are examined further.
+
+Edge rule
+    The seed (section 2.3) assigns each foreign point to one edge of a square by the
+    angular sector it lies in, seen from the square's centre.  For a square the
+    sectors are bounded by its diagonals, which is exactly the set of points whose
+    *largest signed distance* to the 4 edge lines belongs to that edge; we use that
+    form because it carries over to rectangular tables and lets ties be broken.  A
+    tie (a point exactly at an edge's end, as in an aligned stack) goes to the edge
+    that best separates the whole pair (the separating-axis choice), so a corner
+    resting on a corner is held by the face it rests on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .geometry import FloatArray, edge_distances
+from .model import IntArray, Model
+
+#: Two edge distances closer than this (m) count as a tie at a corner.
+TIE_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class Contacts:
+    """Point-versus-edge pairs, one row each.
+
+    Indices refer to the all-points array of :meth:`Model.all_points`.  The edge is in
+    contact order (clockwise), so ``side_value(p[edge_i], p[edge_j], p[point])`` is
+    positive when the point is outside (see :mod:`wuerfel_cvx.geometry`).
+    """
+
+    point: IntArray
+    edge_i: IntArray
+    edge_j: IntArray
+    point_body: IntArray
+    edge_body: IntArray
+    distance: FloatArray
+    """Signed distance (m) of the point from the edge line, positive outside."""
+
+    def __len__(self) -> int:
+        return int(self.point.shape[0])
+
+    @classmethod
+    def empty(cls) -> Contacts:
+        """No contacts."""
+        none = np.zeros(0, dtype=np.int64)
+        return cls(none, none, none, none, none, np.zeros(0))
+
+
+def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntArray:
+    """Ordered (edge body, point body) pairs that may touch, ``(P, 2)``.
+
+    ``reach`` ``(n_bodies,)`` (m) is how far beyond its circumcircle each body must be
+    looked for.  Table-table pairs are never returned.
+    """
+    n, t = model.n_squares, model.n_tables
+    corners = all_points.reshape(-1, 4, 2)
+    centers = corners.mean(axis=1)
+    radii = np.linalg.norm(corners - centers[:, None, :], axis=2).max(axis=1)
+    bound = radii + reach
+    unordered: list[tuple[int, int]] = []
+    if n > 1:
+        tree = cKDTree(centers[:n])
+        candidates = tree.query_pairs(r=2.0 * float(bound[:n].max()), output_type="ndarray")
+        if len(candidates):
+            dist = np.linalg.norm(centers[candidates[:, 0]] - centers[candidates[:, 1]], axis=1)
+            keep = dist <= bound[candidates[:, 0]] + bound[candidates[:, 1]]
+            unordered.extend(map(tuple, candidates[keep]))
+    if t:
+        dist = np.linalg.norm(centers[:n, None, :] - centers[None, n:, :], axis=2)
+        close = np.argwhere(dist <= bound[:n, None] + bound[None, n:])
+        unordered.extend((int(a), int(n + b)) for a, b in close)
+    if not unordered:
+        return np.zeros((0, 2), dtype=np.int64)
+    pairs = np.array(unordered, dtype=np.int64)
+    return np.concatenate([pairs, pairs[:, ::-1]])
+
+
+def find_contacts(
+    model: Model, points: FloatArray, margin: FloatArray | float
+) -> Contacts:
+    """Point-edge contacts whose signed distance is at most ``margin`` (m).
+
+    ``margin`` is a scalar or one value per body ``(n_bodies,)``; a pair uses the sum
+    of its two bodies' values.  Returns one row per point that is within reach of a
+    foreign body, with the edge chosen by the rule in the module docstring.
+    """
+    all_points = model.all_points(points)
+    reach = np.broadcast_to(np.asarray(margin, dtype=np.float64), (model.n_bodies,))
+    pairs = body_pairs(model, all_points, reach)
+    if len(pairs) == 0:
+        return Contacts.empty()
+    corners = all_points.reshape(-1, 4, 2)
+    edge_body, point_body = pairs[:, 0], pairs[:, 1]
+    # distances[p, k, e]: point k of the point body against edge e of the edge body.
+    distances = np.stack([
+        edge_distances(corners[b], corners[w]) for w, b in zip(edge_body, point_body, strict=True)
+    ])
+    separation = distances.min(axis=1)  # (P, 4): the pair's separation along each edge normal
+    best = distances.max(axis=2, keepdims=True)
+    tied = distances >= best - TIE_TOLERANCE
+    score = np.where(tied, separation[:, None, :], -np.inf)
+    edge = np.argmax(score, axis=2)  # (P, 4)
+    chosen = np.take_along_axis(distances, edge[:, :, None], axis=2)[:, :, 0]
+    pair_margin = reach[edge_body] + reach[point_body]
+    keep = chosen <= pair_margin[:, None]
+    pair_index, corner = np.nonzero(keep)
+    edge_index = edge[pair_index, corner]
+    w = edge_body[pair_index]
+    return Contacts(
+        point=4 * point_body[pair_index] + corner,
+        edge_i=4 * w + (edge_index + 1) % 4,
+        edge_j=4 * w + edge_index,
+        point_body=point_body[pair_index],
+        edge_body=w,
+        distance=chosen[pair_index, corner],
+    )

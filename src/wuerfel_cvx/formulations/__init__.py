@@ -1,0 +1,30 @@
+"""Formulations of a time step as a QP, chosen by name."""
+
+from __future__ import annotations
+
+from ..errors import InputError
+from .base import Formulation
+from .qp import StepQP, declare_qp
+from .seed import SeedFormulation
+from .velocity import VelocityFormulation, rigid_step
+
+FORMULATIONS: dict[str, type[SeedFormulation] | type[VelocityFormulation]] = {
+    "velocity": VelocityFormulation,
+    "seed": SeedFormulation,
+}
+"""Registry of formulation names (the first is the default)."""
+
+
+def get_formulation(name: str | Formulation) -> Formulation:
+    """A formulation by name (case-insensitive), or the object itself."""
+    if not isinstance(name, str):
+        return name
+    key = name.strip().lower()
+    if key not in FORMULATIONS:
+        raise InputError(f"unknown formulation '{name}' (available: {', '.join(FORMULATIONS)})",
+                         field="formulation")
+    return FORMULATIONS[key]()
+
+
+__all__ = ["FORMULATIONS", "Formulation", "SeedFormulation", "StepQP", "VelocityFormulation",
+           "declare_qp", "get_formulation", "rigid_step"]

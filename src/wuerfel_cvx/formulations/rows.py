@@ -1,0 +1,94 @@
+"""Constraint rows shared by the formulations: rods, sides and held table corners.
+
+Each function returns gradient blocks for :func:`~.qp.point_rows`; a point's column
+index is its row in the all-points array, or ``-1`` if it is a fixed constant.
+Rows are scaled to be dimensionally uniform: rod rows are divided by the rod length
+and side rows by the edge length, so an equality residual is a velocity (m/s) in
+the velocity form and an acceleration (m/s^2) in the acceleration form.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..contacts import Contacts
+from ..geometry import FloatArray, edge_parameter, rot90, side_gradients
+from ..model import IntArray, Model
+
+
+def unknown_index(model: Model, index: IntArray) -> IntArray:
+    """Column block of each all-points row, ``-1`` for fixed table corners."""
+    if model.table_mass is not None:
+        return index
+    return np.where(index < model.n_points, index, -1)
+
+
+def n_unknown_points(model: Model) -> int:
+    """Points that carry unknowns: the square corners, plus table corners if heavy."""
+    return model.n_points + (4 * model.n_tables if model.table_mass is not None else 0)
+
+
+def unknown_masses(model: Model) -> FloatArray:
+    """Mass (kg) of each unknown coordinate, ``(2 n_unknown_points,)``."""
+    masses = model.point_masses
+    if model.table_mass is not None:
+        masses = np.concatenate([masses, np.full(4 * model.n_tables, model.table_mass)])
+    return np.repeat(masses, 2)
+
+
+def rod_blocks(model: Model, points: FloatArray) -> tuple[list[tuple[IntArray, FloatArray]],
+                                                          FloatArray]:
+    """Rod gradient blocks ``(d/l, -d/l)`` with ``d = p_i - p_j``, and ``C/l`` per rod.
+
+    ``C = (|p_i - p_j|^2 - l^2) / 2`` (m^2) is the rod's position error; ``dC/dp_i = d``.
+    """
+    i, j = model.rods[:, 0], model.rods[:, 1]
+    d = points[i] - points[j]
+    length = model.rod_lengths[:, None]
+    error = 0.5 * (np.sum(d * d, axis=1) - model.rod_lengths**2) / model.rod_lengths
+    return [(i, d / length), (j, -d / length)], error
+
+
+def side_blocks(all_points: FloatArray, contacts: Contacts,
+                model: Model) -> list[tuple[IntArray, FloatArray]]:
+    """Exact gradient of ``A / |p_j - p_i|`` blocks for each contact (edge length fixed).
+
+    dA/dp_i = rot90(p_k - p_j), dA/dp_j = rot90(p_i - p_k), dA/dp_k = rot90(p_j - p_i).
+    """
+    p_i, p_j, p_k = (all_points[contacts.edge_i], all_points[contacts.edge_j],
+                     all_points[contacts.point])
+    g_i, g_j, g_k = side_gradients(p_i, p_j, p_k)
+    scale = 1.0 / np.linalg.norm(p_j - p_i, axis=1)[:, None]
+    return [(unknown_index(model, contacts.edge_i), g_i * scale),
+            (unknown_index(model, contacts.edge_j), g_j * scale),
+            (unknown_index(model, contacts.point), g_k * scale)]
+
+
+def seed_side_blocks(all_points: FloatArray, contacts: Contacts,
+                     model: Model) -> list[tuple[IntArray, FloatArray]]:
+    """Blocks of the seed's eq. (13), corrected, divided by the edge length.
+
+    ``<a_k, n> - alpha <a_j, n> - (1 - alpha) <a_i, n>`` with ``n = rot90(p_j - p_i)``
+    and alpha by projection.
+    """
+    p_i, p_j, p_k = (all_points[contacts.edge_i], all_points[contacts.edge_j],
+                     all_points[contacts.point])
+    n = rot90(p_j - p_i)
+    alpha = edge_parameter(p_i, p_j, p_k)[:, None]
+    scale = 1.0 / np.linalg.norm(p_j - p_i, axis=1)[:, None]
+    return [(unknown_index(model, contacts.edge_i), -(1.0 - alpha) * n * scale),
+            (unknown_index(model, contacts.edge_j), -alpha * n * scale),
+            (unknown_index(model, contacts.point), n * scale)]
+
+
+def held_table_blocks(model: Model) -> list[tuple[IntArray, FloatArray]]:
+    """Rows fixing each coordinate of each heavy table corner (seed 2.4)."""
+    if model.table_mass is None or model.n_tables == 0:
+        return []
+    corners = np.arange(model.n_points, model.n_points + 4 * model.n_tables)
+    rows = 2 * len(corners)
+    index = np.full(rows, -1)
+    grad_x = np.zeros((rows, 2))
+    index[0::2], index[1::2] = corners, corners
+    grad_x[0::2, 0], grad_x[1::2, 1] = 1.0, 1.0
+    return [(index, grad_x)]

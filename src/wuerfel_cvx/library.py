@@ -1,0 +1,166 @@
+"""Named scenes, defined once and shared by tests, benchmarks and notebooks.
+
+Each entry is a builder; families take a number after a dash (``stack-10``,
+``pyramid-4``, ``rain-50``, ``heavy-on-light-1000``).  Every scene has a floor whose
+top face is at ``y = 0``; unit squares unless stated otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+from .scene import Scene, Square, Table
+
+FLOOR = Table(center=(0.0, -0.5), size=(40.0, 1.0), angle=0.0)
+"""The default table: 40 m wide, 1 m thick, top face at y = 0."""
+
+
+@dataclass(frozen=True)
+class SceneEntry:
+    """A named scene or family of scenes in the library."""
+
+    pattern: str
+    """Name as shown to users; ``N`` stands for a positive integer."""
+    description: str
+    """One line on what the scene tests."""
+    build: Callable[[int | None], Scene]
+    """Builder; receives the family number or ``None``."""
+    default_number: int | None = None
+    """Number used when a family is named without one (``None``: required)."""
+
+
+def _single_drop(_: int | None) -> Scene:
+    return Scene("single-drop", (Square(center=(0.0, 2.0)),), (FLOOR,))
+
+
+def _tilted_drop(_: int | None) -> Scene:
+    return Scene("tilted-drop", (Square(center=(0.0, 2.0), angle=0.3),), (FLOOR,))
+
+
+def _corner_drop(_: int | None) -> Scene:
+    return Scene("corner-drop", (Square(center=(0.0, 2.0), angle=math.pi / 4),), (FLOOR,))
+
+
+def _resting_square(_: int | None) -> Scene:
+    return Scene("resting-square", (Square(center=(0.0, 0.5)),), (FLOOR,))
+
+
+def _spinning_flight(_: int | None) -> Scene:
+    square = Square(center=(0.0, 10.0), angle=0.2, velocity=(1.5, 4.0), angular_velocity=3.0)
+    return Scene("spinning-flight", (square,), ())
+
+
+def _stack(n: int | None) -> Scene:
+    count = _require(n, "stack")
+    squares = tuple(Square(center=(0.0, 0.5 + k)) for k in range(count))
+    return Scene(f"stack-{count}", squares, (FLOOR,))
+
+
+def _pyramid(n: int | None) -> Scene:
+    base = _require(n, "pyramid")
+    pitch = 1.1  # 0.1 m between neighbours in a row: no corner meets a corner
+    squares = []
+    for row in range(base):
+        count = base - row
+        for i in range(count):
+            squares.append(Square(center=((i - (count - 1) / 2) * pitch, 0.5 + row)))
+    return Scene(f"pyramid-{base}", tuple(squares), (FLOOR,))
+
+
+def _rain(n: int | None) -> Scene:
+    count = _require(n, "rain")
+    rng = np.random.default_rng(20261122 + count)
+    columns = max(3, math.ceil(math.sqrt(count)))
+    rows = math.ceil(count / columns)
+    cell = 1.6
+    width = columns * cell
+    height = rows * cell + 2.0
+    floor = Table(center=(0.0, -0.5), size=(width + 2.0, 1.0))
+    left = Table(center=(-width / 2 - 0.5, height / 2), size=(1.0, height))
+    right = Table(center=(width / 2 + 0.5, height / 2), size=(1.0, height))
+    squares = []
+    for k in range(count):
+        row, col = divmod(k, columns)
+        size = float(rng.uniform(0.6, 1.0))
+        jitter = rng.uniform(-0.05, 0.05, size=2)
+        center = (-width / 2 + (col + 0.5) * cell + float(jitter[0]),
+                  1.0 + (row + 0.5) * cell + float(jitter[1]))
+        squares.append(Square(center=center, size=size, angle=float(rng.uniform(0, math.pi / 2)),
+                              mass=size * size))
+    return Scene(f"rain-{count}", tuple(squares), (floor, left, right))
+
+
+def _heavy_on_light(n: int | None) -> Scene:
+    ratio = _require(n, "heavy-on-light")
+    squares = (Square(center=(0.0, 0.5)), Square(center=(0.0, 1.5)),
+               Square(center=(0.0, 2.5), mass=float(ratio)))
+    name = "heavy-on-light" if ratio == 100 else f"heavy-on-light-{ratio}"
+    return Scene(name, squares, (FLOOR,))
+
+
+def _overlap_recovery(_: int | None) -> Scene:
+    squares = (Square(center=(0.0, 0.5)), Square(center=(0.1, 1.25)))
+    return Scene("overlap-recovery", squares, (FLOOR,), allow_overlap=True)
+
+
+def _fast_drop(_: int | None) -> Scene:
+    return Scene("fast-drop", (Square(center=(0.0, 3.0), angle=0.1, velocity=(0.0, -40.0)),),
+                 (FLOOR,))
+
+
+def _require(n: int | None, family: str) -> int:
+    if n is None or n < 1:
+        raise InputError(f"'{family}-N' needs a positive integer N", source=family)
+    return n
+
+
+ENTRIES: tuple[SceneEntry, ...] = (
+    SceneEntry("single-drop", "a unit square dropped flat from y = 2 m", _single_drop),
+    SceneEntry("tilted-drop", "a unit square dropped from y = 2 m at 0.3 rad", _tilted_drop),
+    SceneEntry("corner-drop", "a unit square dropped corner first (45 degrees)", _corner_drop),
+    SceneEntry("resting-square", "a unit square resting on the table", _resting_square),
+    SceneEntry("spinning-flight", "a spinning square in free flight, no table",
+               _spinning_flight),
+    SceneEntry("stack-N", "N unit squares stacked exactly, at rest", _stack, 10),
+    SceneEntry("pyramid-N", "a pyramid with N squares in its base, 0.1 m gaps", _pyramid, 4),
+    SceneEntry("rain-N", "N squares of random size and angle falling into a box of tables",
+               _rain, 20),
+    SceneEntry("heavy-on-light-N", "a square of mass N kg on two 1 kg squares (N = 100)",
+               _heavy_on_light, 100),
+    SceneEntry("overlap-recovery", "a square starting 25 % overlapped with the one below",
+               _overlap_recovery),
+    SceneEntry("fast-drop", "a square at 40 m/s: one 1/60 s step moves 0.67 side lengths",
+               _fast_drop),
+)
+
+_NAME = re.compile(r"^(?P<base>[a-z][a-z-]*?)(?:-(?P<number>\d+))?$")
+
+
+def scene_names() -> list[str]:
+    """The library's names as shown to users (``N`` marks a family number)."""
+    return [entry.pattern for entry in ENTRIES]
+
+
+def named_scene(name: str) -> Scene:
+    """Build a library scene by name, e.g. ``"stack-10"``; raises :class:`InputError`."""
+    match = _NAME.match(name.strip().lower())
+    if match:
+        base, number = match["base"], match["number"]
+        for entry in ENTRIES:
+            family = entry.pattern.removesuffix("-N")
+            is_family = entry.pattern.endswith("-N")
+            if is_family and base == family:
+                value = int(number) if number is not None else entry.default_number
+                return entry.build(value)
+            if not is_family and number is None and base == entry.pattern:
+                return entry.build(None)
+            if not is_family and number is not None and f"{base}-{number}" == entry.pattern:
+                return entry.build(None)
+    raise InputError(f"unknown scene '{name}' (named scenes: {', '.join(scene_names())}; "
+                     "or give a .toml path)", source=name)

@@ -1,0 +1,34 @@
+"""Physical diagnostics of a state: rod drift, penetration and energy."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .contacts import find_contacts
+from .geometry import FloatArray
+from .model import Model, State
+
+
+def rod_length_drift(model: Model, points: FloatArray) -> float:
+    """Largest relative rod-length error ``max |(|p_i - p_j| - l) / l|`` (1)."""
+    i, j = model.rods[:, 0], model.rods[:, 1]
+    lengths = np.linalg.norm(points[i] - points[j], axis=1)
+    return float(np.max(np.abs(lengths - model.rod_lengths) / model.rod_lengths))
+
+
+def deepest_penetration(model: Model, points: FloatArray) -> float:
+    """Depth (m) of the deepest corner inside a foreign body (square or table); 0 if none."""
+    contacts = find_contacts(model, points, 0.0)
+    if len(contacts) == 0:
+        return 0.0
+    return float(max(0.0, -np.min(contacts.distance)))
+
+
+def kinetic_energy(model: Model, state: State) -> float:
+    """``sum_i m_i |v_i|^2 / 2`` over the corner masses (J)."""
+    return float(0.5 * np.sum(model.point_masses * np.sum(state.velocities**2, axis=1)))
+
+
+def potential_energy(model: Model, state: State) -> float:
+    """``-sum_i m_i g . p_i`` (J), zero at the origin."""
+    return float(-np.sum(model.point_masses * (state.points @ model.gravity)))

@@ -1,0 +1,103 @@
+"""The mechanical model of a scene: point masses, rods, bodies and the state.
+
+Every body (square or table) owns 4 consecutive rows of the *all-points* array:
+squares first (square ``b`` at rows ``4b..4b+3``), then tables (table ``t`` at rows
+``4(n+t)..4(n+t)+3``), each counter-clockwise.  Square corners are the QP's
+variables; table corners are constants unless the seed's heavy-table variant is
+chosen, in which case they become variables of mass ``table_mass`` held still by an
+equality ("Tischrestriktion").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import InputError
+from .geometry import FloatArray, square_corners
+from .scene import Scene
+
+IntArray = NDArray[np.int64]
+
+#: The 5 rods of a square as corner pairs: 4 sides and the diagonal 0-2 (seed 2.1).
+SQUARE_RODS: tuple[tuple[int, int], ...] = ((0, 1), (1, 2), (2, 3), (3, 0), (0, 2))
+
+
+@dataclass(frozen=True)
+class Model:
+    """Arrays derived once from a :class:`~wuerfel_cvx.scene.Scene`."""
+
+    scene: Scene
+    n_squares: int
+    n_tables: int
+    square_sizes: FloatArray
+    """Side length of each square (m), shape ``(n,)``."""
+    point_masses: FloatArray
+    """Mass of each square corner (kg), shape ``(4 n,)``."""
+    rods: IntArray
+    """Rod end points ``(5 n, 2)`` as rows of the square-points array."""
+    rod_lengths: FloatArray
+    """Rest length of each rod (m), shape ``(5 n,)``."""
+    table_points: FloatArray
+    """Table corners ``(4 t, 2)`` (m), fixed."""
+    reference_corners: FloatArray
+    """Corners ``(n, 4, 2)`` of each square centred at 0 with angle 0 (m)."""
+    gravity: FloatArray
+    """Gravitational acceleration ``(2,)`` (m/s^2)."""
+    table_mass: float | None = None
+    """``None``: tables are constants.  A number (kg per corner): the seed's heavy table."""
+
+    @classmethod
+    def from_scene(
+        cls, scene: Scene, *, table_mass: float | None = None, extra_rod: bool = False
+    ) -> Model:
+        """Derive the model; ``extra_rod`` adds the redundant second diagonal 1-3."""
+        if table_mass is not None and not (np.isfinite(table_mass) and table_mass > 0):
+            raise InputError(f"table_mass must be a positive finite number, got {table_mass}",
+                             field="table_mass")
+        n = scene.n_squares
+        sizes = np.array([s.size for s in scene.squares])
+        masses = np.repeat(np.array([s.mass for s in scene.squares]) / 4.0, 4)
+        pairs = SQUARE_RODS + (((1, 3),) if extra_rod else ())
+        rods = np.array([[4 * b + i, 4 * b + j] for b in range(n) for i, j in pairs],
+                        dtype=np.int64)
+        reference = np.stack([square_corners((0.0, 0.0), s, 0.0) for s in sizes])
+        flat_reference = reference.reshape(-1, 2)
+        lengths = np.linalg.norm(flat_reference[rods[:, 0]] - flat_reference[rods[:, 1]], axis=1)
+        return cls(
+            scene=scene, n_squares=n, n_tables=len(scene.tables), square_sizes=sizes,
+            point_masses=masses, rods=rods, rod_lengths=lengths,
+            table_points=scene.table_points(), reference_corners=reference,
+            gravity=np.asarray(scene.gravity, dtype=np.float64), table_mass=table_mass,
+        )
+
+    @property
+    def n_points(self) -> int:
+        """Number of square corners (the moving points)."""
+        return 4 * self.n_squares
+
+    @property
+    def n_bodies(self) -> int:
+        """Squares plus tables."""
+        return self.n_squares + self.n_tables
+
+    def all_points(self, points: FloatArray) -> FloatArray:
+        """Square corners followed by table corners, ``(4 (n + t), 2)`` (m)."""
+        return np.concatenate([points, self.table_points])
+
+
+@dataclass(frozen=True)
+class State:
+    """Positions and velocities of the square corners at one instant."""
+
+    points: FloatArray
+    """Corner positions ``(4 n, 2)`` (m)."""
+    velocities: FloatArray
+    """Corner velocities ``(4 n, 2)`` (m/s)."""
+
+    @classmethod
+    def initial(cls, scene: Scene) -> State:
+        """The scene's initial state."""
+        return cls(scene.initial_points(), scene.initial_velocities())

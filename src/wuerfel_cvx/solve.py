@@ -1,0 +1,136 @@
+"""Solving a step QP and checking the answer independently of the solver.
+
+:func:`solve_step_qp` calls the solver through cvxpy and then recomputes, from the
+QP's own numeric data, the residuals of the KKT conditions of
+
+    min sum w (x - t)^2   s.t.   E x = e  (multiplier y),   G x >= h  (multiplier z >= 0)
+
+which are ``2 W (x - t) + E^T y - G^T z = 0`` (cvxpy's sign convention), primal
+feasibility and complementarity ``z_i (G x - h)_i = 0``.  Each residual is made
+relative to the size of the terms it balances.  A "solved" step counts as *verified*
+when all three are below ``VERIFY_FACTOR * eps``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import cvxpy as cp
+import numpy as np
+
+from .errors import StepFailure
+from .formulations.qp import StepQP
+from .geometry import FloatArray
+from .solvers import get_solver, tolerance_value
+
+#: A solution is verified when its relative residuals are below this multiple of ``eps``.
+#: Solvers measure their own stopping criteria in scaled or differently normed units, so
+#: the independent check allows two orders of magnitude of slack over ``eps``.
+VERIFY_FACTOR = 100.0
+
+SOLVED = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """Relative KKT residuals of a candidate solution (dimensionless)."""
+
+    primal: float
+    dual: float
+    complementarity: float
+
+    def worst(self) -> float:
+        """The largest of the three."""
+        return max(self.primal, self.dual, self.complementarity)
+
+
+@dataclass(frozen=True)
+class StepSolution:
+    """What a solver returned for one step QP, and how it checks out."""
+
+    x: FloatArray
+    solver: str
+    status: str
+    residuals: Residuals
+    verified: bool
+    solve_wall_time: float
+    """Wall time of the cvxpy ``solve`` call (s), including cvxpy's own work."""
+    solver_time: float
+    """Time the solver itself reports (s); NaN if it reports none."""
+    iterations: int
+
+
+def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
+                  ineq_dual: FloatArray) -> Residuals:
+    """Relative primal, dual and complementarity residuals of ``(x, y, z)``."""
+    objective_grad = 2.0 * qp.weights * (x - qp.target)
+    eq_term = qp.eq_matrix.T @ eq_dual
+    ineq_term = qp.ineq_matrix.T @ ineq_dual
+    stationarity = objective_grad + eq_term - ineq_term
+    dual_scale = 1.0 + max(_inf(objective_grad), _inf(eq_term), _inf(ineq_term))
+    dual = max(_inf(stationarity), _inf(np.minimum(ineq_dual, 0.0))) / dual_scale
+
+    eq_violation = qp.eq_matrix @ x - qp.eq_rhs
+    slack = qp.ineq_matrix @ x - qp.ineq_rhs
+    primal_scale = 1.0 + max(_inf(qp.eq_rhs), _inf(qp.ineq_rhs), _inf(qp.eq_matrix @ x),
+                             _inf(qp.ineq_matrix @ x))
+    primal = max(_inf(eq_violation), _inf(np.minimum(slack, 0.0))) / primal_scale
+
+    complementarity = (_inf(ineq_dual * slack) / (1.0 + _inf(ineq_dual) * primal_scale)
+                       if slack.size else 0.0)
+    return Residuals(primal=primal, dual=dual, complementarity=complementarity)
+
+
+def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "default",
+                  *, step: int = 0) -> StepSolution:
+    """Solve ``qp`` with ``solver`` at tolerance ``tol`` and verify the result.
+
+    Raises :class:`StepFailure` (with ``step``) if the solver raises, reports a status
+    other than optimal, returns non-finite numbers, or claims an inaccurate optimum
+    that fails the residual check.  A claimed optimum that fails the check is
+    returned with ``verified=False`` for the caller to record.
+    """
+    spec = get_solver(solver)
+    eps = tolerance_value(tol)
+    started = time.perf_counter()
+    try:
+        qp.problem.solve(solver=spec.cvxpy_name, **spec.options(eps))
+    except cp.error.SolverError as exc:
+        raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
+    except Exception as exc:  # a solver library raising anything is a failed step
+        raise StepFailure(step, spec.name, "exception", f"{type(exc).__name__}: {exc}") from exc
+    wall = time.perf_counter() - started
+    status = str(qp.problem.status)
+    x = qp.variable.value
+    if status not in SOLVED or x is None:
+        raise StepFailure(step, spec.name, status)
+    x = np.asarray(x, dtype=np.float64)
+    if not np.all(np.isfinite(x)):
+        raise StepFailure(step, spec.name, status, "solution has non-finite entries")
+    eq_dual = _dual(qp.eq_constraint, qp.n_equalities)
+    ineq_dual = _dual(qp.ineq_constraint, qp.n_inequalities)
+    residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
+    verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
+    if status == cp.OPTIMAL_INACCURATE and not verified:
+        raise StepFailure(step, spec.name, status,
+                          f"residuals {residuals.worst():.2e} above {VERIFY_FACTOR * eps:.1e}")
+    stats = qp.problem.solver_stats
+    solver_time = stats.solve_time if stats is not None and stats.solve_time is not None else np.nan
+    iterations = stats.num_iters if stats is not None and stats.num_iters is not None else -1
+    return StepSolution(x=x, solver=spec.name, status=status, residuals=residuals,
+                        verified=verified, solve_wall_time=wall, solver_time=float(solver_time),
+                        iterations=int(iterations))
+
+
+def _dual(constraint: cp.Constraint | None, size: int) -> FloatArray:
+    if constraint is None or size == 0:
+        return np.zeros(0)
+    value = constraint.dual_value
+    if value is None:
+        return np.full(size, np.nan)
+    return np.atleast_1d(np.asarray(value, dtype=np.float64))
+
+
+def _inf(values: FloatArray) -> float:
+    return float(np.max(np.abs(values))) if np.size(values) else 0.0

@@ -1,0 +1,93 @@
+"""A simulated trajectory: states over time, per-step metrics, saving and loading."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .geometry import FloatArray
+
+
+@dataclass
+class Trajectory:
+    """States at ``steps + 1`` instants and one metrics row per step.
+
+    ``points`` and ``velocities`` are ``(steps + 1, 4 n, 2)`` (m and m/s): square ``i``'s
+    corners at rows ``4i..4i+3``, counter-clockwise.  ``times`` is ``(steps + 1,)`` (s).
+    A trajectory cut short by a failed step holds the steps that succeeded.
+    """
+
+    times: FloatArray
+    points: FloatArray
+    velocities: FloatArray
+    metrics: pd.DataFrame
+    table_points: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    """Fixed table corners ``(4 t, 2)`` (m)."""
+    info: dict[str, Any] = field(default_factory=dict)
+    """Run settings: scene, formulation, solver, tolerance, dt, package versions."""
+
+    @property
+    def n_steps(self) -> int:
+        """Number of completed steps."""
+        return int(self.times.shape[0]) - 1
+
+    def metrics_path(self, path: str | Path) -> Path:
+        """Where :meth:`save` puts the metrics CSV for a given ``.npz`` path."""
+        path = Path(path)
+        return path.with_name(path.stem + ".metrics.csv")
+
+    def save(self, path: str | Path) -> Path:
+        """Write ``times``, ``points``, ``velocities`` (and tables, settings) to a ``.npz``.
+
+        The metrics go to ``<stem>.metrics.csv`` beside it.  Returns the ``.npz`` path.
+        """
+        path = Path(path)
+        if path.suffix != ".npz":
+            path = path.with_name(path.name + ".npz")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(path, times=self.times, points=self.points, velocities=self.velocities,
+                 table_points=self.table_points, info=np.array(json.dumps(self.info)))
+        self.metrics.to_csv(self.metrics_path(path), index=False)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> Trajectory:
+        """Read a trajectory written by :meth:`save` (no pickles are loaded)."""
+        path = Path(path)
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {key: data[key] for key in data.files}
+        metrics_file = path.with_name(path.stem + ".metrics.csv")
+        metrics = pd.read_csv(metrics_file) if metrics_file.exists() else pd.DataFrame()
+        return cls(times=arrays["times"], points=arrays["points"],
+                   velocities=arrays["velocities"], metrics=metrics,
+                   table_points=arrays.get("table_points", np.zeros((0, 2))),
+                   info=json.loads(str(arrays["info"])) if "info" in arrays else {})
+
+    def summary(self) -> str:
+        """A few lines on the run: duration, extremes of the metrics, timing."""
+        m = self.metrics
+        lines = [
+            f"scene {self.info.get('scene', '?')}: {self.points.shape[1] // 4} squares, "
+            f"{self.n_steps} steps of {self.info.get('dt', float('nan')):g} s "
+            f"({self.times[-1]:g} s simulated)",
+            f"formulation {self.info.get('formulation')}, solver {self.info.get('solver')}, "
+            f"tol {self.info.get('tol')}",
+        ]
+        if len(m):
+            energy = m["total_energy_J"].to_numpy()
+            lines += [
+                f"max rod drift        {m['rod_drift'].max():.3e} (relative)",
+                f"max penetration      {m['penetration_m'].max():.3e} m",
+                f"energy               {energy[0]:.6g} J -> {energy[-1]:.6g} J "
+                f"(largest one-step rise {np.max(np.diff(energy, prepend=energy[0])):.3e} J)",
+                f"verified steps       {int(m['verified'].sum())}/{len(m)}",
+                f"median build / solve {1e3 * m['build_time_s'].median():.2f} ms / "
+                f"{1e3 * m['solve_time_s'].median():.2f} ms per step "
+                f"(solver's own {1e3 * m['solver_time_s'].median():.3f} ms)",
+            ]
+        return "\n".join(lines)
