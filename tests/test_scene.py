@@ -338,13 +338,6 @@ def test_constructor_checks_values_like_the_loader() -> None:
     assert info.value.field == "gravity[1]"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="Scene.__post_init__/_check_scene (src/wuerfel_cvx/scene.py) checks only values, "
-           "not types: Square(mass='1.0') raises TypeError from math.isfinite instead of "
-           "InputError, contrary to the Scene docstring ('the constructor checks everything "
-           "from_toml checks')",
-)
 def test_constructor_rejects_wrong_types_with_input_error() -> None:
     with pytest.raises(InputError):
         Scene("code", (Square(center=(0.0, 2.0), mass="1.0"),))  # type: ignore[arg-type]

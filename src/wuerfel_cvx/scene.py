@@ -293,27 +293,29 @@ def _check_scene(scene: Scene) -> None:
     source = scene.source
     if not scene.squares:
         raise InputError("a scene needs at least one square", source=source, field="squares")
-    for axis, value in enumerate(scene.gravity):
-        if not math.isfinite(value):
-            raise InputError("must be finite", source=source, field=f"gravity[{axis}]")
+    _vector(list(scene.gravity), source, "gravity")
     for index, sq in enumerate(scene.squares):
         where = f"squares[{index}]"
-        values = {"center": sq.center, "velocity": sq.velocity, "angle": (sq.angle,),
-                  "angular_velocity": (sq.angular_velocity,), "size": (sq.size,),
-                  "mass": (sq.mass,)}
-        for key, vals in values.items():
-            if not all(math.isfinite(v) for v in vals):
-                raise InputError("must be finite", source=source, field=f"{where}.{key}")
-        for key in ("size", "mass"):
-            if getattr(sq, key) <= 0.0:
-                raise InputError(f"must be positive, got {getattr(sq, key)}", source=source,
-                                 field=f"{where}.{key}")
+        if not isinstance(sq, Square):
+            raise InputError(f"expected a Square, got {type(sq).__name__}", source=source,
+                             field=where)
+        _vector(list(sq.center), source, f"{where}.center")
+        _vector(list(sq.velocity), source, f"{where}.velocity")
+        _number(sq.angle, source, f"{where}.angle")
+        _number(sq.angular_velocity, source, f"{where}.angular_velocity")
+        _positive(sq.size, source, f"{where}.size")
+        _positive(sq.mass, source, f"{where}.mass")
     for index, tb in enumerate(scene.tables):
         where = f"tables[{index}]"
-        if not all(math.isfinite(v) for v in (*tb.center, *tb.size, tb.angle)):
-            raise InputError("must be finite", source=source, field=where)
-        if min(tb.size) <= 0.0:
-            raise InputError("size must be positive", source=source, field=f"{where}.size")
+        if not isinstance(tb, Table):
+            raise InputError(f"expected a Table, got {type(tb).__name__}", source=source,
+                             field=where)
+        _vector(list(tb.center), source, f"{where}.center")
+        _number(tb.angle, source, f"{where}.angle")
+        for axis, value in enumerate(_vector(list(tb.size), source, f"{where}.size")):
+            if value <= 0.0:
+                raise InputError(f"must be positive, got {value}", source=source,
+                                 field=f"{where}.size[{axis}]")
     if not scene.allow_overlap:
         _check_no_overlap(scene)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 import cvxpy as cp
@@ -17,6 +18,15 @@ from .errors import InputError
 
 TOLERANCE_PRESETS: dict[str, float] = {"low": 1e-4, "default": 1e-7, "high": 1e-9}
 """Solver tolerance ``eps`` per preset (absolute and relative, in the QP's scaled units)."""
+
+
+def _osqp_polish_option() -> str:
+    """OSQP 1.0 renamed ``polish`` to ``polishing``."""
+    try:
+        major = int(version("osqp").split(".")[0])
+    except PackageNotFoundError:
+        return "polishing"
+    return "polishing" if major >= 1 else "polish"
 
 
 @dataclass(frozen=True)
@@ -40,7 +50,7 @@ SOLVERS: dict[str, SolverSpec] = {
             "tol_gap_abs": eps, "tol_gap_rel": eps, "tol_feas": eps, "tol_ktratio": eps,
             "max_iter": 200}, "interior-point"),
         SolverSpec("OSQP", "OSQP", lambda eps: {
-            "eps_abs": eps, "eps_rel": eps, "polish": True, "max_iter": 200_000},
+            "eps_abs": eps, "eps_rel": eps, _osqp_polish_option(): True, "max_iter": 200_000},
             "ADMM"),
         SolverSpec("PIQP", "PIQP", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, "max_iter": 250}, "proximal interior-point"),
