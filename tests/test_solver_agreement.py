@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from qp_bank import BANK_CASES, qp_bank
 
+from qp_bank import BANK_CASES, qp_bank
 from wuerfel_cvx.solve import VERIFY_FACTOR, solve_step_qp
 from wuerfel_cvx.solvers import TOLERANCE_PRESETS, available_solvers
 

@@ -26,6 +26,7 @@ class InputError(WuerfelError, ValueError):
         The file (or named scene) the input came from, if any.
     field:
         The dotted field path inside the source, e.g. ``squares[2].mass``.
+
     """
 
     def __init__(self, message: str, *, source: str | None = None, field: str | None = None):
@@ -50,6 +51,7 @@ class StepFailure(WuerfelError, RuntimeError):
         The solver's status string, or a description of the failed check.
     trajectory:
         The trajectory up to the last good step (set by :func:`wuerfel_cvx.simulate`).
+
     """
 
     def __init__(self, step: int, solver: str, status: str, detail: str = ""):

@@ -173,7 +173,8 @@ def edge_distances(points: FloatArray, polygon: FloatArray) -> FloatArray:
 
 def penetration_depth(points: FloatArray, polygon: FloatArray) -> FloatArray:
     """Depth (m, >= 0) of each point inside a convex polygon; zero outside."""
-    return np.maximum(0.0, -np.max(edge_distances(points, polygon), axis=1))
+    depth = np.maximum(0.0, -np.max(edge_distances(points, polygon), axis=1))
+    return np.asarray(depth, dtype=np.float64)
 
 
 def polygon_overlap_depth(poly_a: FloatArray, poly_b: FloatArray) -> float:

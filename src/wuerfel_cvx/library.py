@@ -126,7 +126,8 @@ def _require(n: int | None, family: str) -> int:
 ENTRIES: tuple[SceneEntry, ...] = (
     SceneEntry("single-drop", "a unit square dropped flat from y = 2 m", _single_drop),
     SceneEntry("tilted-drop", "a unit square dropped from y = 2 m at 0.3 rad", _tilted_drop),
-    SceneEntry("corner-drop", "a unit square dropped corner first, 0.05 rad off balance", _corner_drop),
+    SceneEntry("corner-drop", "a unit square dropped corner first, 0.05 rad off balance",
+               _corner_drop),
     SceneEntry("resting-square", "a unit square resting on the table", _resting_square),
     SceneEntry("spinning-flight", "a spinning square in free flight, no table",
                _spinning_flight),

@@ -82,6 +82,7 @@ def simulate(
         For a bad argument.
     StepFailure
         When a step cannot be solved; its ``trajectory`` holds the steps before it.
+
     """
     scene = resolve_scene(scene)
     if not (isinstance(dt, int | float) and math.isfinite(dt) and dt > 0):
@@ -122,9 +123,9 @@ def simulate(
             raise
         state = scheme.advance(model, state, solution.x, float(dt))
         if not (np.all(np.isfinite(state.points)) and np.all(np.isfinite(state.velocities))):
-            failure = StepFailure(step, spec.name, solution.status, "non-finite state")
-            failure.trajectory = trajectory()
-            raise failure
+            bad_state = StepFailure(step, spec.name, solution.status, "non-finite state")
+            bad_state.trajectory = trajectory()
+            raise bad_state
         times.append(step * float(dt))
         points.append(state.points)
         velocities.append(state.velocities)

@@ -23,7 +23,8 @@ def get_formulation(name: str | Formulation) -> Formulation:
     if key not in FORMULATIONS:
         raise InputError(f"unknown formulation '{name}' (available: {', '.join(FORMULATIONS)})",
                          field="formulation")
-    return FORMULATIONS[key]()
+    formulation: Formulation = FORMULATIONS[key]()
+    return formulation
 
 
 __all__ = ["FORMULATIONS", "Formulation", "SeedFormulation", "StepQP", "VelocityFormulation",

@@ -16,7 +16,10 @@ class Formulation(Protocol):
     turns the QP's solution into the next state.
     """
 
-    name: str
+    @property
+    def name(self) -> str:
+        """The formulation's registry name."""
+        ...
 
     def build(self, model: Model, state: State, dt: float) -> StepQP:
         """The QP of the step from ``state`` over ``dt`` seconds."""
