@@ -53,7 +53,8 @@ SOLVERS: dict[str, SolverSpec] = {
             "eps_abs": eps, "eps_rel": eps, _osqp_polish_option(): True, "max_iter": 200_000},
             "ADMM"),
         SolverSpec("PIQP", "PIQP", lambda eps: {
-            "eps_abs": eps, "eps_rel": eps, "max_iter": 250}, "proximal interior-point"),
+            "eps_abs": eps, "eps_rel": eps, "max_iter": 250, "compute_timings": True},
+            "proximal interior-point"),
         SolverSpec("PROXQP", "PROXQP", lambda eps: {
             "eps_abs": eps, "eps_rel": 0.0, "max_iter": 10_000}, "proximal augmented Lagrangian"),
         SolverSpec("SCS", "SCS", lambda eps: {
