@@ -11,12 +11,14 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from .errors import InputError, StepFailure
 from .formulations import FORMULATIONS
 from .library import ENTRIES
 from .simulate import simulate
 from .solvers import SOLVERS, TOLERANCE_PRESETS, available_solvers
+from .trajectory import Trajectory
 
 PROG = "wuerfel-cvx"
 
@@ -76,15 +78,22 @@ def _simulate(args: argparse.Namespace) -> int:
     except StepFailure as failure:
         print(f"{PROG}: {failure}", file=sys.stderr)
         if args.out and failure.trajectory is not None:
-            path = failure.trajectory.save(args.out)
+            path = _save(failure.trajectory, args.out)
             print(f"{PROG}: saved the {failure.trajectory.n_steps} steps before it to {path}",
                   file=sys.stderr)
         return 1
     print(trajectory.summary())
     if args.out:
-        path = trajectory.save(args.out)
+        path = _save(trajectory, args.out)
         print(f"saved {path} and {trajectory.metrics_path(path)}")
     return 0
+
+
+def _save(trajectory: Trajectory, out: str) -> Path:
+    try:
+        return trajectory.save(out)
+    except OSError as exc:
+        raise InputError(f"cannot write ({exc.strerror})", source=out, field="--out") from None
 
 
 if __name__ == "__main__":

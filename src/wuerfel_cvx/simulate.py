@@ -35,9 +35,14 @@ def resolve_scene(scene: Scene | str | Path) -> Scene:
     if isinstance(scene, Scene):
         return scene
     text = str(scene)
-    if text.endswith(".toml") or Path(text).exists():
+    if text.endswith(".toml") or "/" in text or "\\" in text:
         return Scene.from_toml(text)
-    return Scene.named(text)
+    try:
+        return Scene.named(text)
+    except InputError:
+        if Path(text).is_file():  # a scene file without the .toml suffix
+            return Scene.from_toml(text)
+        raise
 
 
 def simulate(

@@ -8,7 +8,7 @@ accelerations or velocities, flattened ``(x_0, y_0, x_1, y_1, ...)``)::
                 G x >= h          (sides: point versus edge)
 
 declared as a :class:`cvxpy.Problem`.  The numeric data are kept beside it so that a
-solution can be checked independently of the solver (:mod:`wuerfel_cvx.residuals`).
+solution can be checked independently of the solver (:func:`wuerfel_cvx.solve.kkt_residuals`).
 """
 
 from __future__ import annotations

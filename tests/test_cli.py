@@ -1,0 +1,197 @@
+"""The ``wuerfel-cvx`` command line: runs, listings, and one-line errors for bad input.
+
+A few cases run the real command in a subprocess (exit status, streams, files as a
+user sees them); the rest call :func:`wuerfel_cvx.cli.main` in-process.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wuerfel_cvx.cli import main
+from wuerfel_cvx.library import ENTRIES
+from wuerfel_cvx.solvers import available_solvers
+from wuerfel_cvx.trajectory import Trajectory
+
+ERROR_PREFIX = "wuerfel-cvx: error:"
+
+
+def run_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    """Run ``python -m wuerfel_cvx.cli ARGS`` and capture its output."""
+    return subprocess.run([sys.executable, "-m", "wuerfel_cvx.cli", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=120, check=False)
+
+
+# ------------------------------------------------------------------ subprocess
+def test_simulate_prints_a_summary_and_writes_files(tmp_path: Path) -> None:
+    result = run_cli("simulate", "tilted-drop", "--steps", "20", "--out",
+                     str(tmp_path / "run"), cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    assert "max rod drift" in result.stdout
+    assert "scene tilted-drop" in result.stdout
+    assert "20 steps" in result.stdout
+    npz, csv = tmp_path / "run.npz", tmp_path / "run.metrics.csv"
+    assert npz.is_file()
+    assert csv.is_file()
+    assert str(npz) in result.stdout
+    loaded = Trajectory.load(npz)
+    assert loaded.n_steps == 20
+    assert loaded.points.shape == (21, 4, 2)
+    assert len(loaded.metrics) == 20
+
+
+def test_scenes_lists_every_library_pattern(tmp_path: Path) -> None:
+    result = run_cli("scenes", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    listed = [line.split()[0] for line in result.stdout.splitlines() if line.strip()]
+    assert listed == [entry.pattern for entry in ENTRIES]
+
+
+def test_unknown_scene_in_a_real_process(tmp_path: Path) -> None:
+    result = run_cli("simulate", "no-such-scene", "--steps", "2", cwd=tmp_path)
+    assert result.returncode == 2
+    assert result.stdout == ""
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith(ERROR_PREFIX)
+    assert "no-such-scene" in lines[0]
+    assert "Traceback" not in result.stderr
+
+
+# ------------------------------------------------------------------ in-process
+def test_solvers_lists_the_available_solvers(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["solvers"]) == 0
+    out = capsys.readouterr().out
+    listed = [line.split()[0] for line in out.splitlines() if line.strip()]
+    assert listed == available_solvers()
+    assert "CLARABEL" in listed
+
+
+def test_scenes_in_process_shows_descriptions(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["scenes"]) == 0
+    out = capsys.readouterr().out
+    for entry in ENTRIES:
+        assert any(line.startswith(entry.pattern) and entry.description in line
+                   for line in out.splitlines()), entry.pattern
+
+
+VALID_SCENE = """\
+name = "my-toml-scene"
+
+[[tables]]
+center = [0.0, -0.5]
+size = [10.0, 1.0]
+
+[[squares]]
+center = [0.0, 1.0]
+angle = 0.2
+"""
+
+
+def test_a_toml_path_works_as_scene(tmp_path: Path,
+                                    capsys: pytest.CaptureFixture[str]) -> None:
+    scene_file = tmp_path / "scene.toml"
+    scene_file.write_text(VALID_SCENE)
+    assert main(["simulate", str(scene_file), "--steps", "5", "--out",
+                 str(tmp_path / "out")]) == 0
+    captured = capsys.readouterr()
+    assert "scene my-toml-scene" in captured.out
+    assert "max rod drift" in captured.out
+    loaded = Trajectory.load(tmp_path / "out.npz")
+    assert loaded.n_steps == 5
+    np.testing.assert_allclose(loaded.points[0].mean(axis=0), [0.0, 1.0], atol=1e-12)
+
+
+@dataclass(frozen=True)
+class BadInput:
+    """One row of the bad-input table."""
+
+    toml: str | None
+    """Content of ``scene.toml`` (then ``{toml}`` in ``args`` is its path), or ``None``."""
+    args: tuple[str, ...]
+    expect: tuple[str, ...]
+    """Fragments the error line must contain (``{toml}`` replaced by the file's path)."""
+
+
+OVERLAPPING = """\
+[[squares]]
+center = [0.0, 0.5]
+
+[[squares]]
+center = [0.1, 1.25]
+"""
+
+BAD_INPUTS: dict[str, BadInput] = {
+    "unknown scene": BadInput(None, ("no-such-scene",), ("unknown scene", "no-such-scene")),
+    "missing toml": BadInput(None, ("{dir}/missing.toml",), ("{dir}/missing.toml",
+                                                              "not found")),
+    "malformed toml": BadInput("[[squares]\ncenter = [0.0, 1.0]\n", ("{toml}",),
+                               ("{toml}", "malformed TOML")),
+    "unknown key": BadInput("[[squares]]\ncenter = [0.0, 1.0]\ncolour = 'red'\n",
+                            ("{toml}",), ("{toml}", "squares[0].colour", "unknown key")),
+    "negative mass": BadInput("[[squares]]\ncenter = [0.0, 1.0]\nmass = -1.0\n",
+                              ("{toml}",), ("{toml}", "squares[0].mass", "positive")),
+    "nan in vector": BadInput("[[squares]]\ncenter = [nan, 1.0]\n", ("{toml}",),
+                              ("{toml}", "squares[0].center[0]", "finite")),
+    "dt zero": BadInput(None, ("tilted-drop", "--dt", "0"), ("dt", "positive")),
+    "dt negative": BadInput(None, ("tilted-drop", "--dt", "-0.01"), ("dt", "positive")),
+    "dt nan": BadInput(None, ("tilted-drop", "--dt", "nan"), ("dt", "nan")),
+    "unknown solver": BadInput(None, ("tilted-drop", "--solver", "nosuchsolver"),
+                               ("solver", "nosuchsolver", "CLARABEL", "OSQP")),
+    "unknown formulation": BadInput(None, ("tilted-drop", "--formulation", "acceleration"),
+                                    ("formulation", "acceleration", "velocity")),
+    "unknown tolerance": BadInput(None, ("tilted-drop", "--tol", "extreme"),
+                                  ("tol", "extreme", "default")),
+    "overlap": BadInput(OVERLAPPING, ("{toml}",),
+                        ("{toml}", "squares[0]", "overlaps squares[1]", "allow_overlap")),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_INPUTS.values()), ids=list(BAD_INPUTS))
+def test_bad_input_exits_2_with_one_error_line(case: BadInput, tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    scene_file = tmp_path / "scene.toml"
+    if case.toml is not None:
+        scene_file.write_text(case.toml)
+
+    def fill(text: str) -> str:
+        return text.replace("{toml}", str(scene_file)).replace("{dir}", str(tmp_path))
+
+    args = [fill(arg) for arg in case.args]
+    status = main(["simulate", *args, "--steps", "2"])
+    captured = capsys.readouterr()
+    assert status == 2
+    assert captured.out == ""
+    lines = captured.err.splitlines()
+    assert len(lines) == 1, captured.err
+    line = lines[0]
+    assert line.startswith(ERROR_PREFIX)
+    assert "Traceback" not in captured.err
+    for fragment in case.expect:
+        assert fill(fragment) in line, (fragment, line)
+
+
+def test_unwritable_out_is_one_error_line(tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    status = main(["simulate", "tilted-drop", "--steps", "2", "--out", str(blocker / "run")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2
+    assert len(err) == 1 and err[0].startswith("wuerfel-cvx: error:") and "--out" in err[0]
+
+
+def test_a_directory_named_like_a_scene_does_not_shadow_the_library(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "tilted-drop").mkdir()
+    monkeypatch.chdir(tmp_path)
+    assert main(["simulate", "tilted-drop", "--steps", "2"]) == 0
+    assert "scene tilted-drop" in capsys.readouterr().out
