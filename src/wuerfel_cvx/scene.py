@@ -240,6 +240,20 @@ def _list_of_tables(data: Mapping[str, Any], key: str, source: str) -> list[Any]
     return value
 
 
+def _entries(data: Mapping[str, Any], key: str, allowed: set[str],
+             source: str) -> list[tuple[str, Mapping[str, Any]]]:
+    """The ``[[key]]`` tables of a scene, each checked for unknown keys and a ``center``."""
+    entries = []
+    for index, raw in enumerate(_list_of_tables(data, key, source)):
+        where = f"{key}[{index}]"
+        entry = _table_of(raw, source, where, allowed)
+        if "center" not in entry:
+            raise InputError("missing required key 'center'", source=source,
+                             field=f"{where}.center")
+        entries.append((where, entry))
+    return entries
+
+
 def _scene_from_mapping(data: Mapping[str, Any], source: str) -> Scene:
     data = _table_of(data, source, "", _SCENE_KEYS)
     name = data.get("name", Path(source).stem if source.endswith(".toml") else "scene")
@@ -251,30 +265,15 @@ def _scene_from_mapping(data: Mapping[str, Any], source: str) -> Scene:
         raise InputError("expected true or false", source=source, field="allow_overlap")
 
     tables = []
-    for index, raw in enumerate(_list_of_tables(data, "tables", source)):
-        where = f"tables[{index}]"
-        entry = _table_of(raw, source, where, _TABLE_KEYS)
-        if "center" not in entry:
-            raise InputError("missing required key 'center'", source=source,
-                             field=f"{where}.center")
-        size = _vector(entry.get("size", [20.0, 1.0]), source, f"{where}.size")
-        for axis, extent in enumerate(size):
-            if extent <= 0.0:
-                raise InputError(f"must be positive, got {extent}", source=source,
-                                 field=f"{where}.size[{axis}]")
-        tables.append(Table(
+    for where, entry in _entries(data, "tables", _TABLE_KEYS, source):
+        tables.append(Table(  # sizes are checked positive by the Scene constructor
             center=_vector(entry["center"], source, f"{where}.center"),
-            size=size,
+            size=_vector(entry.get("size", [20.0, 1.0]), source, f"{where}.size"),
             angle=_number(entry.get("angle", 0.0), source, f"{where}.angle"),
         ))
 
     squares = []
-    for index, raw in enumerate(_list_of_tables(data, "squares", source)):
-        where = f"squares[{index}]"
-        entry = _table_of(raw, source, where, _SQUARE_KEYS)
-        if "center" not in entry:
-            raise InputError("missing required key 'center'", source=source,
-                             field=f"{where}.center")
+    for where, entry in _entries(data, "squares", _SQUARE_KEYS, source):
         squares.append(Square(
             center=_vector(entry["center"], source, f"{where}.center"),
             size=_positive(entry.get("size", 1.0), source, f"{where}.size"),

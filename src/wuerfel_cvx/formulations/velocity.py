@@ -33,7 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..contacts import find_contacts
-from ..geometry import FloatArray, rot90, rotation
+from ..geometry import FloatArray, rot90
 from ..model import Model, State
 from .qp import StepQP, declare_qp, point_rows
 from .rows import (
@@ -135,4 +135,6 @@ def rigid_step(reference: FloatArray, points: FloatArray, velocities: FloatArray
 
 
 def _rotations(angles: FloatArray) -> FloatArray:
-    return np.stack([rotation(float(a)) for a in angles]) if angles.size else np.zeros((0, 2, 2))
+    """Rotation matrices ``(n, 2, 2)`` for angles ``(n,)`` (rad)."""
+    cos, sin = np.cos(angles), np.sin(angles)
+    return np.stack([np.stack([cos, -sin], axis=-1), np.stack([sin, cos], axis=-1)], axis=-2)
