@@ -69,33 +69,25 @@ def check_partial(traj: Trajectory, n_steps: int) -> None:
 
 
 # ------------------------------------------------------------------ iteration limit
-def test_iteration_limit_on_the_first_step(monkeypatch: pytest.MonkeyPatch) -> None:
-    cripple_osqp(monkeypatch, first_bad_call=1)
+@pytest.mark.parametrize("first_bad_call", [1, 3])
+def test_iteration_limit_is_reported_and_keeps_the_good_steps(
+        monkeypatch: pytest.MonkeyPatch, first_bad_call: int) -> None:
+    cripple_osqp(monkeypatch, first_bad_call=first_bad_call)
     with pytest.raises(StepFailure) as caught:
-        simulate(SCENE, dt=0.01, steps=5, solver="osqp")
+        simulate(SCENE, dt=0.01, steps=6, solver="osqp")
     failure = caught.value
-    assert failure.step == 1
+    good_steps = first_bad_call - 1
+    assert failure.step == first_bad_call
     assert failure.solver == "OSQP"
     assert failure.status == cp.USER_LIMIT
-    assert "step 1" in str(failure)
+    assert f"step {first_bad_call}" in str(failure)
     assert f"'{cp.USER_LIMIT}'" in str(failure)
-    check_partial(failure.trajectory, 0)
-
-
-def test_iteration_limit_later_keeps_the_good_steps(monkeypatch: pytest.MonkeyPatch) -> None:
-    cripple_osqp(monkeypatch, first_bad_call=3)
-    with pytest.raises(StepFailure) as caught:
-        simulate(SCENE, dt=0.01, steps=6, solver="OSQP")
-    failure = caught.value
-    assert failure.step == 3
-    assert failure.solver == "OSQP"
-    assert failure.status == cp.USER_LIMIT
     traj = failure.trajectory
-    check_partial(traj, 2)
-    np.testing.assert_allclose(traj.times, [0.0, 0.01, 0.02], rtol=0, atol=1e-15)
-    assert list(traj.metrics["step"]) == [1, 2]
+    check_partial(traj, good_steps)
+    np.testing.assert_allclose(traj.times, 0.01 * np.arange(good_steps + 1), rtol=0, atol=1e-15)
+    assert list(traj.metrics["step"]) == list(range(1, good_steps + 1))
     assert set(traj.metrics["status"]) <= {cp.OPTIMAL, cp.OPTIMAL_INACCURATE}
-    assert set(traj.metrics["solver"]) == {"OSQP"}
+    assert set(traj.metrics["solver"]) <= {"OSQP"}
 
 
 def test_cli_reports_the_failure_and_saves_the_partial_run(

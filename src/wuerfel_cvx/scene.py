@@ -312,9 +312,7 @@ def _check_scene(scene: Scene) -> None:
         _vector(list(tb.center), source, f"{where}.center")
         _number(tb.angle, source, f"{where}.angle")
         for axis, value in enumerate(_vector(list(tb.size), source, f"{where}.size")):
-            if value <= 0.0:
-                raise InputError(f"must be positive, got {value}", source=source,
-                                 field=f"{where}.size[{axis}]")
+            _positive(value, source, f"{where}.size[{axis}]")
     if not scene.allow_overlap:
         _check_no_overlap(scene)
 

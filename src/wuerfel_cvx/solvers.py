@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cache
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
@@ -20,6 +21,7 @@ TOLERANCE_PRESETS: dict[str, float] = {"low": 1e-4, "default": 1e-7, "high": 1e-
 """Solver tolerance ``eps`` per preset (absolute and relative, in the QP's scaled units)."""
 
 
+@cache
 def _osqp_polish_option() -> str:
     """OSQP 1.0 renamed ``polish`` to ``polishing``."""
     try:
@@ -64,9 +66,15 @@ SOLVERS: dict[str, SolverSpec] = {
 """Every solver the package knows; :func:`available_solvers` lists those installed."""
 
 
+@cache
+def _installed_in_cvxpy() -> frozenset[str]:
+    """Solvers cvxpy reports installed; asked once, as it costs about 1 ms a call."""
+    return frozenset(cp.installed_solvers())
+
+
 def available_solvers() -> list[str]:
     """Registry names of the solvers installed in this environment."""
-    installed = set(cp.installed_solvers())
+    installed = _installed_in_cvxpy()
     return [name for name, spec in SOLVERS.items() if spec.cvxpy_name in installed]
 
 
