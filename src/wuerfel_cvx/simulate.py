@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import time
 from importlib.metadata import version
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +14,7 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from .errors import InputError, StepFailure
-from .formulations import Formulation, get_formulation
+from .formulations import Formulation, StepQP, get_formulation
 from .metrics import deepest_penetration, kinetic_energy, potential_energy, rod_length_drift
 from .model import Model, State
 from .scene import Scene
@@ -24,10 +25,19 @@ from .trajectory import Trajectory
 METRIC_COLUMNS = (
     "step", "time_s", "solver", "status", "verified", "n_variables", "n_equalities",
     "n_inequalities", "n_contacts", "build_time_s", "solve_time_s", "solver_time_s",
+    "step_time_s",
     "iterations", "primal_residual", "dual_residual", "complementarity", "rod_drift",
     "penetration_m", "kinetic_energy_J", "potential_energy_J", "total_energy_J",
 )
-"""Columns of :attr:`Trajectory.metrics`, one row per step (state after the step)."""
+"""Columns of :attr:`Trajectory.metrics`, one row per step (state after the step).
+
+``build_time_s`` is the QP's construction, ``solve_time_s`` the wall time of the solve call
+(cvxpy's compilation included), ``solver_time_s`` the solver's own reported time, and
+``step_time_s`` the whole step: build, solve, check and advance (all in s).
+"""
+
+StepObserver = Callable[[int, StepQP, StepSolution], None]
+"""Called after each solved step with ``(step, qp, solution)``, outside the step's timers."""
 
 
 def resolve_scene(scene: Scene | str | Path) -> Scene:
@@ -56,6 +66,7 @@ def simulate(
     table_mass: float | None = None,
     extra_rod: bool = False,
     progress: bool = False,
+    observer: StepObserver | None = None,
 ) -> Trajectory:
     """Simulate ``steps`` steps of ``dt`` seconds, one QP per step.
 
@@ -80,6 +91,9 @@ def simulate(
         Add the redundant second diagonal (a 6th rod) to every square.
     progress:
         Show a progress bar.
+    observer:
+        Optional callback ``observer(step, qp, solution)`` after each solved step, e.g. to
+        re-solve the same QP with another solver; its time is not in the step's timings.
 
     Raises
     ------
@@ -127,6 +141,7 @@ def simulate(
             failure.trajectory = trajectory()
             raise
         state = scheme.advance(model, state, solution.x, float(dt))
+        step_time = time.perf_counter() - started
         if not (np.all(np.isfinite(state.points)) and np.all(np.isfinite(state.velocities))):
             bad_state = StepFailure(step, spec.name, solution.status, "non-finite state")
             bad_state.trajectory = trajectory()
@@ -136,13 +151,15 @@ def simulate(
         velocities.append(state.velocities)
         rows.append(_metrics_row(model, state, qp.n_variables, qp.n_equalities,
                                  qp.n_inequalities, len(qp.contacts), step, float(dt),
-                                 build_time, solution))
+                                 build_time, step_time, solution))
+        if observer is not None:
+            observer(step, qp, solution)
     return trajectory()
 
 
 def _metrics_row(model: Model, state: State, n_var: int, n_eq: int, n_in: int,
                  n_contacts: int, step: int, dt: float, build_time: float,
-                 solution: StepSolution) -> dict[str, Any]:
+                 step_time: float, solution: StepSolution) -> dict[str, Any]:
     kinetic = kinetic_energy(model, state)
     potential = potential_energy(model, state)
     return {
@@ -150,6 +167,7 @@ def _metrics_row(model: Model, state: State, n_var: int, n_eq: int, n_in: int,
         "verified": solution.verified, "n_variables": n_var, "n_equalities": n_eq,
         "n_inequalities": n_in, "n_contacts": n_contacts, "build_time_s": build_time,
         "solve_time_s": solution.solve_wall_time, "solver_time_s": solution.solver_time,
+        "step_time_s": step_time,
         "iterations": solution.iterations, "primal_residual": solution.residuals.primal,
         "dual_residual": solution.residuals.dual,
         "complementarity": solution.residuals.complementarity,
