@@ -117,6 +117,27 @@ def _fast_drop(_: int | None) -> Scene:
                  (FLOOR,))
 
 
+def _two_corner_landing(_: int | None) -> Scene:
+    # A 0.6 m square falls flat onto the middle of a resting unit square: its two lower
+    # corners reach the same edge at the same instant (two simultaneous, redundant contacts).
+    squares = (Square(center=(0.0, 0.5)), Square(center=(0.0, 1.8), size=0.6, mass=0.36))
+    return Scene("two-corner-landing", squares, (FLOOR,))
+
+
+def _edge_end_landing(_: int | None) -> Scene:
+    # Exactly aligned: each lower corner of the falling square lands on an end of the
+    # resting square's top edge (alpha = 0 or 1, where the edge rule's sectors meet).
+    squares = (Square(center=(0.0, 0.5)), Square(center=(0.0, 2.0)))
+    return Scene("edge-end-landing", squares, (FLOOR,))
+
+
+def _wall_contact(_: int | None) -> Scene:
+    # Sliding (frictionless) at 3 m/s into a wall: the contact is on a vertical edge.
+    wall = Table(center=(2.5, 1.5), size=(1.0, 3.0))
+    square = Square(center=(0.0, 0.5), angle=0.0, velocity=(3.0, 0.0))
+    return Scene("wall-contact", (square,), (FLOOR, wall))
+
+
 def _require(n: int | None, family: str) -> int:
     if n is None or n < 1:
         raise InputError(f"'{family}-N' needs a positive integer N", source=family)
@@ -141,6 +162,12 @@ ENTRIES: tuple[SceneEntry, ...] = (
                _overlap_recovery),
     SceneEntry("fast-drop", "a square at 40 m/s: one 1/60 s step moves 0.67 side lengths",
                _fast_drop),
+    SceneEntry("two-corner-landing", "a 0.6 m square lands flat on a resting one: two "
+               "corners reach an edge at once", _two_corner_landing),
+    SceneEntry("edge-end-landing", "a square lands exactly aligned on another: corners "
+               "meet edge ends", _edge_end_landing),
+    SceneEntry("wall-contact", "a square slides at 3 m/s into a wall: contact on a vertical "
+               "edge", _wall_contact),
 )
 
 _NAME = re.compile(r"^(?P<base>[a-z][a-z-]*?)(?:-(?P<number>\d+))?$")
