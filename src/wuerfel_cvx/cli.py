@@ -1,6 +1,8 @@
 """The ``wuerfel-cvx`` command line.
 
 ``wuerfel-cvx simulate SCENE ...`` runs a simulation and prints a summary;
+``wuerfel-cvx bench --suite NAME`` runs a benchmark suite into a results CSV and
+``wuerfel-cvx report RESULTS.csv`` turns one into ``reports/<suite>/README.md``;
 ``wuerfel-cvx scenes`` lists the named scenes; ``wuerfel-cvx solvers`` lists the
 installed solvers.  Bad input ends with one line on standard error and exit status 2;
 a failed step ends with status 1 after saving the trajectory computed so far.
@@ -45,6 +47,22 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                      help="progress bar (default: on when standard error is a terminal)")
 
+    bench = commands.add_parser("bench", help="run a benchmark suite (rows append; resumes)")
+    bench.add_argument("--suite", required=True,
+                       help="suite name (benchmarks/<NAME>.toml: smoke, standard, hard, "
+                            "scaling) or a .toml path")
+    bench.add_argument("--out", default=None,
+                       help="results directory (default bench-results/<suite>)")
+    bench.add_argument("--jobs", type=int, default=1,
+                       help="worker processes (default 1; timings are cleanest with 1)")
+    bench.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                       help="progress bar with ETA (default: on when stderr is a terminal)")
+
+    report = commands.add_parser("report", help="write reports/<suite>/README.md from results")
+    report.add_argument("results", help="a results CSV written by 'wuerfel-cvx bench'")
+    report.add_argument("--root", default="reports",
+                        help="reports directory (default reports)")
+
     commands.add_parser("scenes", help="list the named scenes")
     commands.add_parser("solvers", help="list the installed solvers")
     return parser
@@ -63,6 +81,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             for name in available_solvers():
                 print(f"{name:<9} {SOLVERS[name].kind}")
             return 0
+        if args.command == "bench":
+            return _bench(args)
+        if args.command == "report":
+            return _report(args)
         return _simulate(args)
     except InputError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
@@ -86,6 +108,29 @@ def _simulate(args: argparse.Namespace) -> int:
     if args.out:
         path = _save(trajectory, args.out)
         print(f"saved {path} and {trajectory.metrics_path(path)}")
+    return 0
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from .bench.suite import Suite
+    from .bench.sweep import run_sweep
+
+    suite = Suite.named(args.suite)
+    out = Path(args.out) if args.out else Path("bench-results") / suite.name
+    summary = run_sweep(suite, out, jobs=args.jobs, progress=args.progress)
+    print(f"suite {suite.name}: {summary.ran} grid points run, {summary.skipped_done} already "
+          f"done, {len(summary.skipped_unavailable)} skipped (not installed), "
+          f"{summary.failed} failed or errored")
+    print(f"results: {summary.results}")
+    print(f"report:  {PROG} report {summary.results}")
+    return 0
+
+
+def _report(args: argparse.Namespace) -> int:
+    from .bench.report import write_report
+
+    path = write_report(args.results, args.root)
+    print(f"wrote {path}")
     return 0
 
 

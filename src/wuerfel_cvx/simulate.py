@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import math
 import time
-from importlib.metadata import version
 from collections.abc import Callable
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 

@@ -117,6 +117,8 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
                           f"residuals {residuals.worst():.2e} above {VERIFY_FACTOR * eps:.1e}")
     stats = qp.problem.solver_stats
     solver_time = stats.solve_time if stats is not None and stats.solve_time is not None else np.nan
+    if not solver_time > 0.0:  # cvxpy reports 0.0 for PROXQP (its timings are off): unknown
+        solver_time = np.nan
     iterations = stats.num_iters if stats is not None and stats.num_iters is not None else -1
     return StepSolution(x=x, solver=spec.name, status=status, residuals=residuals,
                         verified=verified, solve_wall_time=wall, solver_time=float(solver_time),

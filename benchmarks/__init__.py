@@ -1,0 +1,1 @@
+"""Benchmark suite files (TOML), installed as the package data ``wuerfel_cvx.suites``."""

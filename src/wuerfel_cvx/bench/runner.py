@@ -1,0 +1,297 @@
+"""Run one grid point, or one reference, and turn the result into a results row.
+
+Every failure of a grid point becomes a row: a failed step gives ``status = "failed"`` with
+the step and the solver's status, anything else (an unknown scene, a bad tolerance) gives
+``status = "error"``.  Nothing here raises for a bad configuration.
+"""
+
+from __future__ import annotations
+
+import datetime as dt_module
+import hashlib
+import platform
+from dataclasses import dataclass
+from functools import cache
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..errors import StepFailure
+from ..formulations import StepQP
+from ..geometry import FloatArray
+from ..peers import peer_version, simulate_peer
+from ..simulate import simulate
+from ..solve import StepSolution, solve_step_qp
+from ..solvers import SOLVERS
+from ..trajectory import Trajectory
+from . import schema
+from .suite import REFERENCE_REFINEMENT, REFERENCE_SOLVER, REFERENCE_TOL, GridPoint
+
+SOLVER_PACKAGES = {"CLARABEL": "clarabel", "OSQP": "osqp", "PIQP": "piqp",
+                   "PROXQP": "proxsuite", "SCS": "scs"}
+"""The Python package whose version is reported for each solver."""
+
+
+@dataclass(frozen=True)
+class Reference:
+    """A reference trajectory sampled at the grid point's instants ``k dt``."""
+
+    points: FloatArray
+    """Corner positions ``(m + 1, 4 n, 2)`` (m) at ``t = k dt``, ``k = 0..m``."""
+    complete: bool
+    """False when the reference run itself failed before the end."""
+    detail: str = ""
+
+
+def reference_file_name(key: tuple[str, str, float, float]) -> str:
+    """File name under ``<out>/references/`` for a reference key."""
+    scene, formulation, dt, duration = key
+    digest = hashlib.sha1(repr(key).encode("utf-8")).hexdigest()[:10]
+    return f"{scene}-{formulation}-dt{dt:g}-T{duration:g}-{digest}.npz"
+
+
+def compute_reference(key: tuple[str, str, float, float], path: Path) -> Path:
+    """Run the dt/8 reference for ``key`` and save it to ``path`` (``.npz``).
+
+    The run uses fixed tables, five rods, :data:`REFERENCE_SOLVER` at :data:`REFERENCE_TOL`.
+    A failed reference is saved too, marked incomplete, so the points that need it say so.
+    """
+    scene, formulation, dt, duration = key
+    fine_dt = dt / REFERENCE_REFINEMENT
+    steps = max(1, round(duration / dt)) * REFERENCE_REFINEMENT
+    detail = ""
+    try:
+        trajectory = simulate(scene, dt=fine_dt, steps=steps, solver=REFERENCE_SOLVER,
+                              formulation=formulation, tol=REFERENCE_TOL)
+        complete = True
+    except StepFailure as failure:
+        assert failure.trajectory is not None
+        trajectory, complete, detail = failure.trajectory, False, str(failure)
+    sampled = trajectory.points[::REFERENCE_REFINEMENT]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(path.name + ".part.npz")
+    np.savez(temporary, points=sampled, complete=np.array(complete), detail=np.array(detail))
+    temporary.replace(path)  # atomic: a killed sweep never leaves half a reference
+    return path
+
+
+def load_reference(path: Path) -> Reference:
+    """Read a reference written by :func:`compute_reference`."""
+    with np.load(path, allow_pickle=False) as data:
+        return Reference(points=data["points"], complete=bool(data["complete"]),
+                         detail=str(data["detail"]))
+
+
+@cache
+def machine() -> dict[str, str]:
+    """CPU, Python and package versions of this process, as stored in every row."""
+    return {"cpu": _cpu_name(), "python_version": platform.python_version(),
+            "package_version": _version("wuerfel_cvx"), "cvxpy_version": _version("cvxpy")}
+
+
+def run_point(point: GridPoint, reference: Reference | None,
+              series_dir: Path | None = None) -> dict[str, Any]:
+    """Run one grid point and return its results row (never raises for a bad config)."""
+    base = _configuration(point)
+    try:
+        n_squares = _n_squares(point.scene)
+        base["n_squares"] = n_squares
+        trajectory, failure, disagreement = _simulate(point)
+    except Exception as exc:  # any configuration error becomes an error row
+        return schema.new_row(**base, status="error", error=_message(exc), success=False,
+                              verified=False, steps_completed=0)
+    row = {**base, **_outcome(trajectory, failure), **_timing(trajectory, point),
+           **_accuracy(trajectory, point, reference),
+           "reference_disagreement": disagreement}
+    if series_dir is not None:
+        _write_series(trajectory, series_dir / schema.series_file_name(point.point_id))
+    return schema.new_row(**row)
+
+
+def _simulate(point: GridPoint) -> tuple[Trajectory, StepFailure | None, float | None]:
+    """Run the point; a failed step returns the partial trajectory and the failure."""
+    worst = [0.0]
+    compared = [0]
+
+    def compare(step: int, qp: StepQP, solution: StepSolution) -> None:
+        if point.compare_every and step % point.compare_every == 0:
+            try:
+                best = solve_step_qp(qp, REFERENCE_SOLVER, REFERENCE_TOL, step=step)
+            except StepFailure:
+                return  # the reference solver could not solve this QP: no comparison
+            worst[0] = max(worst[0], float(np.max(np.abs(solution.x - best.x))))
+            compared[0] += 1
+
+    try:
+        if point.engine != "wuerfel_cvx":
+            trajectory = simulate_peer(point.solver, point.scene, point.dt, point.steps)
+        else:
+            trajectory = simulate(point.scene, dt=point.dt, steps=point.steps,
+                                  solver=point.solver, formulation=point.formulation,
+                                  tol=point.tol, table_mass=point.table_mass,
+                                  extra_rod=point.extra_rod, observer=compare)
+    except StepFailure as failure:
+        if failure.trajectory is None:
+            raise
+        return failure.trajectory, failure, worst[0] if compared[0] else None
+    return trajectory, None, worst[0] if compared[0] else None
+
+
+def _configuration(point: GridPoint) -> dict[str, Any]:
+    return {
+        "suite": point.suite, "point_id": point.point_id, "scene": point.scene,
+        "engine": point.engine, "formulation": point.formulation, "solver": point.solver,
+        "tol": point.tol, "dt": point.dt, "duration": point.duration, "steps": point.steps,
+        "table_mass": point.table_mass, "extra_rod": point.extra_rod,
+        "solver_version": _solver_version(point.solver), **machine(),
+        "finished_at": dt_module.datetime.now(dt_module.UTC).isoformat(timespec="seconds"),
+        "reference_kind": point.reference,
+    }
+
+
+def _outcome(trajectory: Trajectory, failure: StepFailure | None) -> dict[str, Any]:
+    metrics = trajectory.metrics
+    completed = len(metrics)
+    statuses = metrics["status"].astype(str)
+    claimed = bool(statuses.isin(["optimal", "peer"]).all()) and failure is None
+    verified_steps = metrics["verified"].astype("boolean")
+    if bool(verified_steps.isna().all()) and completed:  # peers: nothing to verify
+        verified: bool | None = None
+        fraction = None
+    else:
+        verified = bool(verified_steps.fillna(False).all()) and failure is None
+        fraction = float(verified_steps.fillna(False).mean()) if completed else 0.0
+    outcome: dict[str, Any] = {
+        "status": "ok" if failure is None else "failed", "steps_completed": completed,
+        "success": claimed, "verified": verified, "verified_fraction": fraction,
+    }
+    if failure is not None:
+        outcome |= {"error": _message(failure), "failed_step": failure.step}
+    return outcome
+
+
+def _timing(trajectory: Trajectory, point: GridPoint) -> dict[str, Any]:
+    metrics = trajectory.metrics
+    if len(metrics) == 0:
+        return {}
+    step = metrics["step_time_s"].to_numpy(dtype=float)
+    solver = metrics["solver_time_s"].to_numpy(dtype=float)
+    simulated = len(metrics) * point.dt
+    return {
+        "wall_time_per_step_median": float(np.median(step)),
+        "wall_time_per_step_p90": float(np.percentile(step, 90)),
+        "solver_time_per_step_median": _nan_median(solver),
+        "modelling_time_per_step_median": _nan_median(step - solver),
+        "wall_time_per_simulated_second": float(step.sum() / simulated),
+        "total_wall_time": float(step.sum()),
+        "n_variables": _int_max(metrics["n_variables"]),
+        "n_equalities": _int_max(metrics["n_equalities"]),
+        "n_inequalities": _int_max(metrics["n_inequalities"]),
+        "n_contacts_max": _int_max(metrics["n_contacts"]),
+    }
+
+
+def _accuracy(trajectory: Trajectory, point: GridPoint,
+              reference: Reference | None) -> dict[str, Any]:
+    metrics = trajectory.metrics
+    accuracy: dict[str, Any] = {}
+    if len(metrics):
+        energy = metrics["total_energy_J"].to_numpy(dtype=float)
+        initial = _initial_energy(trajectory)
+        with_start = np.concatenate([[initial], energy])
+        accuracy |= {
+            "max_rod_drift": float(metrics["rod_drift"].max()),
+            "max_penetration": float(metrics["penetration_m"].max()),
+            "energy_gain": float(np.max(energy) - initial),
+            "max_step_energy_rise": float(np.max(np.diff(with_start))),
+        }
+    if point.reference == "rest":
+        accuracy["trajectory_error"] = _largest_distance(trajectory.points,
+                                                          trajectory.points[:1])
+    elif point.reference == "dt/8" and reference is not None:
+        if reference.complete:
+            accuracy["trajectory_error"] = _largest_distance(trajectory.points,
+                                                              reference.points)
+        else:
+            accuracy["reference_kind"] = "dt/8 (reference failed)"
+    return accuracy
+
+
+def _largest_distance(points: FloatArray, reference: FloatArray) -> float:
+    """Largest corner distance (m) over the instants both have.
+
+    A single reference state is broadcast: the exact solution at rest.
+    """
+    if reference.shape[0] == 1:
+        difference = points - reference
+    else:
+        common = min(points.shape[0], reference.shape[0])
+        difference = points[:common] - reference[:common]
+    return float(np.max(np.linalg.norm(difference, axis=-1)))
+
+
+def _initial_energy(trajectory: Trajectory) -> float:
+    from ..metrics import kinetic_energy, potential_energy
+    from ..model import Model, State
+    from ..simulate import resolve_scene
+
+    scene = resolve_scene(str(trajectory.info["scene"]))
+    model = Model.from_scene(scene, table_mass=trajectory.info.get("table_mass"),
+                             extra_rod=bool(trajectory.info.get("extra_rod", False)))
+    state = State(trajectory.points[0], trajectory.velocities[0])
+    return kinetic_energy(model, state) + potential_energy(model, state)
+
+
+def _write_series(trajectory: Trajectory, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    trajectory.metrics.reindex(columns=list(schema.SERIES_COLUMNS)).to_csv(path, index=False)
+
+
+def _n_squares(scene: str) -> int:
+    from ..simulate import resolve_scene
+
+    return len(resolve_scene(scene).squares)
+
+
+def _nan_median(values: FloatArray) -> float | None:
+    finite = values[np.isfinite(values)]
+    return float(np.median(finite)) if finite.size else None
+
+
+def _int_max(column: pd.Series) -> int | None:
+    values = pd.to_numeric(column, errors="coerce").dropna()
+    return int(values.max()) if len(values) else None
+
+
+def _message(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}"[:500]
+
+
+def _solver_version(solver: str) -> str:
+    if solver in SOLVERS:
+        return _version(SOLVER_PACKAGES.get(solver, solver.lower()))
+    try:
+        return peer_version(solver)
+    except Exception:  # an unknown name: the row will carry the error itself
+        return "unknown"
+
+
+def _version(package: str) -> str:
+    try:
+        return version(package)
+    except PackageNotFoundError:
+        return "not installed"
+
+
+def _cpu_name() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"

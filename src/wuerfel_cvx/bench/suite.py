@@ -1,0 +1,259 @@
+"""Benchmark suites: TOML files in ``benchmarks/`` that expand into grid points.
+
+A suite file has a name, a description, a ``[defaults]`` table and one or more ``[[grid]]``
+tables.  Each grid table is the defaults overlaid with its own keys; its points are the
+Cartesian product of its lists::
+
+    name = "smoke"
+    description = "seconds-long check that every part of the sweep works"
+
+    [defaults]
+    duration = 0.3                      # simulated time per grid point (s)
+    formulations = ["velocity"]
+    solvers = ["CLARABEL", "OSQP", "PIQP"]
+    tols = ["default"]
+    dts = [0.01]                        # time steps (s)
+    table_masses = ["fixed"]            # "fixed" or a heavy-table corner mass (kg)
+    extra_rods = [false]
+    reference = "dt/8"                  # "dt/8", "rest" or "none"
+    compare_every = 1                   # steps between re-solves by the reference solver
+
+    [[grid]]
+    scenes = ["tilted-drop", "stack-3"]
+
+Peer engines (``PYMUNK``, ``MUJOCO``) may appear among the solvers; a peer point has no
+formulation or tolerance of ours, so it is expanded once per scene and dt.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from ..errors import InputError
+from ..peers import PEER_ENGINES
+
+REFERENCE_KINDS = ("dt/8", "rest", "none")
+"""``dt/8``: the same scene and formulation at dt/8 with CLARABEL at ``high`` tolerance;
+``rest``: the exact solution is the initial state (resting scenes); ``none``: no reference."""
+
+REFERENCE_REFINEMENT = 8
+"""The reference runs at ``dt / REFERENCE_REFINEMENT``."""
+
+REFERENCE_SOLVER = "CLARABEL"
+REFERENCE_TOL = "high"
+"""The tightest CLARABEL setting (see :data:`wuerfel_cvx.solvers.TOLERANCE_PRESETS`)."""
+
+_LIST_KEYS = {"scenes": str, "formulations": str, "solvers": str, "tols": str,
+              "dts": float, "table_masses": (str, float), "extra_rods": bool}
+_SCALAR_KEYS = {"duration": float, "reference": str, "compare_every": int}
+_DEFAULTS: dict[str, Any] = {
+    "formulations": ["velocity"], "solvers": ["CLARABEL"], "tols": ["default"],
+    "dts": [0.01], "table_masses": ["fixed"], "extra_rods": [False], "reference": "dt/8",
+    "compare_every": 1,
+}
+
+
+@dataclass(frozen=True)
+class GridPoint:
+    """One configuration of a sweep: a scene run for ``duration`` seconds."""
+
+    suite: str
+    scene: str
+    formulation: str
+    """``velocity`` or ``seed``; ``peer`` for a peer engine."""
+    solver: str
+    """Solver registry name (upper case) or peer engine."""
+    tol: str
+    """Tolerance preset; ``native`` for a peer engine."""
+    dt: float
+    """Time step (s)."""
+    duration: float
+    """Simulated time (s)."""
+    table_mass: float | None = None
+    """Seed heavy-table corner mass (kg), or ``None`` for fixed tables."""
+    extra_rod: bool = False
+    reference: str = "dt/8"
+    compare_every: int = 1
+    """Re-solve every ``compare_every``-th step's QP with the reference solver; 0: never."""
+
+    @property
+    def engine(self) -> str:
+        """``wuerfel_cvx`` or the peer engine's package name."""
+        return self.solver.lower() if self.solver in PEER_ENGINES else "wuerfel_cvx"
+
+    @property
+    def steps(self) -> int:
+        """Number of steps: ``round(duration / dt)``, at least 1."""
+        return max(1, round(self.duration / self.dt))
+
+    @property
+    def point_id(self) -> str:
+        """A readable key, unique within the suite."""
+        parts = [self.scene, self.formulation, self.solver, self.tol, f"dt={self.dt:g}",
+                 f"T={self.duration:g}"]
+        if self.table_mass is not None:
+            parts.append(f"table_mass={self.table_mass:g}")
+        if self.extra_rod:
+            parts.append("extra_rod")
+        return "|".join(parts)
+
+    @property
+    def reference_key(self) -> tuple[str, str, float, float] | None:
+        """What identifies this point's dt/8 reference run, or ``None`` if it needs none.
+
+        Variants (heavy tables, a sixth rod) and peers are compared with the exact model:
+        fixed tables, five rods, and for peers the ``velocity`` formulation.
+        """
+        if self.reference != "dt/8":
+            return None
+        formulation = "velocity" if self.formulation == "peer" else self.formulation
+        return (self.scene, formulation, self.dt, self.duration)
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A named list of grid points."""
+
+    name: str
+    description: str
+    points: tuple[GridPoint, ...]
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> Suite:
+        """Read a suite file; raises :class:`InputError` naming the file and key."""
+        path = Path(path)
+        try:
+            with path.open("rb") as handle:
+                data = tomllib.load(handle)
+        except FileNotFoundError:
+            raise InputError("no such suite file", source=str(path)) from None
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"not valid TOML ({exc})", source=str(path)) from None
+        return cls.from_dict(data, source=str(path))
+
+    @classmethod
+    def named(cls, name: str) -> Suite:
+        """A suite by name (``benchmarks/<name>.toml``) or by path to a TOML file."""
+        if name.endswith(".toml") or "/" in name:
+            return cls.from_toml(name)
+        local = Path("benchmarks") / f"{name}.toml"
+        if local.is_file():
+            return cls.from_toml(local)
+        bundled = resources.files("wuerfel_cvx.suites").joinpath(f"{name}.toml")
+        if bundled.is_file():
+            with resources.as_file(bundled) as bundled_path:
+                return cls.from_toml(bundled_path)
+        raise InputError(f"unknown suite (known: {', '.join(suite_names())}; "
+                         "or give a .toml path)", source=name)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], source: str = "suite") -> Suite:
+        """Build from parsed TOML; checks keys and types."""
+        unknown = set(data) - {"name", "description", "defaults", "grid"}
+        if unknown:
+            raise InputError(f"unknown keys {sorted(unknown)}", source=source)
+        name = data.get("name")
+        if not isinstance(name, str) or not name:
+            raise InputError("needs a non-empty string", source=source, field="name")
+        defaults = {**_DEFAULTS, **_checked(data.get("defaults", {}), source, "defaults")}
+        grids = data.get("grid")
+        if not isinstance(grids, list) or not grids:
+            raise InputError("needs at least one [[grid]] table", source=source, field="grid")
+        points: list[GridPoint] = []
+        for index, grid in enumerate(grids):
+            where = f"grid[{index}]"
+            settings = {**defaults, **_checked(grid, source, where)}
+            points.extend(_expand(name, settings, source, where))
+        unique = list(dict.fromkeys(points))
+        return cls(name, str(data.get("description", "")), tuple(unique))
+
+
+def suite_names() -> list[str]:
+    """Names of the bundled suites."""
+    names = {entry.name.removesuffix(".toml")
+             for entry in resources.files("wuerfel_cvx.suites").iterdir()
+             if entry.name.endswith(".toml")}
+    return sorted(names)
+
+
+def _checked(table: Any, source: str, where: str) -> dict[str, Any]:
+    if not isinstance(table, dict):
+        raise InputError("must be a table", source=source, field=where)
+    checked: dict[str, Any] = {}
+    for key, value in table.items():
+        field = f"{where}.{key}"
+        if key in _LIST_KEYS:
+            if not isinstance(value, list) or not value:
+                raise InputError("must be a non-empty list", source=source, field=field)
+            for item in value:
+                _check_type(item, _LIST_KEYS[key], source, field)
+        elif key in _SCALAR_KEYS:
+            _check_type(value, _SCALAR_KEYS[key], source, field)
+        else:
+            raise InputError(f"unknown key (known: {', '.join([*_LIST_KEYS, *_SCALAR_KEYS])})",
+                             source=source, field=field)
+        checked[key] = value
+    return checked
+
+
+def _check_type(value: Any, expected: Any, source: str, field: str) -> None:
+    kinds = expected if isinstance(expected, tuple) else (expected,)
+    ok = any(_is(value, kind) for kind in kinds)
+    if not ok:
+        names = " or ".join(kind.__name__ for kind in kinds)
+        raise InputError(f"expected {names}, got {value!r}", source=source, field=field)
+
+
+def _is(value: Any, kind: type) -> bool:
+    if kind is float:
+        return isinstance(value, int | float) and not isinstance(value, bool)
+    if kind is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    return isinstance(value, kind)
+
+
+def _expand(suite: str, s: dict[str, Any], source: str, where: str) -> list[GridPoint]:
+    if "scenes" not in s:
+        raise InputError("needs 'scenes'", source=source, field=where)
+    duration = s.get("duration")
+    if duration is None or not (math.isfinite(duration) and duration > 0):
+        raise InputError("needs a positive 'duration' (s)", source=source, field=where)
+    if s["reference"] not in REFERENCE_KINDS:
+        raise InputError(f"must be one of {', '.join(REFERENCE_KINDS)}", source=source,
+                         field=f"{where}.reference")
+    if s["compare_every"] < 0:
+        raise InputError("must be >= 0", source=source, field=f"{where}.compare_every")
+    for dt in s["dts"]:
+        if not (math.isfinite(dt) and dt > 0):
+            raise InputError(f"time steps must be positive, got {dt}", source=source,
+                             field=f"{where}.dts")
+    masses = [_table_mass(m, source, f"{where}.table_masses") for m in s["table_masses"]]
+    points = []
+    for scene, formulation, solver, tol, dt, mass, rod in itertools.product(
+            s["scenes"], s["formulations"], s["solvers"], s["tols"], s["dts"], masses,
+            s["extra_rods"]):
+        solver = solver.upper()
+        if solver in PEER_ENGINES:
+            formulation, tol, mass, rod = "peer", "native", None, False
+        points.append(GridPoint(suite, scene, formulation, solver, str(tol), float(dt),
+                                float(duration), mass, bool(rod), s["reference"],
+                                s["compare_every"]))
+    return points
+
+
+def _table_mass(value: str | float, source: str, field: str) -> float | None:
+    if isinstance(value, str):
+        if value != "fixed":
+            raise InputError(f"'fixed' or a mass in kg, got {value!r}", source=source,
+                             field=field)
+        return None
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(f"table mass must be positive, got {value}", source=source,
+                         field=field)
+    return float(value)

@@ -1,0 +1,190 @@
+"""Code shared by the peer engines: poses to corners, the step loop, metrics rows.
+
+A peer engine models each square as one rigid body with pose
+``(x, y, theta, vx, vy, omega)``: centre (m), angle (rad, counter-clockwise), centre
+velocity (m/s) and angular velocity (rad/s, counter-clockwise).  This module turns
+poses into the corner layout of :class:`~wuerfel_cvx.model.State` (square ``i`` at rows
+``4i..4i+3``, counter-clockwise from the corner that is lower-left at angle 0, exactly
+as :func:`~wuerfel_cvx.geometry.square_corners`) and records a
+:class:`~wuerfel_cvx.trajectory.Trajectory` whose metrics are computed by the same
+functions of :mod:`wuerfel_cvx.metrics` as for the package's own simulator.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any, Protocol
+
+import numpy as np
+import pandas as pd
+from tqdm.auto import tqdm
+
+from ..errors import InputError, StepFailure
+from ..geometry import FloatArray, rot90, square_corners
+from ..metrics import deepest_penetration, kinetic_energy, potential_energy, rod_length_drift
+from ..model import Model, State
+from ..scene import Scene
+from ..simulate import METRIC_COLUMNS
+from ..trajectory import Trajectory
+
+POSE_COLUMNS = ("x", "y", "theta", "vx", "vy", "omega")
+"""Columns of a pose array ``(n, 6)``: m, m, rad, m/s, m/s, rad/s."""
+
+_METRIC_DTYPES = {
+    "verified": "boolean", "n_inequalities": "Int64", "n_contacts": "Int64",
+    "iterations": "Int64", "primal_residual": "Float64", "dual_residual": "Float64",
+    "complementarity": "Float64",
+}
+"""Nullable dtypes of the metric columns a peer cannot fill (they hold ``pd.NA``)."""
+
+
+class PeerWorld(Protocol):
+    """One engine's copy of a scene, advanced one fixed step at a time."""
+
+    def step(self) -> None:
+        """Advance the engine by one time step ``dt`` (s)."""
+
+    def poses(self) -> FloatArray:
+        """Current poses ``(n, 6)`` in the layout of :data:`POSE_COLUMNS`."""
+
+    def n_contacts(self) -> int | None:
+        """Contact points the engine used in the last step, or ``None`` if unknown."""
+
+
+def matched_moment(mass: float, size: float) -> float:
+    """Moment of inertia (kg m^2) of 4 corner masses ``mass / 4`` on a square of side ``size``.
+
+    ``4 (mass / 4) (size^2 / 2) = mass size^2 / 2``: the value of the package's model,
+    three times the solid square's ``mass size^2 / 6``.
+    """
+    return mass * size * size / 2.0
+
+
+def initial_poses(scene: Scene) -> FloatArray:
+    """The scene's initial poses ``(n, 6)`` (see :data:`POSE_COLUMNS`)."""
+    return np.array([[s.center[0], s.center[1], s.angle, s.velocity[0], s.velocity[1],
+                      s.angular_velocity] for s in scene.squares], dtype=np.float64)
+
+
+def corners_from_poses(sizes: FloatArray, poses: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Corner positions and velocities ``(4 n, 2)`` (m, m/s) of rigid squares.
+
+    ``sizes`` are the side lengths ``(n,)`` (m) and ``poses`` the poses ``(n, 6)``.  The
+    corners of square ``i`` are ``square_corners((x, y), size, theta)`` at rows
+    ``4i..4i+3``; their velocities are ``v + omega x r = v + omega rot90(r)`` with ``r``
+    the corner's offset from the centre.
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    points = np.empty((4 * len(sizes), 2))
+    velocities = np.empty_like(points)
+    for i, (size, pose) in enumerate(zip(sizes, poses, strict=True)):
+        center = pose[0:2]
+        corners = square_corners(center, float(size), float(pose[2]))
+        points[4 * i:4 * i + 4] = corners
+        velocities[4 * i:4 * i + 4] = pose[3:5] + pose[5] * rot90(corners - center)
+    return points, velocities
+
+
+def check_run_arguments(dt: float, steps: int) -> None:
+    """Reject a non-positive or non-finite ``dt`` (s) or a negative ``steps`` like ``simulate``."""
+    if isinstance(dt, bool) or not (isinstance(dt, int | float) and math.isfinite(dt)
+                                    and dt > 0):
+        raise InputError(f"must be a positive finite number of seconds, got {dt}", field="dt")
+    if isinstance(steps, bool) or not isinstance(steps, int | np.integer) or steps < 0:
+        raise InputError(f"must be a non-negative integer, got {steps}", field="steps")
+
+
+def package_version(package: str) -> str:
+    """Installed version of a distribution, or ``"not installed"``."""
+    try:
+        return version(package)
+    except PackageNotFoundError:
+        return "not installed"
+
+
+def run_peer(engine: str, package: str, scene: Scene, world: PeerWorld, dt: float,
+             steps: int, *, progress: bool = False) -> Trajectory:
+    """Step ``world`` ``steps`` times and record the trajectory of the scene.
+
+    Parameters
+    ----------
+    engine:
+        Upper-case engine name, written to ``info["solver"]`` and the ``solver`` column.
+    package:
+        The engine's distribution name, whose version goes to ``info["versions"]``.
+    scene:
+        The scene the world was built from (for the model, names and the initial state).
+    world:
+        The engine's world, already at the scene's initial state.
+    dt:
+        Time step (s) the world was built with.
+    steps:
+        Number of steps.
+    progress:
+        Show a progress bar.
+
+    Raises
+    ------
+    StepFailure
+        When the engine returns a non-finite pose; ``trajectory`` holds the steps before.
+
+    """
+    model = Model.from_scene(scene)
+    state = State.initial(scene)
+    times = [0.0]
+    points = [state.points]
+    velocities = [state.velocities]
+    rows: list[dict[str, Any]] = []
+    info: dict[str, Any] = {
+        "scene": scene.name, "formulation": "peer", "solver": engine, "tol": "native",
+        "dt": float(dt), "steps": int(steps), "table_mass": None, "extra_rod": False,
+        "versions": {"wuerfel_cvx": package_version("wuerfel_cvx"),
+                     package: package_version(package)},
+    }
+
+    def trajectory() -> Trajectory:
+        metrics = pd.DataFrame(rows, columns=list(METRIC_COLUMNS)).astype(_METRIC_DTYPES)
+        return Trajectory(times=np.array(times), points=np.array(points),
+                          velocities=np.array(velocities), metrics=metrics,
+                          table_points=model.table_points.copy(), info=info)
+
+    for step in tqdm(range(1, int(steps) + 1), disable=not progress, unit="step",
+                     desc=f"{scene.name} ({engine})"):
+        started = time.perf_counter()
+        world.step()
+        stepped = time.perf_counter()
+        poses = world.poses()
+        finished = time.perf_counter()
+        if not np.all(np.isfinite(poses)):
+            failure = StepFailure(step, engine, "peer", "non-finite state")
+            failure.trajectory = trajectory()
+            raise failure
+        state = State(*corners_from_poses(model.square_sizes, poses))
+        times.append(step * float(dt))
+        points.append(state.points)
+        velocities.append(state.velocities)
+        rows.append(_metrics_row(model, state, engine, step, float(dt), world.n_contacts(),
+                                 stepped - started, finished - started))
+    return trajectory()
+
+
+def _metrics_row(model: Model, state: State, engine: str, step: int, dt: float,
+                 n_contacts: int | None, solver_time: float,
+                 step_time: float) -> dict[str, Any]:
+    kinetic = kinetic_energy(model, state)
+    potential = potential_energy(model, state)
+    return {
+        "step": step, "time_s": step * dt, "solver": engine, "status": "peer",
+        "verified": pd.NA, "n_variables": 3 * model.n_squares, "n_equalities": 0,
+        "n_inequalities": pd.NA, "n_contacts": pd.NA if n_contacts is None else n_contacts,
+        "build_time_s": step_time - solver_time, "solve_time_s": solver_time,
+        "solver_time_s": solver_time, "step_time_s": step_time,
+        "iterations": pd.NA, "primal_residual": pd.NA, "dual_residual": pd.NA,
+        "complementarity": pd.NA,
+        "rod_drift": rod_length_drift(model, state.points),
+        "penetration_m": deepest_penetration(model, state.points),
+        "kinetic_energy_J": kinetic, "potential_energy_J": potential,
+        "total_energy_J": kinetic + potential,
+    }

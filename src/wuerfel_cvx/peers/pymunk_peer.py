@@ -1,0 +1,136 @@
+"""The pymunk (Chipmunk2D) peer: the same scene as rigid bodies in a Chipmunk space.
+
+Matched physics (SI units throughout)
+-------------------------------------
+* Time step ``dt`` (s) as given, one ``Space.step(dt)`` per step; gravity (m/s^2) is the
+  scene's.  Chipmunk integrates positions with the velocities of the previous step and
+  then velocities (semi-implicit Euler), so free flight is off the parabola by exactly
+  ``|g| dt t / 2`` (m), the same order as the package's own velocity-level stepping.
+* Each square is a dynamic :class:`pymunk.Body` with mass ``Square.mass`` (kg) and moment
+  of inertia ``mass size^2 / 2`` (kg m^2, the 4-corner-mass value, not the solid
+  square's ``mass size^2 / 6``), set explicitly after its shape is attached; its shape is
+  ``Poly.create_box`` of side ``size`` (m) with no rounding radius.
+* Each table is a static body at the table's centre and angle with a box shape.
+* Frictionless and inelastic: ``friction = 0`` and ``elasticity = 0`` on every shape.
+* ``Space.collision_slop`` = :data:`COLLISION_SLOP` = 1e-3 m (pymunk's default 0.1 is
+  meant for pixel units and would let a unit square sink 10 % of its side).  Overlap up
+  to the slop is allowed and not corrected, so a resting body sits about one slop deep.
+* ``Space.iterations`` = :data:`ITERATIONS` = 10 (Chipmunk's default) velocity
+  iterations of the sequential-impulse solver; ``collision_bias`` keeps its default
+  ``0.9^60`` (the fraction of overlap beyond the slop left after one second), damping 1
+  (none) and sleeping off.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..geometry import FloatArray
+from ..scene import Scene
+from ._common import matched_moment
+
+if TYPE_CHECKING:
+    import pymunk
+
+ENGINE = "PYMUNK"
+"""The engine's name in trajectories and metrics."""
+PACKAGE = "pymunk"
+"""The distribution that provides the engine."""
+COLLISION_SLOP = 1e-3
+"""Allowed overlap (m) that Chipmunk does not correct (its default, 0.1, suits pixels)."""
+ITERATIONS = 10
+"""Velocity iterations of Chipmunk's solver per step (its default)."""
+
+
+class PymunkWorld:
+    """A pymunk space holding a scene; ``bodies[i]`` is square ``i``.
+
+    Parameters
+    ----------
+    scene:
+        The scene.
+    dt:
+        Time step (s) of :meth:`step`.
+    iterations:
+        Solver iterations per step.
+    collision_slop:
+        Allowed overlap (m).
+
+    """
+
+    def __init__(self, scene: Scene, dt: float, *, iterations: int = ITERATIONS,
+                 collision_slop: float = COLLISION_SLOP) -> None:
+        import pymunk
+
+        self.dt = float(dt)
+        self.space = pymunk.Space()
+        self.space.gravity = scene.gravity
+        self.space.iterations = int(iterations)
+        self.space.collision_slop = float(collision_slop)
+        for table in scene.tables:
+            base = pymunk.Body(body_type=pymunk.Body.STATIC)
+            base.position = table.center
+            base.angle = table.angle
+            self.space.add(base, _frictionless_box(base, table.size))
+        self.bodies: list[pymunk.Body] = []
+        for square in scene.squares:
+            moment = matched_moment(square.mass, square.size)
+            body = pymunk.Body(square.mass, moment)
+            body.position = square.center
+            body.angle = square.angle
+            body.velocity = square.velocity
+            body.angular_velocity = square.angular_velocity
+            self.space.add(body, _frictionless_box(body, (square.size, square.size)))
+            body.mass = square.mass  # explicit, after the shape: nothing recomputes them
+            body.moment = moment
+            self.bodies.append(body)
+
+    def step(self) -> None:
+        """Advance the space by ``dt`` (s)."""
+        self.space.step(self.dt)
+
+    def poses(self) -> FloatArray:
+        """Poses ``(n, 6)``: centre (m), angle (rad), velocity (m/s), spin (rad/s)."""
+        return np.array([(*b.position, b.angle, *b.velocity, b.angular_velocity)
+                         for b in self.bodies], dtype=np.float64)
+
+    def n_contacts(self) -> int:
+        """Contact points of the arbiters touching the squares in the last step."""
+        import pymunk
+
+        total = 0.0
+
+        def count(arbiter: pymunk.Arbiter, body: pymunk.Body) -> None:
+            nonlocal total
+            a, b = arbiter.bodies
+            other = b if a is body else a
+            # A square-square arbiter is met from both squares: count it half each time.
+            weight = 1.0 if other.body_type == pymunk.Body.STATIC else 0.5
+            total += weight * len(arbiter.contact_point_set.points)
+
+        for body in self.bodies:
+            body.each_arbiter(count, body)
+        return round(total)
+
+
+def _frictionless_box(body: pymunk.Body, size: tuple[float, float]) -> pymunk.Poly:
+    import pymunk
+
+    shape = pymunk.Poly.create_box(body, size)
+    shape.friction = 0.0
+    shape.elasticity = 0.0
+    return shape
+
+
+def build_world(scene: Scene, dt: float) -> PymunkWorld:
+    """The scene in a pymunk space with the matched settings of this module."""
+    return PymunkWorld(scene, dt)
+
+
+def engine_version() -> str:
+    """The installed pymunk version string (raises ImportError without pymunk)."""
+    import pymunk
+
+    return str(pymunk.version)
