@@ -260,3 +260,11 @@ def test_smoke_suite_runs_clean(tmp_path: Path) -> None:
     assert all(point_id.split("|")[2] in PEER_ENGINES
                for point_id in summary.skipped_unavailable)
     assert len(notes) >= len(summary.skipped_unavailable)
+
+
+def test_a_grid_point_over_its_time_limit_is_stopped_and_reported(tmp_path: Path) -> None:
+    suite = tiny_suite(scenes=["tilted-drop"], solvers=["CLARABEL"], time_limit=1e-9)
+    summary = run_sweep(suite, tmp_path, progress=False, echo=lambda _: None)
+    row = schema.read_results(summary.results).iloc[0]
+    assert row["status"] == "failed" and row["failed_step"] == 1
+    assert "time_limit" in row["error"] and row["steps_completed"] == 1

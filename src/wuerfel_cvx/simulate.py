@@ -94,6 +94,8 @@ def simulate(
     observer:
         Optional callback ``observer(step, qp, solution)`` after each solved step, e.g. to
         re-solve the same QP with another solver; its time is not in the step's timings.
+        It may end the run by raising :class:`StepFailure`, which then carries the
+        trajectory up to and including this step.
 
     Raises
     ------
@@ -153,7 +155,11 @@ def simulate(
                                  qp.n_inequalities, len(qp.contacts), step, float(dt),
                                  build_time, step_time, solution))
         if observer is not None:
-            observer(step, qp, solution)
+            try:
+                observer(step, qp, solution)
+            except StepFailure as stop:  # an observer may end the run (e.g. a time limit)
+                stop.trajectory = trajectory()
+                raise
     return trajectory()
 
 

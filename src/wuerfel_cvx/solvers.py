@@ -57,8 +57,11 @@ SOLVERS: dict[str, SolverSpec] = {
         SolverSpec("PIQP", "PIQP", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, "max_iter": 250, "compute_timings": True},
             "proximal interior-point"),
+        # cvxpy (1.9) runs PROXQP's dense backend; its sparse one fails there with a
+        # TypeError (cvxpy passes a box flag the sparse constructor does not take).
         SolverSpec("PROXQP", "PROXQP", lambda eps: {
-            "eps_abs": eps, "eps_rel": 0.0, "max_iter": 10_000}, "proximal augmented Lagrangian"),
+            "eps_abs": eps, "eps_rel": 0.0, "max_iter": 10_000},
+            "proximal augmented Lagrangian (dense backend)"),
         SolverSpec("SCS", "SCS", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, "max_iters": 200_000}, "ADMM (conic)"),
     )

@@ -10,6 +10,7 @@ from __future__ import annotations
 import datetime as dt_module
 import hashlib
 import platform
+import time
 from dataclasses import dataclass
 from functools import cache
 from importlib.metadata import PackageNotFoundError, version
@@ -115,8 +116,12 @@ def _simulate(point: GridPoint) -> tuple[Trajectory, StepFailure | None, float |
     """Run the point; a failed step returns the partial trajectory and the failure."""
     worst = [0.0]
     compared = [0]
+    started = time.perf_counter()
 
     def compare(step: int, qp: StepQP, solution: StepSolution) -> None:
+        if time.perf_counter() - started > point.time_limit:
+            raise StepFailure(step, point.solver, "time_limit",
+                              f"grid point stopped after {point.time_limit:g} s of wall time")
         if point.compare_every and step % point.compare_every == 0:
             try:
                 best = solve_step_qp(qp, REFERENCE_SOLVER, REFERENCE_TOL, step=step)

@@ -17,6 +17,7 @@ Cartesian product of its lists::
     extra_rods = [false]
     reference = "dt/8"                  # "dt/8", "rest" or "none"
     compare_every = 1                   # steps between re-solves by the reference solver
+    time_limit = 600.0                  # wall seconds per grid point before it is stopped
 
     [[grid]]
     scenes = ["tilted-drop", "stack-3"]
@@ -51,11 +52,12 @@ REFERENCE_TOL = "high"
 
 _LIST_KEYS = {"scenes": str, "formulations": str, "solvers": str, "tols": str,
               "dts": float, "table_masses": (str, float), "extra_rods": bool}
-_SCALAR_KEYS = {"duration": float, "reference": str, "compare_every": int}
+_SCALAR_KEYS = {"duration": float, "reference": str, "compare_every": int,
+                "time_limit": float}
 _DEFAULTS: dict[str, Any] = {
     "formulations": ["velocity"], "solvers": ["CLARABEL"], "tols": ["default"],
     "dts": [0.01], "table_masses": ["fixed"], "extra_rods": [False], "reference": "dt/8",
-    "compare_every": 1,
+    "compare_every": 1, "time_limit": 600.0,
 }
 
 
@@ -81,6 +83,8 @@ class GridPoint:
     reference: str = "dt/8"
     compare_every: int = 1
     """Re-solve every ``compare_every``-th step's QP with the reference solver; 0: never."""
+    time_limit: float = 600.0
+    """Wall time (s) after which a grid point is stopped and reported as failed."""
 
     @property
     def engine(self) -> str:
@@ -227,6 +231,8 @@ def _expand(suite: str, s: dict[str, Any], source: str, where: str) -> list[Grid
     if s["reference"] not in REFERENCE_KINDS:
         raise InputError(f"must be one of {', '.join(REFERENCE_KINDS)}", source=source,
                          field=f"{where}.reference")
+    if not s["time_limit"] > 0:
+        raise InputError("must be positive (s)", source=source, field=f"{where}.time_limit")
     if s["compare_every"] < 0:
         raise InputError("must be >= 0", source=source, field=f"{where}.compare_every")
     for dt in s["dts"]:
@@ -243,7 +249,7 @@ def _expand(suite: str, s: dict[str, Any], source: str, where: str) -> list[Grid
             formulation, tol, mass, rod = "peer", "native", None, False
         points.append(GridPoint(suite, scene, formulation, solver, str(tol), float(dt),
                                 float(duration), mass, bool(rod), s["reference"],
-                                s["compare_every"]))
+                                s["compare_every"], float(s["time_limit"])))
     return points
 
 
