@@ -470,20 +470,22 @@ def _series_panel(axis: Axes, rows: pd.DataFrame, frames: dict[str, pd.DataFrame
 
 
 def scaling_table(results: pd.DataFrame) -> pd.DataFrame:
-    """Median wall time per step (s) per formulation, solver and ``n_squares``.
+    """Median wall time per step (s) per scene family, formulation, solver and ``n_squares``.
 
-    Over rows with status ok, the plain variant and tolerance default/native; the median
-    is taken over the grid points (scenes, dts) of each number of squares.
+    The family is the scene name without its number (``stack-20`` -> ``stack``), so stacks
+    and pyramids get lines of their own.  Over rows with status ok, the plain variant and
+    tolerance default/native; the median is over the grid points of each number of squares.
     """
     rows = results[is_value(results["status"], "ok") & plain_variant(results)
                    & results["n_squares"].notna()
                    & results["wall_time_per_step_median"].gt(0).fillna(False).astype(bool)]
     rows = preferred_tolerance(rows)
     table = rows.assign(n_squares=rows["n_squares"].astype(float),
+                        family=rows["scene"].astype(str).str.replace(r"-\d+$", "", regex=True),
                         formulation=rows["formulation"].astype(str),
                         solver=rows["solver"].astype(str))
-    return (table.groupby(["formulation", "solver", "n_squares"])["wall_time_per_step_median"]
-            .median().reset_index())
+    return (table.groupby(["family", "formulation", "solver", "n_squares"])
+            ["wall_time_per_step_median"].median().reset_index())
 
 
 def plot_scaling(results: pd.DataFrame, out_dir: str | Path,
@@ -495,29 +497,32 @@ def plot_scaling(results: pd.DataFrame, out_dir: str | Path,
     two distinct numbers of squares.
     """
     table = scaling_table(results)
-    groups = [(key, group) for key, group in table.groupby(["formulation", "solver"])
+    groups = [(key, group) for key, group in table.groupby(["family", "formulation", "solver"])
               if group["n_squares"].nunique() >= 2]
-    groups.sort(key=lambda item: (item[0][0] == "peer", item[0]))
+    families = sorted({str(key[0]) for key, _ in groups})
     if not groups:
         return []
-    figure = _new_figure(7.5, 5.0)
-    axis = figure.subplots()
+    figure = _new_figure(6.0 * len(families), 5.0)
+    axes = np.atleast_1d(figure.subplots(1, len(families), sharey=True))
     many = table["formulation"].nunique() > 1
-    for (formulation, solver), group in groups:
-        colour, marker = solver_style(str(solver))
-        exponent = fitted_exponent(group["n_squares"], group["wall_time_per_step_median"])
-        axis.plot(group["n_squares"], group["wall_time_per_step_median"], color=colour,
-                  marker=marker, linestyle=formulation_linestyle(str(formulation)),
-                  label=f"{series_label(str(solver), str(formulation), many)}: "
-                        f"k = {exponent:.2f}")
-    axis.set_xscale("log")
-    axis.set_yscale("log")
-    axis.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
-    axis.set_xlabel("number of squares")
-    axis.set_ylabel("median wall time per step (s)")
-    axis.set_title("Time per step against size (fitted t ~ n^k)", fontsize=11)
-    axis.grid(True, which="both", linewidth=0.3, alpha=0.5)
-    axis.legend(fontsize=8)
+    for axis, family in zip(axes, families, strict=True):
+        mine = [item for item in groups if item[0][0] == family]
+        mine.sort(key=lambda item: (item[0][1] == "peer", item[0]))
+        for (_, formulation, solver), group in mine:
+            colour, marker = solver_style(str(solver))
+            exponent = fitted_exponent(group["n_squares"], group["wall_time_per_step_median"])
+            axis.plot(group["n_squares"], group["wall_time_per_step_median"], color=colour,
+                      marker=marker, linestyle=formulation_linestyle(str(formulation)),
+                      label=f"{series_label(str(solver), str(formulation), many)}: "
+                            f"k = {exponent:.2f}")
+        axis.set_xscale("log")
+        axis.set_yscale("log")
+        axis.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+        axis.set_xlabel("number of squares")
+        axis.set_title(f"{family}-N (fitted t ~ n^k)", fontsize=11)
+        axis.grid(True, which="both", linewidth=0.3, alpha=0.5)
+        axis.legend(fontsize=8)
+    axes[0].set_ylabel("median wall time per step (s)")
     return _save(figure, Path(out_dir), stem)
 
 

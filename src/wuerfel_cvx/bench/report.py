@@ -468,20 +468,22 @@ def scaling_section(results: pd.DataFrame, images: dict[str, list[Path]],
         return ""
     table = plots.scaling_table(results)
     rows = []
-    for (formulation, solver), group in table.groupby(["formulation", "solver"]):
+    for (family, formulation, solver), group in table.groupby(
+            ["family", "formulation", "solver"]):
         if group["n_squares"].nunique() >= 2:
             exponent = plots.fitted_exponent(group["n_squares"],
                                              group["wall_time_per_step_median"])
-            rows.append((str(formulation), str(solver),
+            rows.append((f"{family}-N", str(formulation), str(solver),
                          f"{group['n_squares'].min():g}–{group['n_squares'].max():g}",
                          f"{exponent:.2f}"))
-    rows.sort(key=lambda row: (row[0] == "peer", row[0], row[1]))
+    rows.sort(key=lambda row: (row[0], row[1] == "peer", row[1], row[2]))
     return "\n\n".join([
         "## Time per step against size", image,
         "Median (over grid points) of the median wall time per step against the number of "
         "squares, status ok, tol default (peers: native), fixed tables and five rods; k is "
         "the least-squares slope in log-log (t ~ n^k).",
-        markdown_table(["formulation", "solver", "squares", "k"], rows, align="llrr")])
+        markdown_table(["scenes", "formulation", "solver", "squares", "k"], rows,
+                       align="lllrr")])
 
 
 # ----------------------------------------------------------------------------- failures
