@@ -326,3 +326,10 @@ def test_fixture_is_valid_and_has_the_promised_cases() -> None:
     assert series
     assert all(path.name in {schema.series_file_name(p) for p in results["point_id"]}
                for path in series)
+
+
+def test_headline_scene_can_be_chosen_and_must_exist(tmp_path: Path) -> None:
+    readme = write_report(RESULTS, tmp_path, headline="stack-3").read_text(encoding="utf-8")
+    assert "Scene `stack-3`:" in readme
+    with pytest.raises(InputError, match="not in the results"):
+        write_report(RESULTS, tmp_path, headline="no-such-scene")

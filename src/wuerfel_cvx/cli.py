@@ -62,6 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("results", help="a results CSV written by 'wuerfel-cvx bench'")
     report.add_argument("--root", default="reports",
                         help="reports directory (default reports)")
+    report.add_argument("--headline", default=None,
+                        help="scene of the large speed/accuracy plot (default: the scene "
+                             "with the most points)")
 
     commands.add_parser("scenes", help="list the named scenes")
     commands.add_parser("solvers", help="list the installed solvers")
@@ -129,7 +132,7 @@ def _bench(args: argparse.Namespace) -> int:
 def _report(args: argparse.Namespace) -> int:
     from .bench.report import write_report
 
-    path = write_report(args.results, args.root)
+    path = write_report(args.results, args.root, headline=args.headline)
     print(f"wrote {path}")
     return 0
 

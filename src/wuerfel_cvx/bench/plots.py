@@ -687,11 +687,14 @@ def _stacked_bar(axis: Axes, x: float, colour: str, solver_ms: float, modelling_
                   xytext=(0, 2), textcoords="offset points")
 
 
-def plot_all(results: pd.DataFrame, series_dir: str | Path,
-             out_dir: str | Path) -> dict[str, list[Path]]:
-    """Every plot that has data, keyed by stem (``pareto``, ``scaling``, ...)."""
+def plot_all(results: pd.DataFrame, series_dir: str | Path, out_dir: str | Path,
+             headline: str | None = None) -> dict[str, list[Path]]:
+    """Every plot that has data, keyed by stem (``pareto``, ``scaling``, ...).
+
+    ``headline``: the scene of the large speed/accuracy plot (default :func:`headline_scene`).
+    """
     made = {
-        "pareto-headline": plot_pareto_headline(results, out_dir),
+        "pareto-headline": plot_pareto_headline(results, out_dir, scene=headline),
         "pareto": plot_pareto(results, out_dir),
         "drift-penetration": plot_drift_penetration(results, series_dir, out_dir),
         "scaling": plot_scaling(results, out_dir),

@@ -34,8 +34,12 @@ _TIME_COLUMNS = (("wall", "wall_time_per_step_median"),
                  ("modelling", "modelling_time_per_step_median"))
 
 
-def write_report(results_csv: str | Path, root: str | Path = "reports") -> Path:
+def write_report(results_csv: str | Path, root: str | Path = "reports",
+                 headline: str | None = None) -> Path:
     """Write ``<root>/<suite>/README.md`` and its plots from ``results_csv``.
+
+    ``headline`` names the scene of the large speed-against-accuracy plot (default: the
+    scene with the most points on it).
 
     The suite is taken from the rows' ``suite`` column and must be a single one; a file
     holding several suites, or none, raises :class:`~wuerfel_cvx.errors.InputError`.
@@ -45,15 +49,19 @@ def write_report(results_csv: str | Path, root: str | Path = "reports") -> Path:
     results_csv = Path(results_csv)
     results = schema.read_results(results_csv)
     suite = suite_name(results, source=str(results_csv))
+    if headline is not None and headline not in set(results["scene"].dropna()):
+        raise InputError(f"scene '{headline}' is not in the results", source=str(results_csv),
+                         field="--headline")
     out_dir = Path(root) / suite
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(f"cannot create ({exc.strerror})", source=str(out_dir)) from None
     _remove_old_plots(out_dir)
-    images = plots.plot_all(results, results_csv.parent / "series", out_dir)
-    text = render_report(results, suite, images, out_dir, _results_dir_hint(results_csv,
-                                                                             suite))
+    images = plots.plot_all(results, results_csv.parent / "series", out_dir,
+                            headline=headline)
+    text = render_report(results, suite, images, out_dir,
+                         _results_dir_hint(results_csv, suite), headline=headline)
     readme = out_dir / README
     readme.write_text(text, encoding="utf-8")
     return readme
@@ -74,14 +82,14 @@ def suite_name(results: pd.DataFrame, source: str = "results") -> str:
 
 
 def render_report(results: pd.DataFrame, suite: str, images: dict[str, list[Path]],
-                  out_dir: Path, results_dir: str) -> str:
+                  out_dir: Path, results_dir: str, headline: str | None = None) -> str:
     """The README text (Markdown); image links are relative to ``out_dir``."""
     sections = [
         f"# Benchmark report: `{suite}`",
         header_section(results, suite, results_dir),
         speed_section(results, images, out_dir),
         success_section(results, images, out_dir),
-        accuracy_section(results, images, out_dir),
+        accuracy_section(results, images, out_dir, headline=headline),
         scaling_section(results, images, out_dir),
         failures_section(results),
         "## Appendix: columns of results.csv\n\n" + schema.describe(),
@@ -402,7 +410,7 @@ def accuracy_table(results: pd.DataFrame) -> pd.DataFrame:
 
 
 def accuracy_section(results: pd.DataFrame, images: dict[str, list[Path]],
-                     out_dir: Path) -> str:
+                     out_dir: Path, headline: str | None = None) -> str:
     """Section (d): accuracy per solver, the speed/accuracy plots and the drift plot."""
     table = _solver_rows(accuracy_table(results))
     parts = ["## Accuracy",
@@ -422,7 +430,7 @@ def accuracy_section(results: pd.DataFrame, images: dict[str, list[Path]],
               format_number(row.penetration_max), format_number(row.drift_max),
               format_number(row.energy_gain_max)] for row in table.itertuples()),
             align="llrrrrrrr"))
-    parts += _pareto_parts(results, images, out_dir)
+    parts += _pareto_parts(results, images, out_dir, headline)
     image = _image(images, "drift-penetration", out_dir, "rod drift and penetration over time")
     if image:
         parts += ["### Drift and penetration over time", image,
@@ -433,7 +441,7 @@ def accuracy_section(results: pd.DataFrame, images: dict[str, list[Path]],
 
 
 def _pareto_parts(results: pd.DataFrame, images: dict[str, list[Path]],
-                  out_dir: Path) -> list[str]:
+                  out_dir: Path, headline_scene: str | None = None) -> list[str]:
     headline = _image(images, "pareto-headline", out_dir, "speed against accuracy")
     panels = _image(images, "pareto", out_dir, "speed against accuracy per scene")
     if not (headline or panels):
@@ -450,8 +458,11 @@ def _pareto_parts(results: pd.DataFrame, images: dict[str, list[Path]],
                f"floor.  {shown}")
     parts = ["### Speed against accuracy"]
     if headline:
-        scene = plots.headline_scene(results)
-        parts += [f"Scene `{scene}` (the one with the most points):", headline]
+        if headline_scene is not None:
+            parts += [f"Scene `{headline_scene}`:", headline]
+        else:
+            scene = plots.headline_scene(results)
+            parts += [f"Scene `{scene}` (the one with the most points):", headline]
     if panels:
         parts += ["Every scene:", panels]
     return [*parts, caption]
