@@ -268,3 +268,26 @@ def test_a_grid_point_over_its_time_limit_is_stopped_and_reported(tmp_path: Path
     row = schema.read_results(summary.results).iloc[0]
     assert row["status"] == "failed" and row["failed_step"] == 1
     assert "time_limit" in row["error"] and row["steps_completed"] == 1
+
+
+def test_a_failed_reference_is_named_in_the_row_and_the_report(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from wuerfel_cvx.bench.report import write_report
+
+    real_simulate = runner.simulate
+
+    def fine_runs_fail(scene: Any, **kwargs: Any) -> Any:
+        if kwargs["dt"] < 0.01:  # only the dt/8 reference
+            failure = StepFailure(4, "CLARABEL", "solver_error", "injected")
+            failure.trajectory = real_simulate(scene, dt=kwargs["dt"], steps=3)
+            raise failure
+        return real_simulate(scene, **kwargs)
+
+    monkeypatch.setattr(runner, "simulate", fine_runs_fail)
+    summary = run_sweep(tiny_suite(scenes=["tilted-drop"], solvers=["CLARABEL"]), tmp_path,
+                        progress=False, echo=lambda _: None)
+    row = schema.read_results(summary.results).iloc[0]
+    assert row["status"] == "ok" and pd.isna(row["trajectory_error"])
+    assert row["reference_kind"].startswith("dt/8 (reference failed: step 4")
+    readme = write_report(summary.results, tmp_path / "reports").read_text(encoding="utf-8")
+    assert "### Failed reference runs" in readme and "solver_error" in readme

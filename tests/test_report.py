@@ -333,3 +333,10 @@ def test_headline_scene_can_be_chosen_and_must_exist(tmp_path: Path) -> None:
     assert "Scene `stack-3`:" in readme
     with pytest.raises(InputError, match="not in the results"):
         write_report(RESULTS, tmp_path, headline="no-such-scene")
+
+
+def test_report_carries_a_copy_of_its_results(tmp_path: Path) -> None:
+    readme = write_report(RESULTS, tmp_path)
+    copy = readme.parent / "results.csv"
+    assert copy.read_bytes() == RESULTS.read_bytes()
+    assert "[`results.csv`](results.csv)" in readme.read_text(encoding="utf-8")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import datetime as dt_module
 import math
+import shutil
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
@@ -43,8 +44,8 @@ def write_report(results_csv: str | Path, root: str | Path = "reports",
 
     The suite is taken from the rows' ``suite`` column and must be a single one; a file
     holding several suites, or none, raises :class:`~wuerfel_cvx.errors.InputError`.
-    Plot files (PNG and SVG) go next to the README and are linked relatively.  Returns the
-    README's path.
+    Plot files (PNG and SVG) go next to the README and are linked relatively, and a copy of
+    the results CSV goes there too, so a report carries its data.  Returns the README's path.
     """
     results_csv = Path(results_csv)
     results = schema.read_results(results_csv)
@@ -64,6 +65,9 @@ def write_report(results_csv: str | Path, root: str | Path = "reports",
                          _results_dir_hint(results_csv, suite), headline=headline)
     readme = out_dir / README
     readme.write_text(text, encoding="utf-8")
+    copy = out_dir / "results.csv"  # the report carries its data
+    if not copy.exists() or not copy.samefile(results_csv):
+        shutil.copyfile(results_csv, copy)
     return readme
 
 
@@ -199,6 +203,7 @@ def header_section(results: pd.DataFrame, suite: str, results_dir: str) -> str:
                f"wuerfel-cvx report {results_dir}/results.csv")
     return ("\n".join(lines) + "\n\nEverything below was measured on the machine named "
             "above (taken from the rows, not from the machine that wrote this report).  "
+            "The rows themselves are in [`results.csv`](results.csv).  "
             "To regenerate:\n\n```sh\n" + command + "\n```")
 
 
@@ -504,8 +509,9 @@ def failures_section(results: pd.DataFrame) -> str:
     """Section (e): every grid point with status ``failed`` or ``error``, never hidden."""
     bad = results[~plots.is_value(results["status"], "ok")]
     title = "## Failed and errored grid points"
+    references = _failed_references(results)
     if bad.empty:
-        return f"{title}\n\nNone: every grid point completed."
+        return f"{title}\n\nNone: every grid point completed." + references
     bad = bad.assign(variant=plots.variant_labels(bad)).sort_values(
         ["status", "scene", "solver", "point_id"])
     table = markdown_table(
@@ -516,7 +522,25 @@ def failures_section(results: pd.DataFrame) -> str:
           _text(row.failed_step), _text(row.error)] for row in bad.itertuples()),
         align="lllllllrl")
     return (f"{title}\n\n{len(bad)} of {len(results)} grid points.  *failed*: a step failed "
-            "(the step is given); *error*: the configuration could not run.\n\n" + table)
+            "(the step is given); *error*: the configuration could not run.\n\n" + table
+            + references)
+
+
+def _failed_references(results: pd.DataFrame) -> str:
+    """Reference runs that failed: their grid points have no trajectory error."""
+    kinds = results["reference_kind"].astype("string")
+    failed = results[kinds.str.startswith("dt/8 (reference failed").fillna(False).astype(bool)]
+    if failed.empty:
+        return ""
+    groups = failed.groupby(["scene", "formulation", "dt"], sort=True)
+    table = markdown_table(
+        ["scene", "formulation", "dt (s)", "grid points", "reference run"],
+        ([str(scene), str(formulation), format_number(dt), len(group),
+          _text(group["reference_kind"].iloc[0]).replace("|", "\\|")]
+         for (scene, formulation, dt), group in groups),
+        align="lllrl")
+    return ("\n\n### Failed reference runs\n\nThe dt/8 reference (CLARABEL at tol high) of "
+            "these scenes failed, so their grid points have no trajectory error.\n\n" + table)
 
 
 def _int(value: object) -> int:

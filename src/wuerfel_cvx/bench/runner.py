@@ -221,7 +221,8 @@ def _accuracy(trajectory: Trajectory, point: GridPoint,
             accuracy["trajectory_error"] = _largest_distance(trajectory.points,
                                                               reference.points)
         else:
-            accuracy["reference_kind"] = "dt/8 (reference failed)"
+            detail = " ".join(reference.detail.split())[:160]
+            accuracy["reference_kind"] = f"dt/8 (reference failed: {detail})"
     return accuracy
 
 
