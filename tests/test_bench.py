@@ -291,3 +291,14 @@ def test_a_failed_reference_is_named_in_the_row_and_the_report(
     assert row["reference_kind"].startswith("dt/8 (reference failed: step 4")
     readme = write_report(summary.results, tmp_path / "reports").read_text(encoding="utf-8")
     assert "### Failed reference runs" in readme and "solver_error" in readme
+
+
+def test_progress_bar_stays_quiet_when_stderr_is_not_a_terminal(
+        tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    run_sweep(tiny_suite(scenes=["resting-square"], solvers=["CLARABEL"]), tmp_path)
+    quiet = capfd.readouterr().err
+    assert "step/s" not in quiet and "%|" not in quiet
+    run_sweep(tiny_suite(scenes=["tilted-drop"], solvers=["CLARABEL"]), tmp_path / "shown",
+              progress=True)
+    shown = capfd.readouterr().err
+    assert "tiny:" in shown and "100%|" in shown  # the bar, with its rate and ETA fields
