@@ -340,3 +340,13 @@ def test_report_carries_a_copy_of_its_results(tmp_path: Path) -> None:
     copy = readme.parent / "results.csv"
     assert copy.read_bytes() == RESULTS.read_bytes()
     assert "[`results.csv`](results.csv)" in readme.read_text(encoding="utf-8")
+
+
+def test_step_over_solver_ratio_is_reported_per_solver(readme: str) -> None:
+    # The fixture's solver time is a fixed share of each step, so the ratio is 1 / share.
+    shares = {"CLARABEL": 0.35, "OSQP": 0.2, "PIQP": 0.3, "SCS": 0.4}
+    table = table_after(readme, "### Formulation `velocity`")
+    assert table, "no velocity time table"
+    for cells in table:
+        expected = 1.0 / shares[cells[1]]
+        assert float(cells[-1]) == pytest.approx(expected, abs=0.006)

@@ -14,6 +14,12 @@ Edge rule
     tie (a point exactly at an edge's end, as in an aligned stack) goes to the edge
     that best separates the whole pair (the separating-axis choice), so a corner
     resting on a corner is held by the face it rests on.
+
+Batching
+    There is no loop over pairs in Python: the broad phase yields an array of
+    ordered (edge body, point body) pairs, and one array ``(pairs, 4 corners, 4
+    edges)`` of signed distances carries the edge rule and the margin test for all
+    of them at once.  Contacts come out ordered by pair, then by corner.
 """
 
 from __future__ import annotations
@@ -23,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import FloatArray, edge_distances
+from .geometry import FloatArray, cross
 from .model import IntArray, Model
 
 #: Two edge distances closer than this (m) count as a tie at a corner.
@@ -61,29 +67,58 @@ def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntAr
     """Ordered (edge body, point body) pairs that may touch, ``(P, 2)``.
 
     ``reach`` ``(n_bodies,)`` (m) is how far beyond its circumcircle each body must be
-    looked for.  Table-table pairs are never returned.
+    looked for.  Table-table pairs are never returned.  Order: the square pairs kept
+    from the tree query, then the square-table pairs, then all of them reversed.
     """
     n, t = model.n_squares, model.n_tables
     corners = all_points.reshape(-1, 4, 2)
     centers = corners.mean(axis=1)
     radii = np.linalg.norm(corners - centers[:, None, :], axis=2).max(axis=1)
     bound = radii + reach
-    unordered: list[tuple[int, int]] = []
+    found = [np.zeros((0, 2), dtype=np.int64)]
     if n > 1:
         tree = cKDTree(centers[:n])
         candidates = tree.query_pairs(r=2.0 * float(bound[:n].max()), output_type="ndarray")
-        if len(candidates):
-            dist = np.linalg.norm(centers[candidates[:, 0]] - centers[candidates[:, 1]], axis=1)
-            keep = dist <= bound[candidates[:, 0]] + bound[candidates[:, 1]]
-            unordered.extend(map(tuple, candidates[keep]))
+        dist = np.linalg.norm(centers[candidates[:, 0]] - centers[candidates[:, 1]], axis=1)
+        found.append(candidates[dist <= bound[candidates[:, 0]] + bound[candidates[:, 1]]])
     if t:
         dist = np.linalg.norm(centers[:n, None, :] - centers[None, n:, :], axis=2)
         close = np.argwhere(dist <= bound[:n, None] + bound[None, n:])
-        unordered.extend((int(a), int(n + b)) for a, b in close)
-    if not unordered:
-        return np.zeros((0, 2), dtype=np.int64)
-    pairs = np.array(unordered, dtype=np.int64)
+        found.append(close + np.array([0, n]))
+    pairs = np.concatenate(found).astype(np.int64, copy=False)
     return np.concatenate([pairs, pairs[:, ::-1]])
+
+
+def pair_distances(corners: FloatArray, edge_body: IntArray, point_body: IntArray) -> FloatArray:
+    """Signed distances (m) of each point body's corners from the edge body's edge lines.
+
+    ``corners`` ``(n_bodies, 4, 2)`` (m), counter-clockwise; ``edge_body`` and
+    ``point_body`` ``(P,)``.  Entry ``[p, k, e]`` of the ``(P, 4, 4)`` result is corner
+    ``k`` of ``point_body[p]`` against edge ``e`` (corner ``e`` to ``e + 1``) of
+    ``edge_body[p]``, positive outside.  This is
+    :func:`~wuerfel_cvx.geometry.edge_distances` for all pairs at once, with the same
+    floating-point operations, so the values agree bit for bit.
+    """
+    head = np.roll(corners, -1, axis=1)  # contact order (i, j) = (head, tail)
+    edge = corners - head  # p_j - p_i, (n_bodies, 4, 2)
+    length = np.linalg.norm(edge, axis=-1)  # (n_bodies, 4)
+    offset = corners[point_body][:, :, None, :] - head[edge_body][:, None, :, :]  # p_k - p_i
+    area = cross(edge[edge_body][:, None, :, :], offset)  # (P, 4, 4), m^2
+    return np.asarray(area / length[edge_body][:, None, :], dtype=np.float64)
+
+
+def choose_edges(distances: FloatArray) -> IntArray:
+    """Edge index ``(P, 4)`` for each point of each pair by the edge rule.
+
+    ``distances`` ``(P, 4, 4)`` (m) as from :func:`pair_distances`.  The edge with the
+    largest signed distance wins; edges within :data:`TIE_TOLERANCE` of it tie, and a
+    tie goes to the edge along whose normal the whole pair is best separated.
+    """
+    separation = distances.min(axis=1)  # (P, 4): the pair's separation along each edge normal
+    best = distances.max(axis=2, keepdims=True)
+    tied = distances >= best - TIE_TOLERANCE
+    score = np.where(tied, separation[:, None, :], -np.inf)
+    return np.asarray(np.argmax(score, axis=2), dtype=np.int64)
 
 
 def find_contacts(
@@ -93,28 +128,21 @@ def find_contacts(
 
     ``margin`` is a scalar or one value per body ``(n_bodies,)``; a pair uses the sum
     of its two bodies' values.  Returns one row per point that is within reach of a
-    foreign body, with the edge chosen by the rule in the module docstring.
+    foreign body, with the edge chosen by the rule in the module docstring; rows are
+    ordered by pair (as from :func:`body_pairs`), then by corner.  All pairs are
+    handled in one batch of array operations.
     """
     all_points = model.all_points(points)
     reach = np.broadcast_to(np.asarray(margin, dtype=np.float64), (model.n_bodies,))
     pairs = body_pairs(model, all_points, reach)
     if len(pairs) == 0:
         return Contacts.empty()
-    corners = all_points.reshape(-1, 4, 2)
     edge_body, point_body = pairs[:, 0], pairs[:, 1]
-    # distances[p, k, e]: point k of the point body against edge e of the edge body.
-    distances = np.stack([
-        edge_distances(corners[b], corners[w]) for w, b in zip(edge_body, point_body, strict=True)
-    ])
-    separation = distances.min(axis=1)  # (P, 4): the pair's separation along each edge normal
-    best = distances.max(axis=2, keepdims=True)
-    tied = distances >= best - TIE_TOLERANCE
-    score = np.where(tied, separation[:, None, :], -np.inf)
-    edge = np.argmax(score, axis=2)  # (P, 4)
+    distances = pair_distances(all_points.reshape(-1, 4, 2), edge_body, point_body)
+    edge = choose_edges(distances)
     chosen = np.take_along_axis(distances, edge[:, :, None], axis=2)[:, :, 0]
     pair_margin = reach[edge_body] + reach[point_body]
-    keep = chosen <= pair_margin[:, None]
-    pair_index, corner = np.nonzero(keep)
+    pair_index, corner = np.nonzero(chosen <= pair_margin[:, None])
     edge_index = edge[pair_index, corner]
     w = edge_body[pair_index]
     return Contacts(

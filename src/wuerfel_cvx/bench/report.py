@@ -16,6 +16,7 @@ import shutil
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from ..errors import InputError
@@ -258,8 +259,9 @@ def time_means(rows: pd.DataFrame, key: Sequence[str]) -> tuple[pd.DataFrame, in
     """Shifted geometric means (s) of the per-step times over the common grid points.
 
     Returns one row per formulation and solver (columns ``formulation``, ``solver``,
-    ``wall``, ``solver_time``, ``modelling``) and the number of common grid points.
-    Shift: :data:`~wuerfel_cvx.bench.shgeom.DEFAULT_TIME_SHIFT`.
+    ``wall``, ``solver_time``, ``modelling``, and ``step_over_solver``: the median over the
+    grid points of their median step time / solver time) and the number of common grid
+    points.  Shift: :data:`~wuerfel_cvx.bench.shgeom.DEFAULT_TIME_SHIFT`.
     """
     _, common = common_points(rows, key)
     done = _completed(rows)
@@ -271,8 +273,12 @@ def time_means(rows: pd.DataFrame, key: Sequence[str]) -> tuple[pd.DataFrame, in
             values = group[column].dropna().to_numpy(dtype=float)
             record[name] = (shifted_geometric_mean(values) if len(values) == len(group)
                             else math.nan)
+        ratios = group["step_over_solver_median"].dropna().to_numpy(dtype=float)
+        record["step_over_solver"] = (float(np.median(ratios)) if len(ratios) == len(group)
+                                      else math.nan)
         records.append(record)
-    columns = ["formulation", "solver", *(name for name, _ in _TIME_COLUMNS)]
+    columns = ["formulation", "solver", *(name for name, _ in _TIME_COLUMNS),
+               "step_over_solver"]
     return pd.DataFrame(records, columns=columns), len(common)
 
 
@@ -298,7 +304,9 @@ def speed_section(results: pd.DataFrame, images: dict[str, list[Path]],
         "(status ok), so all solvers in a table are timed on the same points; ×fastest is "
         "the ratio to the fastest solver in that column.  *Wall* is the whole step, "
         "*solver* the solver's own reported time, *modelling* the rest (building the QP, "
-        "cvxpy, checks, the update).",
+        "cvxpy, checks, the update).  *step / solver* is the median over the grid points "
+        "of each point's median ratio of whole step time to solver time: how many times "
+        "the solver's own cost a step costs (1 would be free modelling).",
     ]
     for formulation in _formulations(results):
         rows = results[plots.is_value(results["formulation"], formulation)]
@@ -341,13 +349,14 @@ def _time_table(rows: pd.DataFrame, key: Sequence[str], title: str, same: str) -
     fastest = {name: means[name].min() for name, _ in _TIME_COLUMNS}
     table = markdown_table(
         ["formulation", "solver", "wall (ms)", "×fastest", "solver (ms)", "×fastest",
-         "modelling (ms)", "×fastest"],
+         "modelling (ms)", "×fastest", "step / solver"],
         ([row.formulation, row.solver,
           *(cell for name, _ in _TIME_COLUMNS for cell in (
               format_ms(getattr(row, name)),
-              format_ratio(getattr(row, name) / fastest[name])))]
+              format_ratio(getattr(row, name) / fastest[name]))),
+          format_ratio(plots.as_float(row.step_over_solver))]
          for row in means.itertuples()),
-        align="llrrrrrr")
+        align="llrrrrrrr")
     return (f"{title}\n\nOver {count} grid points (same {same}) completed by all of "
             f"{', '.join(solvers)}.{note}\n\n{table}")
 

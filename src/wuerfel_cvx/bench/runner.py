@@ -190,6 +190,7 @@ def _timing(trajectory: Trajectory, point: GridPoint) -> dict[str, Any]:
         "wall_time_per_step_p90": float(np.percentile(step, 90)),
         "solver_time_per_step_median": _nan_median(solver),
         "modelling_time_per_step_median": _nan_median(step - solver),
+        "step_over_solver_median": _nan_median(step / solver),
         "wall_time_per_simulated_second": float(step.sum() / simulated),
         "total_wall_time": float(step.sum()),
         "n_variables": _int_max(metrics["n_variables"]),

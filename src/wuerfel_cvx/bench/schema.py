@@ -21,7 +21,7 @@ import pandas as pd
 
 from ..errors import InputError
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 """Version of :data:`COLUMNS`; stored in every row's ``schema_version``."""
 
 ColumnType = Literal["str", "int", "float", "bool"]
@@ -80,6 +80,9 @@ COLUMNS: tuple[Column, ...] = (
     _c("solver_time_per_step_median", "float", "s", "median of the solver's own time"),
     _c("modelling_time_per_step_median", "float", "s",
        "median of step wall time minus solver time (building, cvxpy, checks, update)"),
+    _c("step_over_solver_median", "float", "1",
+       "median over steps of (whole step time / solver's own time): the modelling layer's "
+       "cost as a multiple of the solver; 1 would be free modelling"),
     _c("wall_time_per_simulated_second", "float", "1",
        "total step wall time divided by the simulated time (s per s)"),
     _c("total_wall_time", "float", "s", "sum of step wall times"),

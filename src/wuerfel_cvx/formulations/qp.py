@@ -93,20 +93,20 @@ def point_rows(
 ) -> sp.csr_array:
     """Assemble a sparse matrix from per-point gradient blocks.
 
-    Each block is ``(point_index (R,), gradient (R, 2))`` for rows ``0..R-1``; a point
-    index ``< 0`` (a fixed point) contributes nothing.  Columns are ``2 point + axis``.
+    Each block is ``(point_index (R,), gradient (R, 2))`` for rows ``0..R-1`` with
+    ``R = n_rows``; a point index ``< 0`` (a fixed point) contributes nothing.  Columns
+    are ``2 point + axis``; entries that meet in one place are summed.  The CSR arrays
+    are written directly, row by row, and brought to canonical form (sorted columns).
     """
-    rows, cols, vals = [], [], []
-    for index, grad in blocks:
-        row = np.arange(n_rows)
-        moving = index >= 0
-        for axis in (0, 1):
-            rows.append(row[moving])
-            cols.append(2 * index[moving] + axis)
-            vals.append(grad[moving, axis])
-    if not rows:
-        return sp.csr_array((n_rows, 2 * n_points))
-    return sp.csr_array(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-        shape=(n_rows, 2 * n_points),
-    )
+    shape = (n_rows, 2 * n_points)
+    if not blocks:
+        return sp.csr_array(shape)
+    index = np.stack([np.asarray(point) for point, _ in blocks], axis=1)  # (R, B)
+    grad = np.stack([gradient for _, gradient in blocks], axis=1)  # (R, B, 2)
+    cols = 2 * index[:, :, None] + np.arange(2)  # (R, B, 2)
+    moving = np.broadcast_to((index >= 0)[:, :, None], cols.shape)
+    indptr = np.zeros(n_rows + 1, dtype=np.int64)
+    np.cumsum(moving.sum(axis=(1, 2)), out=indptr[1:])
+    matrix = sp.csr_array((grad[moving], cols[moving], indptr), shape=shape)
+    matrix.sum_duplicates()
+    return matrix
