@@ -17,8 +17,8 @@ Edge rule
 
 Batching
     There is no loop over pairs in Python: the broad phase yields an array of
-    ordered (edge body, point body) pairs, and one array ``(pairs, 4 corners, 4
-    edges)`` of signed distances carries the edge rule and the margin test for all
+    ordered (edge body, point body) pairs, and one array ``(4 corners, 4 edges,
+    pairs)`` of signed distances carries the edge rule and the margin test for all
     of them at once.  Contacts come out ordered by pair, then by corner.
 """
 
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import FloatArray, cross
+from .geometry import FloatArray
 from .model import IntArray, Model
 
 #: Two edge distances closer than this (m) count as a tie at a corner.
@@ -93,32 +93,42 @@ def pair_distances(corners: FloatArray, edge_body: IntArray, point_body: IntArra
     """Signed distances (m) of each point body's corners from the edge body's edge lines.
 
     ``corners`` ``(n_bodies, 4, 2)`` (m), counter-clockwise; ``edge_body`` and
-    ``point_body`` ``(P,)``.  Entry ``[p, k, e]`` of the ``(P, 4, 4)`` result is corner
+    ``point_body`` ``(P,)``.  Entry ``[k, e, p]`` of the ``(4, 4, P)`` result is corner
     ``k`` of ``point_body[p]`` against edge ``e`` (corner ``e`` to ``e + 1``) of
-    ``edge_body[p]``, positive outside.  This is
-    :func:`~wuerfel_cvx.geometry.edge_distances` for all pairs at once, with the same
-    floating-point operations, so the values agree bit for bit.
+    ``edge_body[p]``, positive outside.  The pair axis is last so that every operation
+    runs over long contiguous rows.  The arithmetic is that of
+    :func:`~wuerfel_cvx.geometry.edge_distances`, so the values agree with it bit for bit.
     """
     head = np.roll(corners, -1, axis=1)  # contact order (i, j) = (head, tail)
     edge = corners - head  # p_j - p_i, (n_bodies, 4, 2)
     length = np.linalg.norm(edge, axis=-1)  # (n_bodies, 4)
-    offset = corners[point_body][:, :, None, :] - head[edge_body][:, None, :, :]  # p_k - p_i
-    area = cross(edge[edge_body][:, None, :, :], offset)  # (P, 4, 4), m^2
-    return np.asarray(area / length[edge_body][:, None, :], dtype=np.float64)
+
+    def of_edges(values: FloatArray) -> FloatArray:  # (n_bodies, 4) -> (1, 4 edges, P)
+        return values.T.take(edge_body, axis=1)[None, :, :]
+
+    def of_points(values: FloatArray) -> FloatArray:  # (n_bodies, 4) -> (4 corners, 1, P)
+        return values.T.take(point_body, axis=1)[:, None, :]
+
+    offset_x = of_points(corners[..., 0]) - of_edges(head[..., 0])  # p_k - p_i
+    offset_y = of_points(corners[..., 1]) - of_edges(head[..., 1])
+    # cross(p_j - p_i, p_k - p_i), as geometry.cross computes it (m^2)
+    area = of_edges(edge[..., 0]) * offset_y - of_edges(edge[..., 1]) * offset_x
+    return np.asarray(area / of_edges(length), dtype=np.float64)
 
 
 def choose_edges(distances: FloatArray) -> IntArray:
-    """Edge index ``(P, 4)`` for each point of each pair by the edge rule.
+    """Edge index ``(4, P)`` for each corner of each pair by the edge rule.
 
-    ``distances`` ``(P, 4, 4)`` (m) as from :func:`pair_distances`.  The edge with the
-    largest signed distance wins; edges within :data:`TIE_TOLERANCE` of it tie, and a
-    tie goes to the edge along whose normal the whole pair is best separated.
+    ``distances`` ``(4 corners, 4 edges, P)`` (m) as from :func:`pair_distances`.  The
+    edge with the largest signed distance wins; edges within :data:`TIE_TOLERANCE` of
+    it tie, and a tie goes to the edge along whose normal the whole pair is best
+    separated (the first such edge if that too is a tie).
     """
-    separation = distances.min(axis=1)  # (P, 4): the pair's separation along each edge normal
-    best = distances.max(axis=2, keepdims=True)
-    tied = distances >= best - TIE_TOLERANCE
-    score = np.where(tied, separation[:, None, :], -np.inf)
-    return np.asarray(np.argmax(score, axis=2), dtype=np.int64)
+    separation = distances.min(axis=0)  # (4 edges, P): the pair's separation along each normal
+    best = distances.max(axis=1)  # (4 corners, P)
+    tied = distances >= (best - TIE_TOLERANCE)[:, None, :]
+    score = np.where(tied, separation[None, :, :], -np.inf)
+    return np.asarray(np.argmax(score, axis=1), dtype=np.int64)
 
 
 def find_contacts(
@@ -129,8 +139,7 @@ def find_contacts(
     ``margin`` is a scalar or one value per body ``(n_bodies,)``; a pair uses the sum
     of its two bodies' values.  Returns one row per point that is within reach of a
     foreign body, with the edge chosen by the rule in the module docstring; rows are
-    ordered by pair (as from :func:`body_pairs`), then by corner.  All pairs are
-    handled in one batch of array operations.
+    ordered by pair (as from :func:`body_pairs`), then by corner.
     """
     all_points = model.all_points(points)
     reach = np.broadcast_to(np.asarray(margin, dtype=np.float64), (model.n_bodies,))
@@ -139,11 +148,11 @@ def find_contacts(
         return Contacts.empty()
     edge_body, point_body = pairs[:, 0], pairs[:, 1]
     distances = pair_distances(all_points.reshape(-1, 4, 2), edge_body, point_body)
-    edge = choose_edges(distances)
-    chosen = np.take_along_axis(distances, edge[:, :, None], axis=2)[:, :, 0]
+    edge = choose_edges(distances)  # (4 corners, P)
+    chosen = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]
     pair_margin = reach[edge_body] + reach[point_body]
-    pair_index, corner = np.nonzero(chosen <= pair_margin[:, None])
-    edge_index = edge[pair_index, corner]
+    pair_index, corner = np.nonzero((chosen <= pair_margin).T)  # pair-major order
+    edge_index = edge[corner, pair_index]
     w = edge_body[pair_index]
     return Contacts(
         point=4 * point_body[pair_index] + corner,
@@ -151,5 +160,5 @@ def find_contacts(
         edge_j=4 * w + edge_index,
         point_body=point_body[pair_index],
         edge_body=w,
-        distance=chosen[pair_index, corner],
+        distance=chosen[corner, pair_index],
     )

@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
+from .compiled import CompiledQPCache
 from .errors import InputError, StepFailure
 from .formulations import Formulation, StepQP, get_formulation
 from .metrics import deepest_penetration, kinetic_energy, potential_energy, rod_length_drift
@@ -67,6 +68,7 @@ def simulate(
     extra_rod: bool = False,
     progress: bool = False,
     observer: StepObserver | None = None,
+    compiled: bool = True,
 ) -> Trajectory:
     """Simulate ``steps`` steps of ``dt`` seconds, one QP per step.
 
@@ -96,6 +98,10 @@ def simulate(
         re-solve the same QP with another solver; its time is not in the step's timings.
         It may end the run by raising :class:`StepFailure`, which then carries the
         trajectory up to and including this step.
+    compiled:
+        Re-solve repeated QP structures through a compiled, parametrised problem
+        (:class:`~wuerfel_cvx.compiled.CompiledQPCache`) instead of declaring each step's
+        problem afresh.  Same model and answers (to solver tolerance); less cvxpy time.
 
     Raises
     ------
@@ -116,6 +122,7 @@ def simulate(
     model = Model.from_scene(scene, table_mass=table_mass, extra_rod=extra_rod)
 
     state = State.initial(scene)
+    cache = CompiledQPCache() if compiled else None
     times = [0.0]
     points = [state.points]
     velocities = [state.velocities]
@@ -124,10 +131,14 @@ def simulate(
         "scene": scene.name, "formulation": scheme.name, "solver": spec.name, "tol": str(tol),
         "dt": float(dt), "steps": int(steps), "table_mass": table_mass, "extra_rod": extra_rod,
         "versions": _versions(spec.cvxpy_name),
+        "compiled_structures": 0, "steps_reusing_a_compiled_structure": 0,
     }
 
     def trajectory() -> Trajectory:
         metrics = pd.DataFrame(rows, columns=list(METRIC_COLUMNS))
+        if cache is not None:
+            info["compiled_structures"] = cache.compiled
+            info["steps_reusing_a_compiled_structure"] = cache.reused
         return Trajectory(times=np.array(times), points=np.array(points),
                           velocities=np.array(velocities), metrics=metrics,
                           table_points=model.table_points.copy(), info=info)
@@ -138,7 +149,7 @@ def simulate(
         qp = scheme.build(model, state, float(dt))
         build_time = time.perf_counter() - started
         try:
-            solution = solve_step_qp(qp, spec.name, tol, step=step)
+            solution = solve_step_qp(qp, spec.name, tol, step=step, cache=cache)
         except StepFailure as failure:
             failure.trajectory = trajectory()
             raise

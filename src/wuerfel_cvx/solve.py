@@ -14,11 +14,13 @@ when all three are below ``VERIFY_FACTOR * eps``.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 
 import cvxpy as cp
 import numpy as np
 
+from .compiled import CompiledQPCache
 from .errors import StepFailure
 from .formulations.qp import StepQP
 from .geometry import FloatArray
@@ -83,8 +85,11 @@ def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
 
 
 def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "default",
-                  *, step: int = 0) -> StepSolution:
+                  *, step: int = 0, cache: CompiledQPCache | None = None) -> StepSolution:
     """Solve ``qp`` with ``solver`` at tolerance ``tol`` and verify the result.
+
+    With a ``cache``, a QP whose structure repeats is solved through its compiled,
+    parametrised problem (:mod:`wuerfel_cvx.compiled`); without, it is declared afresh.
 
     Raises :class:`StepFailure` (with ``step``) if the solver raises, reports a status
     other than optimal, returns non-finite numbers, or claims an inaccurate optimum
@@ -94,28 +99,36 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     spec = get_solver(solver)
     eps = tolerance_value(tol)
     started = time.perf_counter()
+    declared = cache.declared_for(qp) if cache is not None else qp.declared()
     try:
-        qp.problem.solve(solver=spec.cvxpy_name, **spec.options(eps))
+        with warnings.catch_warnings():
+            # cvxpy reads its own sparse parameters densely while applying them
+            warnings.filterwarnings("ignore", "Reading from a sparse CVXPY expression",
+                                    RuntimeWarning)
+            # warm_start=False: cvxpy's in-place OSQP update can be refused by OSQP
+            # ("Problem data validation") and then silently re-solves the old data.
+            declared.problem.solve(solver=spec.cvxpy_name,
+                                   **{"warm_start": False, **spec.options(eps)})
     except cp.error.SolverError as exc:
         raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
     except Exception as exc:  # a solver library raising anything is a failed step
         raise StepFailure(step, spec.name, "exception", f"{type(exc).__name__}: {exc}") from exc
     wall = time.perf_counter() - started
-    status = str(qp.problem.status)
-    x = qp.variable.value
+    status = str(declared.problem.status)
+    x = declared.variable.value
     if status not in SOLVED or x is None:
         raise StepFailure(step, spec.name, status)
     x = np.asarray(x, dtype=np.float64)
     if not np.all(np.isfinite(x)):
         raise StepFailure(step, spec.name, status, "solution has non-finite entries")
-    eq_dual = _dual(qp.eq_constraint, qp.n_equalities)
-    ineq_dual = _dual(qp.ineq_constraint, qp.n_inequalities)
+    eq_dual = _dual(declared.eq_constraint, qp.n_equalities)
+    ineq_dual = _dual(declared.ineq_constraint, qp.n_inequalities)
     residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
     verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
     if status == cp.OPTIMAL_INACCURATE and not verified:
         raise StepFailure(step, spec.name, status,
                           f"residuals {residuals.worst():.2e} above {VERIFY_FACTOR * eps:.1e}")
-    stats = qp.problem.solver_stats
+    stats = declared.problem.solver_stats
     solver_time = stats.solve_time if stats is not None and stats.solve_time is not None else np.nan
     if not solver_time > 0.0:  # cvxpy reports 0.0 for PROXQP (its timings are off): unknown
         solver_time = np.nan

@@ -23,9 +23,19 @@ from ..contacts import Contacts
 from ..geometry import FloatArray
 
 
+@dataclass(frozen=True)
+class DeclaredQP:
+    """A step QP declared in cvxpy: the problem and the handles to read a solution."""
+
+    problem: cp.Problem
+    variable: cp.Variable
+    eq_constraint: cp.Constraint | None
+    ineq_constraint: cp.Constraint | None
+
+
 @dataclass
 class StepQP:
-    """A step's QP, declared in cvxpy, with its numeric data."""
+    """A step's QP: its numeric data, declared in cvxpy on first use."""
 
     weights: FloatArray
     """Objective weights w (kg), one per unknown."""
@@ -37,10 +47,33 @@ class StepQP:
     ineq_rhs: FloatArray
     contacts: Contacts
     """The contacts whose side constraints are the rows of ``G``."""
-    problem: cp.Problem = field(repr=False)
-    variable: cp.Variable = field(repr=False)
-    eq_constraint: cp.Constraint | None = field(repr=False)
-    ineq_constraint: cp.Constraint | None = field(repr=False)
+    _declared: DeclaredQP | None = field(default=None, repr=False)
+
+    def declared(self) -> DeclaredQP:
+        """The QP as its own cvxpy problem (declared once, on first call)."""
+        if self._declared is None:
+            self._declared = _declare(self)
+        return self._declared
+
+    @property
+    def problem(self) -> cp.Problem:
+        """The cvxpy problem of :meth:`declared`."""
+        return self.declared().problem
+
+    @property
+    def variable(self) -> cp.Variable:
+        """The unknowns ``x`` of :meth:`declared`."""
+        return self.declared().variable
+
+    @property
+    def eq_constraint(self) -> cp.Constraint | None:
+        """``E x == e`` of :meth:`declared` (``None`` without equalities)."""
+        return self.declared().eq_constraint
+
+    @property
+    def ineq_constraint(self) -> cp.Constraint | None:
+        """``G x >= h`` of :meth:`declared` (``None`` without inequalities)."""
+        return self.declared().ineq_constraint
 
     @property
     def n_variables(self) -> int:
@@ -67,23 +100,35 @@ def declare_qp(
     ineq_rhs: FloatArray,
     contacts: Contacts,
 ) -> StepQP:
-    """Declare ``min sum w (x - t)^2  s.t.  E x == e, G x >= h`` in cvxpy."""
-    x = cp.Variable(weights.shape[0], name="x")
-    objective = cp.Minimize(cp.sum_squares(cp.multiply(np.sqrt(weights), x - target)))
+    """The QP ``min sum w (x - t)^2  s.t.  E x == e, G x >= h`` (declared in cvxpy lazily).
+
+    ``E`` and ``G`` are stored in canonical CSR form (sorted indices, no duplicates), so
+    equal sparsity patterns have equal index arrays.
+    """
+    return StepQP(weights=weights, target=target, eq_matrix=_canonical(eq_matrix),
+                  eq_rhs=eq_rhs, ineq_matrix=_canonical(ineq_matrix), ineq_rhs=ineq_rhs,
+                  contacts=contacts)
+
+
+def _canonical(matrix: sp.csr_array) -> sp.csr_array:
+    canonical = sp.csr_array(matrix, copy=True)
+    canonical.sum_duplicates()
+    canonical.sort_indices()
+    return canonical
+
+
+def _declare(qp: StepQP) -> DeclaredQP:
+    x = cp.Variable(qp.n_variables, name="x")
+    objective = cp.Minimize(cp.sum_squares(cp.multiply(np.sqrt(qp.weights), x - qp.target)))
     constraints: list[cp.Constraint] = []
     eq_constraint = ineq_constraint = None
-    if eq_matrix.shape[0]:
-        eq_constraint = eq_matrix @ x == eq_rhs
+    if qp.n_equalities:
+        eq_constraint = qp.eq_matrix @ x == qp.eq_rhs
         constraints.append(eq_constraint)
-    if ineq_matrix.shape[0]:
-        ineq_constraint = ineq_matrix @ x >= ineq_rhs
+    if qp.n_inequalities:
+        ineq_constraint = qp.ineq_matrix @ x >= qp.ineq_rhs
         constraints.append(ineq_constraint)
-    return StepQP(
-        weights=weights, target=target, eq_matrix=eq_matrix, eq_rhs=eq_rhs,
-        ineq_matrix=ineq_matrix, ineq_rhs=ineq_rhs, contacts=contacts,
-        problem=cp.Problem(objective, constraints), variable=x,
-        eq_constraint=eq_constraint, ineq_constraint=ineq_constraint,
-    )
+    return DeclaredQP(cp.Problem(objective, constraints), x, eq_constraint, ineq_constraint)
 
 
 def point_rows(
@@ -103,10 +148,11 @@ def point_rows(
         return sp.csr_array(shape)
     index = np.stack([np.asarray(point) for point, _ in blocks], axis=1)  # (R, B)
     grad = np.stack([gradient for _, gradient in blocks], axis=1)  # (R, B, 2)
-    cols = 2 * index[:, :, None] + np.arange(2)  # (R, B, 2)
-    moving = np.broadcast_to((index >= 0)[:, :, None], cols.shape)
+    moving = index >= 0
+    keep = np.repeat(moving.ravel(), 2)  # entries in (row, block, axis) order
+    cols = (2 * index[:, :, None] + np.arange(2)).reshape(-1)
     indptr = np.zeros(n_rows + 1, dtype=np.int64)
-    np.cumsum(moving.sum(axis=(1, 2)), out=indptr[1:])
-    matrix = sp.csr_array((grad[moving], cols[moving], indptr), shape=shape)
+    np.cumsum(2 * moving.sum(axis=1, dtype=np.int64), out=indptr[1:])
+    matrix = sp.csr_array((grad.reshape(-1)[keep], cols[keep], indptr), shape=shape)
     matrix.sum_duplicates()
     return matrix

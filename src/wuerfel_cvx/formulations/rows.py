@@ -55,10 +55,10 @@ def side_blocks(all_points: FloatArray, contacts: Contacts,
 
     dA/dp_i = rot90(p_k - p_j), dA/dp_j = rot90(p_i - p_k), dA/dp_k = rot90(p_j - p_i).
     """
-    p_i, p_j, p_k = (all_points[contacts.edge_i], all_points[contacts.edge_j],
-                     all_points[contacts.point])
+    p_i, p_j, p_k = (all_points.take(index, axis=0)
+                     for index in (contacts.edge_i, contacts.edge_j, contacts.point))
     g_i, g_j, g_k = side_gradients(p_i, p_j, p_k)
-    scale = 1.0 / np.linalg.norm(p_j - p_i, axis=1)[:, None]
+    scale = 1.0 / np.linalg.norm(g_k, axis=1)[:, None]  # |g_k| = |p_j - p_i| (m)
     return [(unknown_index(model, contacts.edge_i), g_i * scale),
             (unknown_index(model, contacts.edge_j), g_j * scale),
             (unknown_index(model, contacts.point), g_k * scale)]

@@ -142,6 +142,7 @@ def run_peer(engine: str, package: str, scene: Scene, world: PeerWorld, dt: floa
         "dt": float(dt), "steps": int(steps), "table_mass": None, "extra_rod": False,
         "versions": {"wuerfel_cvx": package_version("wuerfel_cvx"),
                      package: package_version(package)},
+        "compiled_structures": None, "steps_reusing_a_compiled_structure": None,
     }
 
     def trajectory() -> Trajectory:
