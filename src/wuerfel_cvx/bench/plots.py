@@ -529,6 +529,15 @@ def plot_scaling(results: pd.DataFrame, out_dir: str | Path,
 # --------------------------------------------------------------------------- success
 
 
+def _sorted_with_labels(table: pd.DataFrame) -> tuple[pd.DataFrame, list[str]]:
+    """Rows ordered by formulation and solver (peers last) and their two-line labels."""
+    table = table.sort_values(["formulation", "solver"], key=_peer_last)
+    many = table["formulation"].nunique() > 1
+    labels = [series_label(s, f, many, "\n") for f, s in zip(table["formulation"],
+                                                              table["solver"], strict=True)]
+    return table, labels
+
+
 def plot_success_rates(results: pd.DataFrame, out_dir: str | Path,
                        stem: str = "success") -> list[Path]:
     """Grouped bars per solver: success rate and verified rate (see :func:`outcome_counts`).
@@ -539,10 +548,7 @@ def plot_success_rates(results: pd.DataFrame, out_dir: str | Path,
     counts = outcome_counts(results)
     if counts.empty:
         return []
-    counts = counts.sort_values(["formulation", "solver"], key=_peer_last)
-    many = counts["formulation"].nunique() > 1
-    labels = [series_label(s, f, many, "\n") for f, s in zip(counts["formulation"],
-                                                              counts["solver"], strict=True)]
+    counts, labels = _sorted_with_labels(counts)
     figure = _new_figure(max(5.0, 1.0 + 0.9 * len(counts)), 4.4)
     axis = figure.subplots()
     positions = np.arange(len(counts), dtype=float)
@@ -653,10 +659,7 @@ def plot_timing_breakdown(results: pd.DataFrame, out_dir: str | Path,
     table = timing_breakdown(results)
     if table.empty:
         return []
-    table = table.sort_values(["formulation", "solver"], key=_peer_last)
-    many = table["formulation"].nunique() > 1
-    labels = [series_label(s, f, many, "\n") for f, s in zip(table["formulation"],
-                                                              table["solver"], strict=True)]
+    table, labels = _sorted_with_labels(table)
     figure = _new_figure(max(5.0, 1.2 + 0.8 * len(table)), 4.2)
     axis = figure.subplots()
     for position, row in enumerate(table.itertuples()):
