@@ -41,7 +41,6 @@ CRIPPLED_OSQP: dict[str, Any] = {
     "warm_start": False,
 }
 
-pytestmark = pytest.mark.filterwarnings("ignore:Solution may be inaccurate:UserWarning")
 
 
 def cripple_osqp(monkeypatch: pytest.MonkeyPatch, first_bad_call: int) -> None:

@@ -105,6 +105,8 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
             # cvxpy reads its own sparse parameters densely while applying them
             warnings.filterwarnings("ignore", "Reading from a sparse CVXPY expression",
                                     RuntimeWarning)
+            # an inaccurate optimum is judged by the residual check below, not by a warning
+            warnings.filterwarnings("ignore", "Solution may be inaccurate", UserWarning)
             # warm_start=False: cvxpy's in-place OSQP update can be refused by OSQP
             # ("Problem data validation") and then silently re-solves the old data.
             declared.problem.solve(solver=spec.cvxpy_name,
