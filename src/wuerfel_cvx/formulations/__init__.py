@@ -5,12 +5,15 @@ from __future__ import annotations
 from ..errors import InputError
 from .base import Formulation
 from .qp import StepQP, declare_qp
+from .rigid import RigidFormulation
 from .seed import SeedFormulation
 from .velocity import VelocityFormulation, rigid_step
 
-FORMULATIONS: dict[str, type[SeedFormulation] | type[VelocityFormulation]] = {
+FORMULATIONS: dict[str, type[SeedFormulation] | type[VelocityFormulation]
+                   | type[RigidFormulation]] = {
     "velocity": VelocityFormulation,
     "seed": SeedFormulation,
+    "rigid": RigidFormulation,
 }
 """Registry of formulation names (the first is the default)."""
 
@@ -27,5 +30,6 @@ def get_formulation(name: str | Formulation) -> Formulation:
     return formulation
 
 
-__all__ = ["FORMULATIONS", "Formulation", "SeedFormulation", "StepQP", "VelocityFormulation",
+__all__ = ["FORMULATIONS", "Formulation", "RigidFormulation", "SeedFormulation", "StepQP",
+           "VelocityFormulation",
            "declare_qp", "get_formulation", "rigid_step"]

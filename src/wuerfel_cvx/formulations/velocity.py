@@ -32,7 +32,7 @@ from typing import Literal
 import numpy as np
 import scipy.sparse as sp
 
-from ..contacts import find_contacts
+from ..contacts import Contacts, find_contacts
 from ..geometry import FloatArray, rot90
 from ..model import Model, State
 from .qp import StepQP, declare_qp, point_rows
@@ -85,11 +85,20 @@ class VelocityFormulation:
         eq_rhs = np.concatenate([-(self.beta / dt) * rod_error,
                                  np.zeros(held_matrix.shape[0] if held_matrix is not None else 0)])
 
-        ineq_matrix = point_rows(len(contacts), n_unknown, side_blocks(all_points, contacts, model))
-        rate = np.where(contacts.distance > 0.0, 1.0 / dt, self.beta / dt)
-        ineq_rhs = -rate * contacts.distance
+        ineq_matrix, ineq_rhs = self.contact_rows(model, all_points, contacts, dt)
         return declare_qp(weights, target.ravel(), sp.csr_array(eq_matrix), eq_rhs,
                           ineq_matrix, ineq_rhs, contacts)
+
+    def contact_rows(self, model: Model, all_points: FloatArray, contacts: Contacts,
+                     dt: float) -> tuple[sp.csr_array, FloatArray]:
+        """``G`` and ``h`` of ``G v+ >= h`` in the corner velocities (one row per contact).
+
+        Speculative for a point outside (``rate = 1/dt``), Baumgarte for one inside.
+        """
+        matrix = point_rows(len(contacts), n_unknown_points(model),
+                            side_blocks(all_points, contacts, model))
+        rate = np.where(contacts.distance > 0.0, 1.0 / dt, self.beta / dt)
+        return matrix, -rate * contacts.distance
 
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
         """The QP's new corner velocities ``(4 n, 2)`` (m/s)."""

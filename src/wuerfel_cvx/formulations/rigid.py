@@ -1,0 +1,107 @@
+"""The ``rigid`` formulation: the velocity QP in rigid coordinates, no rods.
+
+Each square is a rigid body with centre velocity ``u`` (m/s) and angular velocity
+``omega`` (rad/s): 3 unknowns instead of 8, and no rod constraints.  Its corners move
+with ``v_i = u + omega rot90(r_i)``, ``r_i`` the corner's offset from the centre, so the
+velocity formulation's objective ``sum_i m_i |v_i - v_i0 - dt g|^2`` becomes, with equal
+corner masses (``sum_i m_i r_i = 0``)::
+
+    M |u - u0 - dt g|^2 + I (omega - omega0)^2 + constant
+
+``M`` the square's mass, ``I = sum_i m_i |r_i|^2 = M s^2 / 2`` (kg m^2, four corner
+masses), ``u0`` the mean corner velocity and ``omega0 = sum_i m_i r_i x v_i0 / I``.  The
+contact rows are the velocity formulation's rows times the corner map, so the two
+formulations pose the same QP whenever the rods hold exactly: this one is the reduced
+model for comparison.  Positions follow the rigid motion (as the velocity formulation's
+default update), so rod lengths hold to round-off.  Fixed tables only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..contacts import find_contacts
+from ..errors import InputError
+from ..geometry import FloatArray, cross, rot90
+from ..model import Model, State
+from .qp import StepQP, declare_qp
+from .velocity import VelocityFormulation, rigid_step
+
+
+@dataclass(frozen=True)
+class RigidFormulation:
+    """Velocity-level QP in (u_x, u_y, omega) per square; contacts as in ``velocity``."""
+
+    beta: float = 0.2
+    """Fraction of a penetration removed per step (1)."""
+    contact_margin: float = 0.01
+    """Distance (m) within which a point-edge pair is always constrained."""
+    name: str = "rigid"
+
+    def build(self, model: Model, state: State, dt: float) -> StepQP:
+        """The step QP in the squares' new centre and angular velocities."""
+        if model.table_mass is not None:
+            raise InputError("the rigid formulation has fixed tables only", field="table_mass")
+        velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin)
+        points = state.points
+        contacts = find_contacts(model, points, velocity.body_reach(model, state, dt))
+        corner_rows, rhs = velocity.contact_rows(model, model.all_points(points), contacts, dt)
+        corner_map = corner_velocity_map(points)
+        masses = model.point_masses.reshape(-1, 4)
+        offsets = _offsets(points)
+        inertia = np.sum(masses * np.sum(offsets**2, axis=2), axis=1)
+        centre_velocity, spin = body_velocities(points, state.velocities, masses)
+        weights = np.column_stack([masses.sum(axis=1), masses.sum(axis=1), inertia]).ravel()
+        target = np.column_stack([centre_velocity + dt * model.gravity, spin]).ravel()
+        no_rows = sp.csr_array((0, weights.shape[0]))
+        return declare_qp(weights, target, no_rows, np.zeros(0),
+                          sp.csr_array(corner_rows @ corner_map), rhs, contacts)
+
+    def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
+        """The corner velocities ``(4 n, 2)`` (m/s) of the new body velocities."""
+        return (corner_velocity_map(state.points) @ solution).reshape(-1, 2)
+
+    def advance(self, model: Model, state: State, solution: FloatArray, dt: float) -> State:
+        """Move each square rigidly with its new centre and angular velocity."""
+        return rigid_step(model.reference_corners, state.points,
+                          self.new_velocities(state, solution, dt), dt)
+
+
+def corner_velocity_map(points: FloatArray) -> sp.csr_array:
+    """Sparse ``(8 n, 3 n)`` map from ``(u_x, u_y, omega)`` per square to corner velocities.
+
+    ``v_i = u + omega rot90(r_i)`` with ``r_i`` the corner's offset from its square's centre.
+    """
+    turned = rot90(_offsets(points)).reshape(-1, 2)  # (4n, 2)
+    n_corners = turned.shape[0]
+    body = np.arange(n_corners) // 4
+    rows = np.concatenate([2 * np.arange(n_corners), 2 * np.arange(n_corners) + 1,
+                           2 * np.arange(n_corners), 2 * np.arange(n_corners) + 1])
+    cols = np.concatenate([3 * body, 3 * body + 1, 3 * body + 2, 3 * body + 2])
+    values = np.concatenate([np.ones(n_corners), np.ones(n_corners), turned[:, 0],
+                             turned[:, 1]])
+    return sp.csr_array((values, (rows, cols)), shape=(2 * n_corners, 3 * (n_corners // 4)))
+
+
+def body_velocities(points: FloatArray, velocities: FloatArray,
+                    masses: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Centre velocities ``(n, 2)`` (m/s) and angular velocities ``(n,)`` (rad/s).
+
+    The mass-weighted mean and ``sum m r x v / sum m |r|^2``: exact for a rigid motion, and
+    for any corner velocities the rigid motion nearest in kinetic-energy norm.
+    """
+    corner_velocities = velocities.reshape(-1, 4, 2)
+    total = masses.sum(axis=1)
+    centre = np.einsum("nk,nkd->nd", masses, corner_velocities) / total[:, None]
+    offsets = _offsets(points)
+    spin = (np.sum(masses * cross(offsets, corner_velocities - centre[:, None, :]), axis=1)
+            / np.sum(masses * np.sum(offsets**2, axis=2), axis=1))
+    return centre, spin
+
+
+def _offsets(points: FloatArray) -> FloatArray:
+    corners = points.reshape(-1, 4, 2)
+    return np.asarray(corners - corners.mean(axis=1, keepdims=True), dtype=np.float64)

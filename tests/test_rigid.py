@@ -1,0 +1,78 @@
+"""The rigid formulation: the same physics as ``velocity`` in 3 unknowns per square."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from qp_bank import qp_bank
+from test_solver_agreement import AGREEMENT
+from wuerfel_cvx import simulate
+from wuerfel_cvx.errors import InputError
+from wuerfel_cvx.formulations import RigidFormulation, get_formulation
+from wuerfel_cvx.formulations.rigid import body_velocities, corner_velocity_map
+from wuerfel_cvx.model import Model
+from wuerfel_cvx.solve import solve_step_qp
+
+
+def test_corner_map_reproduces_a_rigid_motion() -> None:
+    rng = np.random.default_rng(7)
+    traj = simulate("rain-3", steps=1)
+    points = traj.points[-1]
+    body = rng.normal(size=(3, 3))  # (u_x, u_y, omega) per square
+    corners = (corner_velocity_map(points) @ body.ravel()).reshape(-1, 4, 2)
+    offsets = points.reshape(-1, 4, 2) - points.reshape(-1, 4, 2).mean(axis=1, keepdims=True)
+    # Finite difference of the rigid motion: p(t) = c + u t + R(omega t) r.
+    h = 1e-7
+    for b in range(3):
+        c, s = np.cos(body[b, 2] * h), np.sin(body[b, 2] * h)
+        moved = offsets[b] @ np.array([[c, s], [-s, c]]) + body[b, :2] * h
+        np.testing.assert_allclose((moved - offsets[b]) / h, corners[b], atol=1e-6)
+    masses = np.full((3, 4), 0.25)
+    centre, spin = body_velocities(points, corners.reshape(-1, 2), masses)
+    np.testing.assert_allclose(centre, body[:, :2], atol=1e-12)
+    np.testing.assert_allclose(spin, body[:, 2], atol=1e-12)
+
+
+def test_rigid_and_velocity_qps_give_the_same_corner_velocities() -> None:
+    # With the rods exact, the velocity QP's feasible velocities are the rigid ones and
+    # its objective equals the rigid one up to a constant: the minimisers coincide.
+    rigid = get_formulation("rigid")
+    compared = 0
+    for entry in qp_bank():
+        if entry.formulation != "velocity" or entry.model.table_mass is not None:
+            continue
+        full = solve_step_qp(get_formulation("velocity").build(entry.model, entry.state, 0.01),
+                             "CLARABEL", "high")
+        reduced = solve_step_qp(rigid.build(entry.model, entry.state, 0.01), "CLARABEL",
+                                "high")
+        assert reduced.verified
+        corner = rigid.new_velocities(entry.state, reduced.x, 0.01).ravel()
+        # Two verified solutions of the same minimisation (bound derived in
+        # test_solver_agreement); the corner map scales by at most 1 + |r| < 2.
+        assert np.max(np.abs(corner - full.x[: corner.size])) <= 2 * AGREEMENT, entry.label
+        compared += 1
+    assert compared >= 8
+
+
+@pytest.mark.parametrize("scene", ["tilted-drop", "stack-10", "pyramid-3", "overlap-recovery"])
+def test_rigid_and_velocity_trajectories_agree(scene: str) -> None:
+    steps = 120
+    rigid = simulate(scene, steps=steps, formulation="rigid", tol="high")
+    velocity = simulate(scene, steps=steps, formulation="velocity", tol="high")
+    # Per step the velocities agree within 2 AGREEMENT (above); positions integrate them.
+    np.testing.assert_allclose(rigid.points, velocity.points, rtol=0,
+                               atol=steps * 0.01 * 2 * AGREEMENT)
+    assert rigid.metrics["rod_drift"].max() < 1e-12  # rigid motion: round-off only
+    assert (rigid.metrics["n_variables"] == 3 * rigid.points.shape[1] // 4).all()
+    assert (rigid.metrics["n_equalities"] == 0).all()
+
+
+def test_rigid_formulation_refuses_the_heavy_table() -> None:
+    from wuerfel_cvx import Scene
+    from wuerfel_cvx.model import State
+
+    scene = Scene.named("tilted-drop")
+    model = Model.from_scene(scene, table_mass=1e6)
+    with pytest.raises(InputError, match="fixed tables"):
+        RigidFormulation().build(model, State.initial(scene), 0.01)
