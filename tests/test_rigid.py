@@ -76,3 +76,23 @@ def test_rigid_formulation_refuses_the_heavy_table() -> None:
     model = Model.from_scene(scene, table_mass=1e6)
     with pytest.raises(InputError, match="fixed tables"):
         RigidFormulation().build(model, State.initial(scene), 0.01)
+
+
+def test_structural_product_keeps_cancelled_entries() -> None:
+    import scipy.sparse as sp
+
+    from wuerfel_cvx.formulations.rigid import structural_product
+
+    left = sp.csr_array(np.array([[1.0, 1.0, 0.0]]))
+    right = sp.csr_array(np.array([[1.0, 2.0], [-1.0, 0.0], [5.0, 0.0]]))
+    product = structural_product(left, right)
+    np.testing.assert_array_equal(product.toarray(), [[0.0, 2.0]])
+    assert product.nnz == 2  # the cancelled (0, 0) entry stays in the pattern
+
+
+def test_a_resting_scene_compiles_once_in_rigid_coordinates() -> None:
+    # Constant weights (inertia from the exact squares) and a cancellation-proof pattern
+    # keep the structure key constant while nothing moves.
+    traj = simulate("pyramid-4", steps=30, formulation="rigid")
+    assert traj.info["compiled_structures"] == 1
+    assert traj.info["steps_reusing_a_compiled_structure"] == 28

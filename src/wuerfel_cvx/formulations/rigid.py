@@ -51,14 +51,15 @@ class RigidFormulation:
         corner_rows, rhs = velocity.contact_rows(model, model.all_points(points), contacts, dt)
         corner_map = corner_velocity_map(points)
         masses = model.point_masses.reshape(-1, 4)
-        offsets = _offsets(points)
-        inertia = np.sum(masses * np.sum(offsets**2, axis=2), axis=1)
+        # from the exact squares, not the current corners: constant weights keep the
+        # compiled-problem cache's key constant
+        inertia = np.sum(masses * np.sum(model.reference_corners**2, axis=2), axis=1)
         centre_velocity, spin = body_velocities(points, state.velocities, masses)
         weights = np.column_stack([masses.sum(axis=1), masses.sum(axis=1), inertia]).ravel()
         target = np.column_stack([centre_velocity + dt * model.gravity, spin]).ravel()
         no_rows = sp.csr_array((0, weights.shape[0]))
         return declare_qp(weights, target, no_rows, np.zeros(0),
-                          sp.csr_array(corner_rows @ corner_map), rhs, contacts)
+                          structural_product(corner_rows, corner_map), rhs, contacts)
 
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
         """The corner velocities ``(4 n, 2)`` (m/s) of the new body velocities."""
@@ -84,6 +85,26 @@ def corner_velocity_map(points: FloatArray) -> sp.csr_array:
     values = np.concatenate([np.ones(n_corners), np.ones(n_corners), turned[:, 0],
                              turned[:, 1]])
     return sp.csr_array((values, (rows, cols)), shape=(2 * n_corners, 3 * (n_corners // 4)))
+
+
+def structural_product(left: sp.csr_array, right: sp.csr_array) -> sp.csr_array:
+    """``left @ right`` keeping every structurally nonzero entry, even one that is 0.0.
+
+    scipy drops products that cancel to exactly zero (a contact normal through a square's
+    centre has no torque), which would change the sparsity pattern from step to step and
+    defeat the compiled-problem cache.
+    """
+    left_ones, right_ones = sp.csr_array(left, copy=True), sp.csr_array(right, copy=True)
+    left_ones.data[:] = 1.0
+    right_ones.data[:] = 1.0
+    pattern = sp.csr_array(left_ones @ right_ones)  # positive counts: nothing cancels
+    pattern.sort_indices()
+    if pattern.nnz == 0:
+        return pattern
+    rows = np.repeat(np.arange(pattern.shape[0]), np.diff(pattern.indptr))
+    product = sp.csr_array(left @ right)
+    pattern.data = np.asarray(product[rows, pattern.indices], dtype=np.float64).ravel()
+    return pattern
 
 
 def body_velocities(points: FloatArray, velocities: FloatArray,
