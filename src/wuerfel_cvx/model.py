@@ -10,7 +10,7 @@ equality ("Tischrestriktion").
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -71,6 +71,23 @@ class Model:
             point_masses=masses, rods=rods, rod_lengths=lengths,
             table_points=scene.table_points(), reference_corners=reference,
             gravity=np.asarray(scene.gravity, dtype=np.float64), table_mass=table_mass,
+        )
+
+    def subset(self, squares: IntArray) -> Model:
+        """The same model restricted to ``squares`` (indices, ascending); all tables kept.
+
+        Square ``squares[k]`` becomes square ``k``; rods and corner masses follow it.
+        """
+        squares = np.asarray(squares, dtype=np.int64)
+        rods_per_square = self.rods.shape[0] // max(self.n_squares, 1)
+        blocks = self.rods.reshape(self.n_squares, rods_per_square, 2)[squares]
+        shift = 4 * (np.arange(squares.size) - squares)[:, None, None]
+        corners = (4 * squares[:, None] + np.arange(4)).ravel()
+        return replace(
+            self, n_squares=int(squares.size), square_sizes=self.square_sizes[squares],
+            point_masses=self.point_masses[corners], rods=(blocks + shift).reshape(-1, 2),
+            rod_lengths=self.rod_lengths.reshape(self.n_squares, -1)[squares].ravel(),
+            reference_corners=self.reference_corners[squares],
         )
 
     @property

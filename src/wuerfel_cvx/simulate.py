@@ -14,11 +14,13 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from .compiled import CompiledQPCache
+from .contacts import find_contacts
 from .errors import InputError, StepFailure
-from .formulations import Formulation, StepQP, get_formulation
+from .formulations import Formulation, StepQP, VelocityFormulation, get_formulation
 from .metrics import deepest_penetration, kinetic_energy, potential_energy, rod_length_drift
-from .model import Model, State
+from .model import IntArray, Model, State
 from .scene import Scene
+from .sleep import SleepSettings, SleepTracker
 from .solve import StepSolution, solve_step_qp
 from .solvers import get_solver, tolerance_value
 from .trajectory import Trajectory
@@ -36,6 +38,9 @@ METRIC_COLUMNS = (
 (cvxpy's compilation included), ``solver_time_s`` the solver's own reported time, and
 ``step_time_s`` the whole step: build, solve, check and advance (all in s).
 """
+
+ASLEEP = "asleep"
+"""Status of a step in which every island slept (no QP was solved)."""
 
 StepObserver = Callable[[int, StepQP, StepSolution], None]
 """Called after each solved step with ``(step, qp, solution)``, outside the step's timers."""
@@ -69,6 +74,7 @@ def simulate(
     progress: bool = False,
     observer: StepObserver | None = None,
     compiled: bool = True,
+    sleep: SleepSettings | None = None,
 ) -> Trajectory:
     """Simulate ``steps`` steps of ``dt`` seconds, one QP per step.
 
@@ -102,6 +108,11 @@ def simulate(
         Re-solve repeated QP structures through a compiled, parametrised problem
         (:class:`~wuerfel_cvx.compiled.CompiledQPCache`) instead of declaring each step's
         problem afresh.  Same model and answers (to solver tolerance); less cvxpy time.
+    sleep:
+        ``None`` (default): every square takes part in every step.  Settings: islands of
+        squares that have been still long enough sleep (frozen, left out of the QP) until
+        an awake square touches them (:mod:`wuerfel_cvx.sleep`).  A step in which every
+        island sleeps has status ``"asleep"`` and no QP.
 
     Raises
     ------
@@ -143,17 +154,43 @@ def simulate(
                           velocities=np.array(velocities), metrics=metrics,
                           table_points=model.table_points.copy(), info=info)
 
+    tracker = SleepTracker(model.n_squares, sleep) if sleep is not None else None
+    all_asleep = False
     for step in tqdm(range(1, int(steps) + 1), disable=not progress, unit="step",
                      desc=scene.name):
         started = time.perf_counter()
-        qp = scheme.build(model, state, float(dt))
+        step_model, step_state = model, state
+        awake_squares: IntArray | None = None  # None: every square takes part
+        if tracker is not None:
+            # When everything slept in the last step nothing moved: it all sleeps still.
+            asleep = (np.ones(model.n_squares, dtype=bool) if all_asleep else
+                      tracker.asleep(find_contacts(model, state.points,
+                                                   _SLEEP_REACH.body_reach(model, state, dt))))
+            all_asleep = bool(asleep.all())
+            if all_asleep:
+                state = State(state.points, np.zeros_like(state.velocities))
+                tracker.record(state.velocities, float(dt))
+                times.append(step * float(dt))
+                points.append(state.points)
+                velocities.append(state.velocities)
+                rows.append(_asleep_row(model, state, step, float(dt),
+                                        time.perf_counter() - started))
+                continue
+            if asleep.any():
+                awake_squares = np.flatnonzero(~asleep)
+                step_model = model.subset(awake_squares)
+                step_state = _restrict(state, awake_squares)
+        qp = scheme.build(step_model, step_state, float(dt))
         build_time = time.perf_counter() - started
         try:
             solution = solve_step_qp(qp, spec.name, tol, step=step, cache=cache)
         except StepFailure as failure:
             failure.trajectory = trajectory()
             raise
-        state = scheme.advance(model, state, solution.x, float(dt))
+        moved = scheme.advance(step_model, step_state, solution.x, float(dt))
+        state = moved if awake_squares is None else _merge(state, moved, awake_squares)
+        if tracker is not None:
+            tracker.record(state.velocities, float(dt))
         step_time = time.perf_counter() - started
         if not (np.all(np.isfinite(state.points)) and np.all(np.isfinite(state.velocities))):
             bad_state = StepFailure(step, spec.name, solution.status, "non-finite state")
@@ -172,6 +209,43 @@ def simulate(
                 stop.trajectory = trajectory()
                 raise
     return trajectory()
+
+
+_SLEEP_REACH = VelocityFormulation()
+"""Whose contact reach (margin plus one step of travel) decides which squares touch."""
+
+
+def _restrict(state: State, squares: IntArray) -> State:
+    corners = (4 * squares[:, None] + np.arange(4)).ravel()
+    return State(state.points[corners], state.velocities[corners])
+
+
+def _merge(state: State, moved: State, squares: IntArray) -> State:
+    """``state`` with ``squares`` replaced by ``moved``; the others frozen at rest."""
+    corners = (4 * squares[:, None] + np.arange(4)).ravel()
+    points = state.points.copy()
+    velocities = np.zeros_like(state.velocities)
+    points[corners] = moved.points
+    velocities[corners] = moved.velocities
+    return State(points, velocities)
+
+
+def _asleep_row(model: Model, state: State, step: int, dt: float,
+                step_time: float) -> dict[str, Any]:
+    """Metrics of a step in which every island slept: no QP, nothing moved."""
+    kinetic = kinetic_energy(model, state)
+    potential = potential_energy(model, state)
+    return {
+        "step": step, "time_s": step * dt, "solver": "", "status": ASLEEP, "verified": True,
+        "n_variables": 0, "n_equalities": 0, "n_inequalities": 0, "n_contacts": 0,
+        "build_time_s": step_time, "solve_time_s": 0.0, "solver_time_s": np.nan,
+        "step_time_s": step_time, "iterations": 0, "primal_residual": 0.0,
+        "dual_residual": 0.0, "complementarity": 0.0,
+        "rod_drift": rod_length_drift(model, state.points),
+        "penetration_m": deepest_penetration(model, state.points),
+        "kinetic_energy_J": kinetic, "potential_energy_J": potential,
+        "total_energy_J": kinetic + potential,
+    }
 
 
 def _metrics_row(model: Model, state: State, n_var: int, n_eq: int, n_in: int,

@@ -140,17 +140,20 @@ def is_value(column: pd.Series, value: str) -> pd.Series:
 
 
 def plain_variant(results: pd.DataFrame) -> pd.Series:
-    """Mask of rows without a variant: fixed tables (no ``table_mass``) and five rods."""
-    return results["table_mass"].isna() & ~results["extra_rod"].fillna(False).astype(bool)
+    """Mask of rows without a variant: fixed tables (no ``table_mass``), five rods, no sleep."""
+    return (results["table_mass"].isna() & ~results["extra_rod"].fillna(False).astype(bool)
+            & ~results["sleep"].fillna(False).astype(bool))
 
 
 def variant_labels(results: pd.DataFrame) -> pd.Series:
-    """Short text per row naming its variant (``table 1e+06 kg``, ``extra rod``) or ``""``."""
+    """Short text per row naming its variant (``table 1e+06 kg``, ``extra rod``, ``sleep``)."""
     masses = results["table_mass"]
     rods = results["extra_rod"].fillna(False).astype(bool)
+    sleeps = results["sleep"].fillna(False).astype(bool)
     labels = [" ".join(part for part in (
-        f"table {mass:.0e} kg" if pd.notna(mass) else "", "extra rod" if rod else "") if part)
-        for mass, rod in zip(masses, rods, strict=True)]
+        f"table {mass:.0e} kg" if pd.notna(mass) else "", "extra rod" if rod else "",
+        "sleep" if sleep else "") if part)
+        for mass, rod, sleep in zip(masses, rods, sleeps, strict=True)]
     return pd.Series(labels, index=results.index, dtype=object)
 
 

@@ -27,7 +27,7 @@ README = "README.md"
 MISSING = "–"
 """Text of an empty table cell."""
 
-_POINT_KEY = ["scene", "tol", "dt", "duration", "table_mass", "extra_rod"]
+_POINT_KEY = ["scene", "tol", "dt", "duration", "table_mass", "extra_rod", "sleep"]
 """Columns that identify a grid point apart from the solver (within one formulation)."""
 _ENGINE_KEY = ["scene", "dt", "duration"]
 """Columns that identify a grid point when solvers are compared with peer engines."""

@@ -24,7 +24,8 @@ from ..errors import StepFailure
 from ..formulations import StepQP
 from ..geometry import FloatArray
 from ..peers import peer_version, simulate_peer
-from ..simulate import simulate
+from ..simulate import ASLEEP, simulate
+from ..sleep import SleepSettings
 from ..solve import StepSolution, solve_step_qp
 from ..solvers import SOLVERS
 from ..trajectory import Trajectory
@@ -137,7 +138,8 @@ def _simulate(point: GridPoint) -> tuple[Trajectory, StepFailure | None, float |
             trajectory = simulate(point.scene, dt=point.dt, steps=point.steps,
                                   solver=point.solver, formulation=point.formulation,
                                   tol=point.tol, table_mass=point.table_mass,
-                                  extra_rod=point.extra_rod, observer=compare)
+                                  extra_rod=point.extra_rod, observer=compare,
+                                  sleep=SleepSettings() if point.sleep else None)
     except StepFailure as failure:
         if failure.trajectory is None:
             raise
@@ -150,7 +152,7 @@ def _configuration(point: GridPoint) -> dict[str, Any]:
         "suite": point.suite, "point_id": point.point_id, "scene": point.scene,
         "engine": point.engine, "formulation": point.formulation, "solver": point.solver,
         "tol": point.tol, "dt": point.dt, "duration": point.duration, "steps": point.steps,
-        "table_mass": point.table_mass, "extra_rod": point.extra_rod,
+        "table_mass": point.table_mass, "extra_rod": point.extra_rod, "sleep": point.sleep,
         "solver_version": _solver_version(point.solver), **machine(),
         "finished_at": dt_module.datetime.now(dt_module.UTC).isoformat(timespec="seconds"),
         "reference_kind": point.reference,
@@ -161,7 +163,7 @@ def _outcome(trajectory: Trajectory, failure: StepFailure | None) -> dict[str, A
     metrics = trajectory.metrics
     completed = len(metrics)
     statuses = metrics["status"].astype(str)
-    claimed = bool(statuses.isin(["optimal", "peer"]).all()) and failure is None
+    claimed = bool(statuses.isin(["optimal", "peer", ASLEEP]).all()) and failure is None
     verified_steps = metrics["verified"].astype("boolean")
     if bool(verified_steps.isna().all()) and completed:  # peers: nothing to verify
         verified: bool | None = None

@@ -21,7 +21,7 @@ import pandas as pd
 
 from ..errors import InputError
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 """Version of :data:`COLUMNS`; stored in every row's ``schema_version``."""
 
 ColumnType = Literal["str", "int", "float", "bool"]
@@ -58,6 +58,7 @@ COLUMNS: tuple[Column, ...] = (
     _c("steps", "int", "1", "steps asked for: round(duration / dt)"),
     _c("table_mass", "float", "kg", "seed heavy-table corner mass; empty for fixed tables"),
     _c("extra_rod", "bool", "", "redundant sixth rod on every square"),
+    _c("sleep", "bool", "", "islands at rest sleep (left out of the QP until touched)"),
     _c("n_squares", "int", "1", "number of squares"),
     # environment
     _c("package_version", "str", "", "wuerfel_cvx version"),

@@ -15,6 +15,7 @@ Cartesian product of its lists::
     dts = [0.01]                        # time steps (s)
     table_masses = ["fixed"]            # "fixed" or a heavy-table corner mass (kg)
     extra_rods = [false]
+    sleeps = [false]                    # true: islands at rest sleep
     reference = "dt/8"                  # "dt/8", "rest" or "none"
     compare_every = 1                   # steps between re-solves by the reference solver
     time_limit = 600.0                  # wall seconds per grid point before it is stopped
@@ -51,12 +52,14 @@ REFERENCE_TOL = "high"
 """The tightest CLARABEL setting (see :data:`wuerfel_cvx.solvers.TOLERANCE_PRESETS`)."""
 
 _LIST_KEYS = {"scenes": str, "formulations": str, "solvers": str, "tols": str,
-              "dts": float, "table_masses": (str, float), "extra_rods": bool}
+              "dts": float, "table_masses": (str, float), "extra_rods": bool,
+              "sleeps": bool}
 _SCALAR_KEYS = {"duration": float, "reference": str, "compare_every": int,
                 "time_limit": float}
 _DEFAULTS: dict[str, Any] = {
     "formulations": ["velocity"], "solvers": ["CLARABEL"], "tols": ["default"],
-    "dts": [0.01], "table_masses": ["fixed"], "extra_rods": [False], "reference": "dt/8",
+    "dts": [0.01], "table_masses": ["fixed"], "extra_rods": [False], "sleeps": [False],
+    "reference": "dt/8",
     "compare_every": 1, "time_limit": 600.0,
 }
 
@@ -80,6 +83,8 @@ class GridPoint:
     table_mass: float | None = None
     """Seed heavy-table corner mass (kg), or ``None`` for fixed tables."""
     extra_rod: bool = False
+    sleep: bool = False
+    """Islands at rest sleep (see :mod:`wuerfel_cvx.sleep`)."""
     reference: str = "dt/8"
     compare_every: int = 1
     """Re-solve every ``compare_every``-th step's QP with the reference solver; 0: never."""
@@ -105,6 +110,8 @@ class GridPoint:
             parts.append(f"table_mass={self.table_mass:g}")
         if self.extra_rod:
             parts.append("extra_rod")
+        if self.sleep:
+            parts.append("sleep")
         return "|".join(parts)
 
     @property
@@ -241,15 +248,16 @@ def _expand(suite: str, s: dict[str, Any], source: str, where: str) -> list[Grid
                              field=f"{where}.dts")
     masses = [_table_mass(m, source, f"{where}.table_masses") for m in s["table_masses"]]
     points = []
-    for scene, formulation, solver, tol, dt, mass, rod in itertools.product(
+    for scene, formulation, solver, tol, dt, mass, rod, sleep in itertools.product(
             s["scenes"], s["formulations"], s["solvers"], s["tols"], s["dts"], masses,
-            s["extra_rods"]):
+            s["extra_rods"], s["sleeps"]):
         solver = solver.upper()
         if solver in PEER_ENGINES:
-            formulation, tol, mass, rod = "peer", "native", None, False
+            formulation, tol, mass, rod, sleep = "peer", "native", None, False, False
         points.append(GridPoint(suite, scene, formulation, solver, str(tol), float(dt),
-                                float(duration), mass, bool(rod), s["reference"],
-                                s["compare_every"], float(s["time_limit"])))
+                                float(duration), mass, bool(rod), bool(sleep),
+                                s["reference"], s["compare_every"],
+                                float(s["time_limit"])))
     return points
 
 

@@ -1,0 +1,88 @@
+"""Islands and sleep: separate islands are separate QPs; sleeping islands wake on contact."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from test_solver_agreement import AGREEMENT
+from wuerfel_cvx import Scene, Square, simulate
+from wuerfel_cvx.contacts import find_contacts
+from wuerfel_cvx.formulations import get_formulation
+from wuerfel_cvx.library import FLOOR
+from wuerfel_cvx.model import Model, State
+from wuerfel_cvx.simulate import ASLEEP
+from wuerfel_cvx.sleep import SleepSettings, island_labels
+from wuerfel_cvx.solve import solve_step_qp
+
+DT = 0.01
+
+
+def two_stacks_and_a_faller() -> Scene:
+    """Two 3-stacks 5 m apart, their tops tilted and moving, and a square in free flight."""
+    left = [Square(center=(-2.5, 0.5 + k)) for k in range(2)]
+    right = [Square(center=(2.5, 0.5 + k)) for k in range(2)]
+    tops = [Square(center=(-2.5, 2.56), angle=0.1, velocity=(0.3, -1.0)),
+            Square(center=(2.5, 2.6), angle=-0.2, velocity=(-0.2, -2.0), angular_velocity=1.0)]
+    faller = Square(center=(0.0, 6.0), velocity=(0.0, -1.0))
+    return Scene("two-stacks", (*left, tops[0], *right, tops[1], faller), (FLOOR,))
+
+
+def test_islands_are_the_connected_stacks() -> None:
+    scene = two_stacks_and_a_faller()
+    model, state = Model.from_scene(scene), State.initial(scene)
+    contacts = find_contacts(model, state.points, get_formulation("velocity").body_reach(
+        model, state, DT))
+    labels = island_labels(model.n_squares, contacts)
+    assert len(set(labels[:3])) == 1 and len(set(labels[3:6])) == 1
+    assert len({labels[0], labels[3], labels[6]}) == 3  # the floor does not connect
+
+
+def test_separate_islands_solve_to_the_joint_qps_answer() -> None:
+    scene = two_stacks_and_a_faller()
+    model, state = Model.from_scene(scene), State.initial(scene)
+    velocity = get_formulation("velocity")
+    joint = solve_step_qp(velocity.build(model, state, DT), "CLARABEL", "high")
+    assert joint.verified
+    for squares in (np.arange(0, 3), np.arange(3, 6), np.arange(6, 7)):
+        corners = (4 * squares[:, None] + np.arange(4)).ravel()
+        part = State(state.points[corners], state.velocities[corners])
+        alone = solve_step_qp(velocity.build(model.subset(squares), part, DT), "CLARABEL",
+                              "high")
+        assert alone.verified
+        joint_part = joint.x.reshape(-1, 2)[corners].ravel()
+        # Both are verified solutions of the same island's rows (bound derived in
+        # test_solver_agreement).
+        assert np.max(np.abs(alone.x - joint_part)) <= AGREEMENT
+
+
+def drop_on_stack() -> Scene:
+    stack = tuple(Square(center=(0.0, 0.5 + k)) for k in range(5))
+    return Scene("drop-on-stack", (*stack, Square(center=(0.2, 9.0))), (FLOOR,))
+
+
+def test_a_square_dropped_on_a_sleeping_stack_wakes_it_and_lands_on_it() -> None:
+    steps = 250
+    sleeping = simulate(drop_on_stack(), steps=steps, tol="high", sleep=SleepSettings())
+    awake = simulate(drop_on_stack(), steps=steps, tol="high")
+    sizes = sleeping.metrics["n_variables"].to_numpy()
+    # The stack sleeps after 0.5 s still: only the falling square is in the QP ...
+    alone = np.flatnonzero(sizes == 8)
+    assert alone.size > 20 and alone[0] == 50
+    # ... until it reaches the stack, which wakes as one island with it (6 squares).
+    assert np.any(sizes[alone[-1] + 1:] == 48)
+    # Sleeping changed nothing: the stack was at rest (to the sleep speed 1e-4 m/s).
+    np.testing.assert_allclose(sleeping.points, awake.points, rtol=0, atol=1e-8)
+    top = sleeping.points[-1, 20:24]
+    np.testing.assert_allclose(top[:, 1].min(), 5.0, atol=1e-6)  # resting on the stack
+    assert sleeping.metrics["penetration_m"].max() < 1e-6
+
+
+def test_a_settled_stack_sleeps_and_stays_exactly_still() -> None:
+    traj = simulate("stack-10", steps=120, sleep=SleepSettings(time=0.5))
+    status = traj.metrics["status"].to_numpy()
+    assert (status[:50] != ASLEEP).all() and (status[50:] == ASLEEP).all()
+    asleep = traj.metrics[traj.metrics["status"] == ASLEEP]
+    assert (asleep["n_variables"] == 0).all()
+    frozen = traj.points[51:]
+    assert np.array_equal(frozen, np.broadcast_to(frozen[0], frozen.shape))
+    assert not traj.velocities[51:].any()
