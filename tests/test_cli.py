@@ -195,3 +195,12 @@ def test_a_directory_named_like_a_scene_does_not_shadow_the_library(
     monkeypatch.chdir(tmp_path)
     assert main(["simulate", "tilted-drop", "--steps", "2"]) == 0
     assert "scene tilted-drop" in capsys.readouterr().out
+
+
+def test_simulate_with_sleep_saves_asleep_steps(tmp_path: Path) -> None:
+    out = tmp_path / "stack"
+    assert main(["simulate", "stack-3", "--steps", "70", "--sleep", "--out", str(out),
+                 "--no-progress"]) == 0
+    statuses = Trajectory.load(out.with_suffix(".npz")).metrics["status"]
+    # At rest from the start: awake for the first 0.5 s, asleep after.
+    assert (statuses.iloc[:50] == "optimal").all() and (statuses.iloc[50:] == "asleep").all()

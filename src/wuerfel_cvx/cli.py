@@ -19,6 +19,7 @@ from .errors import InputError, StepFailure
 from .formulations import FORMULATIONS
 from .library import ENTRIES
 from .simulate import simulate
+from .sleep import SleepSettings
 from .solvers import SOLVERS, TOLERANCE_PRESETS, available_solvers
 from .trajectory import Trajectory
 
@@ -42,6 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help=f"tolerance preset ({', '.join(TOLERANCE_PRESETS)}) or a number")
     run.add_argument("--table-mass", type=float, default=None,
                      help="seed variant: table corners as variables of this mass (kg)")
+    run.add_argument("--sleep", action="store_true",
+                     help="let islands at rest sleep (left out of the QP until touched)")
     run.add_argument("--out", default=None,
                      help="write the trajectory (.npz) and metrics (.metrics.csv) here")
     run.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
@@ -99,7 +102,8 @@ def _simulate(args: argparse.Namespace) -> int:
     try:
         trajectory = simulate(args.scene, dt=args.dt, steps=args.steps, solver=args.solver,
                               formulation=args.formulation, tol=args.tol,
-                              table_mass=args.table_mass, progress=progress)
+                              table_mass=args.table_mass, progress=progress,
+                              sleep=SleepSettings() if args.sleep else None)
     except StepFailure as failure:
         print(f"{PROG}: {failure}", file=sys.stderr)
         if args.out and failure.trajectory is not None:
