@@ -40,7 +40,8 @@ METRIC_COLUMNS = (
 """
 
 ASLEEP = "asleep"
-"""Status of a step in which every island slept (no QP was solved)."""
+"""Status of a step in which every island slept: no QP was solved, nothing moved.  Its
+``verified`` is vacuously true and its residuals are 0; summaries count such steps apart."""
 
 StepObserver = Callable[[int, StepQP, StepSolution], None]
 """Called after each solved step with ``(step, qp, solution)``, outside the step's timers."""

@@ -80,14 +80,17 @@ class Trajectory:
         ]
         if len(m):
             energy = m["total_energy_J"].to_numpy()
+            solved = m[m["status"] != "asleep"]
+            asleep = len(m) - len(solved)
+            slept = f" ({asleep} more asleep: no QP)" if asleep else ""
             lines += [
                 f"max rod drift        {m['rod_drift'].max():.3e} (relative)",
                 f"max penetration      {m['penetration_m'].max():.3e} m",
                 f"energy               {energy[0]:.6g} J -> {energy[-1]:.6g} J "
                 f"(largest one-step rise {np.max(np.diff(energy, prepend=energy[0])):.3e} J)",
-                f"verified steps       {int(m['verified'].sum())}/{len(m)}",
-                f"median build / solve {1e3 * m['build_time_s'].median():.2f} ms / "
-                f"{1e3 * m['solve_time_s'].median():.2f} ms per step "
-                f"(solver's own {1e3 * m['solver_time_s'].median():.3f} ms)",
+                f"verified steps       {int(solved['verified'].sum())}/{len(solved)}{slept}",
+                f"median build / solve {1e3 * solved['build_time_s'].median():.2f} ms / "
+                f"{1e3 * solved['solve_time_s'].median():.2f} ms per step "
+                f"(solver's own {1e3 * solved['solver_time_s'].median():.3f} ms)",
             ]
         return "\n".join(lines)
