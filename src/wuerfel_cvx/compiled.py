@@ -27,11 +27,13 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass, field
+from typing import Any
 
 import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
+from .direct import DirectOSQP, direct_osqp
 from .formulations.qp import DeclaredQP, StepQP
 
 StructureKey = tuple[int, bytes, tuple[int, int], bytes, bytes, tuple[int, int], bytes, bytes]
@@ -56,6 +58,16 @@ class CompiledQP:
     eq_rhs: cp.Parameter | None
     ineq_values: cp.Parameter | None
     ineq_rhs: cp.Parameter | None
+    osqp: DirectOSQP | None = None
+    """The direct OSQP path for this structure, once set up (see :mod:`wuerfel_cvx.direct`)."""
+    osqp_tried: bool = False
+
+    def parameter_names(self) -> dict[int, str]:
+        """Our parameters' ids and the step-QP numbers each holds."""
+        named = {"weighted_target": self.weighted_target, "eq_values": self.eq_values,
+                 "eq_rhs": self.eq_rhs, "ineq_values": self.ineq_values,
+                 "ineq_rhs": self.ineq_rhs}
+        return {param.id: name for name, param in named.items() if param is not None}
 
     @classmethod
     def of(cls, qp: StepQP) -> CompiledQP:
@@ -139,6 +151,25 @@ class CompiledQPCache:
             self._problems.popitem(last=False)
         self.compiled += 1
         return compiled.load(qp)
+
+    def direct_osqp(self, qp: StepQP, options: dict[str, Any]) -> DirectOSQP | None:
+        """The direct OSQP path for ``qp``'s structure, if it is compiled and the path works.
+
+        Counts a sighting like :meth:`declared_for`; ``None`` means: solve through cvxpy.
+        """
+        key = structure_key(qp)
+        compiled = self._problems.get(key)
+        if compiled is None:
+            return None
+        self._problems.move_to_end(key)
+        if not compiled.osqp_tried:
+            compiled.osqp_tried = True
+            compiled.load(qp)
+            compiled.osqp = direct_osqp(compiled.declared.problem, compiled.parameter_names(),
+                                        qp, options)
+        if compiled.osqp is not None:
+            self.reused += 1
+        return compiled.osqp
 
     def __len__(self) -> int:
         return len(self._problems)

@@ -98,46 +98,77 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     """
     spec = get_solver(solver)
     eps = tolerance_value(tol)
+    options = spec.options(eps)
     started = time.perf_counter()
-    declared = cache.declared_for(qp) if cache is not None else qp.declared()
+    direct = (cache.direct_osqp(qp, options) if cache is not None and spec.name == "OSQP"
+              else None)
     try:
-        with warnings.catch_warnings():
-            # cvxpy reads its own sparse parameters densely while applying them
-            warnings.filterwarnings("ignore", "Reading from a sparse CVXPY expression",
-                                    RuntimeWarning)
-            # an inaccurate optimum is judged by the residual check below, not by a warning
-            warnings.filterwarnings("ignore", "Solution may be inaccurate", UserWarning)
-            # warm_start=False: cvxpy's in-place OSQP update can be refused by OSQP
-            # ("Problem data validation") and then silently re-solves the old data.
-            declared.problem.solve(solver=spec.cvxpy_name,
-                                   **{"warm_start": False, **spec.options(eps)})
+        if direct is not None:  # warm-started from the structure's last solution
+            raw = direct.solve(qp, options)
+            answer = _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.solver_time,
+                             raw.iterations)
+        else:
+            answer = _solve_with_cvxpy(qp, spec.cvxpy_name, {"warm_start": False, **options},
+                                       cache)
     except cp.error.SolverError as exc:
         raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
     except Exception as exc:  # a solver library raising anything is a failed step
         raise StepFailure(step, spec.name, "exception", f"{type(exc).__name__}: {exc}") from exc
     wall = time.perf_counter() - started
-    status = str(declared.problem.status)
-    x = declared.variable.value
-    if status not in SOLVED or x is None:
+    status = answer.status
+    if status not in SOLVED or answer.x is None:
         raise StepFailure(step, spec.name, status)
-    x = np.asarray(x, dtype=np.float64)
+    x = np.asarray(answer.x, dtype=np.float64)
     if not np.all(np.isfinite(x)):
         raise StepFailure(step, spec.name, status, "solution has non-finite entries")
-    eq_dual = _dual(declared.eq_constraint, qp.n_equalities)
-    ineq_dual = _dual(declared.ineq_constraint, qp.n_inequalities)
-    residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
+    residuals = kkt_residuals(qp, x, answer.eq_dual, answer.ineq_dual)
     verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
     if status == cp.OPTIMAL_INACCURATE and not verified:
         raise StepFailure(step, spec.name, status,
                           f"residuals {residuals.worst():.2e} above {VERIFY_FACTOR * eps:.1e}")
-    stats = declared.problem.solver_stats
-    solver_time = stats.solve_time if stats is not None and stats.solve_time is not None else np.nan
+    solver_time = answer.solver_time
     if not solver_time > 0.0:  # cvxpy reports 0.0 for PROXQP (its timings are off): unknown
         solver_time = np.nan
-    iterations = stats.num_iters if stats is not None and stats.num_iters is not None else -1
     return StepSolution(x=x, solver=spec.name, status=status, residuals=residuals,
                         verified=verified, solve_wall_time=wall, solver_time=float(solver_time),
-                        iterations=int(iterations))
+                        iterations=int(answer.iterations))
+
+
+@dataclass(frozen=True)
+class _Answer:
+    """What a solve returned, before it is checked."""
+
+    status: str
+    x: FloatArray | None
+    eq_dual: FloatArray
+    ineq_dual: FloatArray
+    solver_time: float
+    iterations: int
+
+
+def _solve_with_cvxpy(qp: StepQP, solver: str, options: dict[str, object],
+                      cache: CompiledQPCache | None) -> _Answer:
+    declared = cache.declared_for(qp) if cache is not None else qp.declared()
+    with warnings.catch_warnings():
+        # cvxpy reads its own sparse parameters densely while applying them
+        warnings.filterwarnings("ignore", "Reading from a sparse CVXPY expression",
+                                RuntimeWarning)
+        # an inaccurate optimum is judged by the residual check, not by a warning
+        warnings.filterwarnings("ignore", "Solution may be inaccurate", UserWarning)
+        # warm_start=False (in options): cvxpy's in-place OSQP update can be refused by
+        # OSQP ("Problem data validation") and then silently re-solves the old data.
+        declared.problem.solve(solver=solver, **options)
+    stats = declared.problem.solver_stats
+    value = declared.variable.value
+    return _Answer(
+        status=str(declared.problem.status),
+        x=None if value is None else np.asarray(value, dtype=np.float64),
+        eq_dual=_dual(declared.eq_constraint, qp.n_equalities),
+        ineq_dual=_dual(declared.ineq_constraint, qp.n_inequalities),
+        solver_time=(stats.solve_time if stats is not None and stats.solve_time is not None
+                     else np.nan),
+        iterations=stats.num_iters if stats is not None and stats.num_iters is not None else -1,
+    )
 
 
 def _dual(constraint: cp.Constraint | None, size: int) -> FloatArray:
