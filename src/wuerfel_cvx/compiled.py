@@ -36,7 +36,7 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
-from .direct import DirectOSQP, direct_osqp
+from .direct import DirectClarabel, DirectOSQP, direct_clarabel, direct_osqp
 from .formulations.qp import DeclaredQP, StepQP
 
 StructureKey = tuple[int, bytes, tuple[int, int], bytes, bytes, tuple[int, int], bytes, bytes]
@@ -61,9 +61,9 @@ class CompiledQP:
     eq_rhs: cp.Parameter | None
     ineq_values: cp.Parameter | None
     ineq_rhs: cp.Parameter | None
-    osqp: DirectOSQP | None = None
-    """The direct OSQP path for this structure, once set up (see :mod:`wuerfel_cvx.direct`)."""
-    osqp_tried: bool = False
+    direct: dict[str, DirectOSQP | DirectClarabel | None] = field(default_factory=dict)
+    """Per solver, the direct path for this structure once tried (see :mod:`wuerfel_cvx.direct`;
+    ``None``: it does not apply)."""
 
     def parameter_names(self) -> dict[int, str]:
         """Our parameters' ids and the step-QP numbers each holds."""
@@ -155,24 +155,27 @@ class CompiledQPCache:
         self.compiled += 1
         return compiled.load(qp)
 
-    def direct_osqp(self, qp: StepQP, options: dict[str, Any]) -> DirectOSQP | None:
-        """The direct OSQP path for ``qp``'s structure, if it is compiled and the path works.
+    def direct_solver(self, qp: StepQP, solver: str,
+                      options: dict[str, Any]) -> DirectOSQP | DirectClarabel | None:
+        """The direct path of ``solver`` (OSQP or CLARABEL) for ``qp``'s compiled structure.
 
-        Counts a sighting like :meth:`declared_for`; ``None`` means: solve through cvxpy.
+        ``None`` means: solve through cvxpy (not compiled yet, another solver, or the path
+        does not apply).  A structure's path is set up with the options of its first use.
         """
+        builders = {"OSQP": direct_osqp, "CLARABEL": direct_clarabel}
         key = structure_key(qp)
         compiled = self._problems.get(key)
-        if compiled is None:
+        if compiled is None or solver not in builders:
             return None
         self._problems.move_to_end(key)
-        if not compiled.osqp_tried:
-            compiled.osqp_tried = True
+        if solver not in compiled.direct:
             compiled.load(qp)
-            compiled.osqp = direct_osqp(compiled.declared.problem, compiled.parameter_names(),
-                                        qp, options)
-        if compiled.osqp is not None:
+            compiled.direct[solver] = builders[solver](
+                compiled.declared.problem, compiled.parameter_names(), qp, options)
+        direct = compiled.direct[solver]
+        if direct is not None:
             self.reused += 1
-        return compiled.osqp
+        return direct
 
     def __len__(self) -> int:
         return len(self._problems)

@@ -111,6 +111,95 @@ class DirectOSQP:
         return vector
 
 
+@dataclass
+class DirectClarabel:
+    """One structure's parameter map and its persistent Clarabel solver.
+
+    Clarabel takes cvxpy's conic data as ``A = -A_cone``, ``b = b_cone``; its dual ``z``
+    gives our multipliers with the signs of :func:`_rhs_rows` (equalities negated).
+    """
+
+    osqp_like: DirectOSQP
+    """The shared parameter map (its OSQP-specific fields are unused here)."""
+    a_count: int
+    a_pattern: tuple[np.ndarray, np.ndarray, tuple[int, int]]
+    b_rows: np.ndarray
+    b_entries: np.ndarray
+    n_rows: int
+    solver: Any
+
+    def solve(self, qp: StepQP, settings: dict[str, Any]) -> DirectResult:
+        """Solve ``qp`` (this structure); ``settings`` were fixed when it was set up."""
+        from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import CLARABEL
+
+        base = self.osqp_like
+        vector = base._parameter_vector(qp)
+        values = base.reduced_map @ vector
+        indices, indptr, shape = self.a_pattern
+        a = sp.csc_matrix((-values[: self.a_count], indices, indptr), shape=shape)
+        b = np.zeros(self.n_rows)
+        b[self.b_rows] = values[self.b_entries]
+        q = np.asarray(base.q_map @ vector).ravel()[:-1]
+        self.solver.update(q=q, b=b, A=a)
+        result = self.solver.solve()
+        status = CLARABEL.STATUS_MAP.get(str(result.status), cp.SOLVER_ERROR)
+        x = np.asarray(result.x, dtype=np.float64)[base.x_offset:base.x_offset
+                                                   + qp.n_variables]
+        z = np.asarray(result.z, dtype=np.float64)
+        return DirectResult(x=x, eq_dual=-base.eq_sign * z[base.eq_rows],
+                            ineq_dual=base.ineq_sign * z[base.ineq_rows], status=str(status),
+                            solver_time=float(result.solve_time),
+                            iterations=int(result.iterations))
+
+
+def direct_clarabel(problem: cp.Problem, names: dict[int, str], qp: StepQP,
+                    options: dict[str, Any]) -> DirectClarabel | None:
+    """As :func:`direct_osqp`, for Clarabel; ``None`` if the path does not apply."""
+    try:
+        return _build_clarabel(problem, names, qp, options)
+    except Exception:  # any surprise in cvxpy's internals: use the public path instead
+        return None
+
+
+def _build_clarabel(problem: cp.Problem, names: dict[int, str], qp: StepQP,
+                    options: dict[str, Any]) -> DirectClarabel | None:
+    import clarabel
+    from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import (
+        CLARABEL,
+        dims_to_solver_cones,
+    )
+
+    base = _build(problem, names, qp, options, with_osqp=False)
+    if base is None:
+        return None
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "Reading from a sparse CVXPY expression",
+                                RuntimeWarning)
+        data, _, _ = problem.get_problem_data(cp.CLARABEL)
+    indices, indptr, shape = problem._cache.param_prog.reduced_A.problem_data_index
+    a_count = int(indptr[-2])
+    a_pattern = (np.asarray(indices[:a_count]), np.asarray(indptr[:-1]),
+                 (int(shape[0]), int(shape[1]) - 1))
+    reference = sp.csc_array(data["A"])
+    reference.sort_indices()
+    values = base.reduced_map @ base._parameter_vector(qp)
+    ours = sp.csc_array((-values[:a_count], a_pattern[0], a_pattern[1]), shape=a_pattern[2])
+    if not (np.array_equal(reference.indptr, ours.indptr)
+            and np.array_equal(reference.indices, ours.indices)
+            and np.allclose(reference.data, ours.data, rtol=0, atol=1e-12)):
+        return None
+    b_entries = np.arange(int(indptr[-2]), int(indptr[-1]))
+    settings = CLARABEL().parse_solver_opts(False, dict(options))
+    solver = clarabel.DefaultSolver(sp.csc_matrix(sp.triu(data["P"]).tocsc()), data["c"],
+                                    sp.csc_matrix(reference), data["b"],
+                                    dims_to_solver_cones(data["dims"]), settings)
+    if not solver.is_data_update_allowed():
+        return None
+    return DirectClarabel(osqp_like=base, a_count=a_count, a_pattern=a_pattern,
+                          b_rows=np.asarray(indices[b_entries]), b_entries=b_entries,
+                          n_rows=int(shape[0]), solver=solver)
+
+
 def _osqp_settings(options: dict[str, Any]) -> dict[str, Any]:
     settings = {key: value for key, value in options.items() if key not in _NOT_OSQP_SETTINGS}
     settings["warm_starting"] = bool(options.get("warm_start", True))
@@ -133,13 +222,13 @@ def direct_osqp(problem: cp.Problem, names: dict[int, str], qp: StepQP,
 
 
 def _build(problem: cp.Problem, names: dict[int, str], qp: StepQP,
-           options: dict[str, Any]) -> DirectOSQP | None:
+           options: dict[str, Any], with_osqp: bool = True) -> DirectOSQP | None:
     import osqp
 
     with warnings.catch_warnings():  # cvxpy reads its own sparse parameters densely
         warnings.filterwarnings("ignore", "Reading from a sparse CVXPY expression",
                                 RuntimeWarning)
-        data, chain, _ = problem.get_problem_data(cp.OSQP)
+        data, chain, _ = problem.get_problem_data(cp.OSQP if with_osqp else cp.CLARABEL)
     program = problem._cache.param_prog
     reduced_to_ours = {}
     for reduction in chain.reductions:
@@ -157,16 +246,20 @@ def _build(problem: cp.Problem, names: dict[int, str], qp: StepQP,
     tensor = program.reduced_A
     tensor.cache(keep_zeros=True)
     indices, indptr, shape = tensor.problem_data_index
-    n_eq = int(data["n_eq"])
     tags = sp.csc_array((np.arange(1.0, len(indices) + 1), indices, indptr), shape=shape)
-    stacked = sp.vstack([tags[:, :-1][:n_eq], -tags[:, :-1][n_eq:]]).tocsc()
-    stacked.sort_indices()
     b_tags = tags[:, [-1]].toarray().ravel()
-    reference = sp.vstack([data["A"], data["F"]]).tocsc()
-    reference.sort_indices()
-    if not (np.array_equal(reference.indptr, stacked.indptr)
-            and np.array_equal(reference.indices, stacked.indices)):
-        return None
+    if with_osqp:  # OSQP's A stacks cvxpy's equality rows A and inequality rows F = -A_cone
+        n_eq = int(data["n_eq"])
+        stacked = sp.vstack([tags[:, :-1][:n_eq], -tags[:, :-1][n_eq:]]).tocsc()
+        stacked.sort_indices()
+        reference = sp.vstack([data["A"], data["F"]]).tocsc()
+        reference.sort_indices()
+        if not (np.array_equal(reference.indptr, stacked.indptr)
+                and np.array_equal(reference.indices, stacked.indices)):
+            return None
+    else:  # Clarabel takes A = -A_cone whole; its builder checks that separately
+        n_eq = 0
+        stacked = reference = sp.csc_array((0, 0))
     direct = DirectOSQP(
         parameter_slots=slots, vector_size=size, reduced_map=sp.csr_array(tensor.reduced_mat),
         ax_index=np.abs(stacked.data).astype(np.int64) - 1, ax_sign=np.sign(stacked.data),
@@ -181,6 +274,8 @@ def _build(problem: cp.Problem, names: dict[int, str], qp: StepQP,
         return None
     direct.eq_rows, direct.eq_sign = eq
     direct.ineq_rows, direct.ineq_sign = ineq
+    if not with_osqp:
+        return direct
     # the conic data at the current values must be the data cvxpy just formatted
     values = direct.reduced_map @ direct._parameter_vector(qp)
     if not np.allclose(direct.ax_sign * values[direct.ax_index], reference.data, rtol=0,

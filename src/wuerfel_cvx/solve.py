@@ -100,8 +100,7 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     eps = tolerance_value(tol)
     options = spec.options(eps)
     started = time.perf_counter()
-    direct = (cache.direct_osqp(qp, options) if cache is not None and spec.name == "OSQP"
-              else None)
+    direct = cache.direct_solver(qp, spec.name, options) if cache is not None else None
     try:
         if direct is not None:  # warm-started from the structure's last solution
             raw = direct.solve(qp, options)
