@@ -134,7 +134,9 @@ def raise_on_call(monkeypatch: pytest.MonkeyPatch, bad_call: int,
 def test_solver_raising_becomes_a_step_failure(monkeypatch: pytest.MonkeyPatch) -> None:
     calls = raise_on_call(monkeypatch, 3, lambda: RuntimeError("solver exploded"))
     with pytest.raises(StepFailure) as caught:
-        simulate(SCENE, dt=0.01, steps=5)
+        # compiled=False: every step goes through Problem.solve (a compiled structure is
+        # solved on the direct path instead; its own failure test is below)
+        simulate(SCENE, dt=0.01, steps=5, compiled=False)
     failure = caught.value
     assert calls["n"] == 3  # nothing was solved after the failure
     assert failure.step == 3
@@ -143,6 +145,23 @@ def test_solver_raising_becomes_a_step_failure(monkeypatch: pytest.MonkeyPatch) 
     assert "RuntimeError" in failure.detail
     assert "solver exploded" in failure.detail
     assert isinstance(failure.__cause__, RuntimeError)
+    check_partial(failure.trajectory, 2)
+
+
+def test_direct_path_raising_becomes_a_step_failure(monkeypatch: pytest.MonkeyPatch) -> None:
+    from wuerfel_cvx.direct import DirectClarabel
+
+    def explode(self: DirectClarabel, *args: Any, **kwargs: Any) -> Any:
+        raise RuntimeError("direct solver exploded")
+
+    monkeypatch.setattr(DirectClarabel, "solve", explode)
+    with pytest.raises(StepFailure) as caught:
+        simulate(SCENE, dt=0.01, steps=5)
+    failure = caught.value
+    # Step 1 is declared plainly, step 2 compiles the structure, step 3 is the first
+    # on the direct path.
+    assert failure.step == 3 and failure.status == "exception"
+    assert "direct solver exploded" in failure.detail
     check_partial(failure.trajectory, 2)
 
 
