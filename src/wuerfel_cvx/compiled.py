@@ -17,7 +17,7 @@ A later step with the same structure only sets parameter values, and
 cvxpy re-solves through its cached parameter map without canonicalising again.  The model
 is the same cvxpy model; only its numbers change.
 
-For OSQP a compiled structure is then solved on the direct path
+For OSQP and CLARABEL a compiled structure is then solved on the direct path
 (:mod:`wuerfel_cvx.direct`): cvxpy's parameter map applied by hand and a persistent solver.
 
 A structure is compiled the second time it is seen (``compile_after=2``): a structure that

@@ -1,4 +1,4 @@
-"""The direct path: cvxpy's parameter map applied by hand, one persistent OSQP per structure.
+"""The direct path: cvxpy's parameter map applied by hand, one persistent solver per structure.
 
 A compiled step problem (:mod:`wuerfel_cvx.compiled`) re-solved through ``Problem.solve()``
 still pays cvxpy's per-call work: validating parameter values, applying the parameter map
@@ -10,15 +10,17 @@ the linear map from the parameter vector to the solver's data.  Each step then
 1. fills the parameter vector from the step QP's numbers (``sqrt(w) t``, the nonzeros of
    ``E`` and ``G`` in their canonical order, ``e``, ``h``),
 2. multiplies it by cvxpy's own reduced map, giving the nonzeros of the conic data,
-3. scatters them into OSQP's ``q``, ``l``, ``u`` and ``A`` by index maps found once, and
-4. updates a persistent ``osqp.OSQP`` in place and solves.
+3. scatters them into the solver's data by index maps found once (OSQP: ``q``, ``l``,
+   ``u``, ``A``; Clarabel: ``q``, ``b``, ``A``), and
+4. updates a persistent ``osqp.OSQP`` or ``clarabel.DefaultSolver`` in place and solves.
 
 The model is the cvxpy one: no matrix is written by hand, only cvxpy's map is applied.
 The duals of our rows ``E x = e`` and ``G x >= h`` are read from OSQP's by the row and sign
 each right-hand side takes in the conic data, so every step is checked by the same
 independent KKT residuals as any other solve.  The map uses cvxpy internals (the cached
-``ParamConeProg`` and its reduced tensor); :func:`direct_osqp` returns ``None`` when they
-do not look as expected, and the caller falls back to ``Problem.solve()``.
+``ParamConeProg`` and its reduced tensor); :func:`direct_osqp` and :func:`direct_clarabel`
+return ``None`` when they do not look as expected, and the caller falls back to
+``Problem.solve()``.  PIQP, PROXQP and SCS always go through ``Problem.solve()``.
 """
 
 from __future__ import annotations
