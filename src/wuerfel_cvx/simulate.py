@@ -21,7 +21,7 @@ from .metrics import deepest_penetration, kinetic_energy, potential_energy, rod_
 from .model import IntArray, Model, State
 from .scene import Scene
 from .sleep import SleepSettings, SleepTracker
-from .solve import StepSolution, solve_step_qp
+from .solve import Residuals, StepSolution, solve_step_qp
 from .solvers import get_solver, tolerance_value
 from .trajectory import Trajectory
 
@@ -234,19 +234,11 @@ def _merge(state: State, moved: State, squares: IntArray) -> State:
 def _asleep_row(model: Model, state: State, step: int, dt: float,
                 step_time: float) -> dict[str, Any]:
     """Metrics of a step in which every island slept: no QP, nothing moved."""
-    kinetic = kinetic_energy(model, state)
-    potential = potential_energy(model, state)
-    return {
-        "step": step, "time_s": step * dt, "solver": "", "status": ASLEEP, "verified": True,
-        "n_variables": 0, "n_equalities": 0, "n_inequalities": 0, "n_contacts": 0,
-        "build_time_s": step_time, "solve_time_s": 0.0, "solver_time_s": np.nan,
-        "step_time_s": step_time, "iterations": 0, "primal_residual": 0.0,
-        "dual_residual": 0.0, "complementarity": 0.0,
-        "rod_drift": rod_length_drift(model, state.points),
-        "penetration_m": deepest_penetration(model, state.points),
-        "kinetic_energy_J": kinetic, "potential_energy_J": potential,
-        "total_energy_J": kinetic + potential,
-    }
+    nothing_solved = StepSolution(
+        x=np.zeros(0), solver="", status=ASLEEP, residuals=Residuals(0.0, 0.0, 0.0),
+        verified=True, solve_wall_time=0.0, solver_time=np.nan, iterations=0)
+    return _metrics_row(model, state, 0, 0, 0, 0, step, dt, step_time, step_time,
+                        nothing_solved)
 
 
 def _metrics_row(model: Model, state: State, n_var: int, n_eq: int, n_in: int,
