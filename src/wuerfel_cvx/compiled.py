@@ -126,8 +126,6 @@ class CompiledQPCache:
     """Structures compiled so far."""
     reused: int = 0
     """Steps that re-solved an already compiled structure."""
-    declared_plain: int = 0
-    """Steps declared as a plain (unparametrised) problem."""
     _problems: OrderedDict[StructureKey, CompiledQP] = field(default_factory=OrderedDict,
                                                              repr=False)
     _sightings: dict[StructureKey, int] = field(default_factory=dict, repr=False)
@@ -145,7 +143,6 @@ class CompiledQPCache:
             self._sightings[key] = seen
             if len(self._sightings) > 16 * self.capacity:  # forget old one-off structures
                 self._sightings.clear()
-            self.declared_plain += 1
             return qp.declared()
         self._sightings.pop(key, None)
         compiled = CompiledQP.of(qp)

@@ -23,8 +23,10 @@ import pandas as pd
 from ..errors import StepFailure
 from ..formulations import StepQP
 from ..geometry import FloatArray
+from ..metrics import kinetic_energy, potential_energy
+from ..model import Model, State
 from ..peers import peer_version, simulate_peer
-from ..simulate import ASLEEP, simulate
+from ..simulate import ASLEEP, resolve_scene, simulate
 from ..sleep import SleepSettings
 from ..solve import StepSolution, solve_step_qp
 from ..solvers import SOLVERS
@@ -243,10 +245,6 @@ def _largest_distance(points: FloatArray, reference: FloatArray) -> float:
 
 
 def _initial_energy(trajectory: Trajectory) -> float:
-    from ..metrics import kinetic_energy, potential_energy
-    from ..model import Model, State
-    from ..simulate import resolve_scene
-
     scene = resolve_scene(str(trajectory.info["scene"]))
     model = Model.from_scene(scene, table_mass=trajectory.info.get("table_mass"),
                              extra_rod=bool(trajectory.info.get("extra_rod", False)))
@@ -260,8 +258,6 @@ def _write_series(trajectory: Trajectory, path: Path) -> None:
 
 
 def _n_squares(scene: str) -> int:
-    from ..simulate import resolve_scene
-
     return len(resolve_scene(scene).squares)
 
 

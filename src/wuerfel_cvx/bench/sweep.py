@@ -75,9 +75,8 @@ def run_sweep(suite: Suite, out: str | Path, *, jobs: int = 1, progress: bool | 
     failed = 0
     with tqdm(total=work, unit="step", disable=not show, desc=suite.name,
               dynamic_ncols=True) as bar:
-        for key, path in _run_all(_reference_tasks(references), jobs):
+        for key, _ in _run_all(_reference_tasks(references), jobs):
             bar.update(key_steps(key))
-            del path
         for point, row in _run_all(_point_tasks(todo, out), jobs):
             schema.append_row(results, row)
             failed += row["status"] != "ok"
