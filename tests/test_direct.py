@@ -9,7 +9,7 @@ from qp_bank import qp_bank
 from test_solver_agreement import AGREEMENT
 from wuerfel_cvx import simulate
 from wuerfel_cvx.compiled import CompiledQP, CompiledQPCache
-from wuerfel_cvx.direct import direct_clarabel, direct_osqp
+from wuerfel_cvx.direct import direct_clarabel, direct_osqp, direct_piqp
 from wuerfel_cvx.solve import VERIFY_FACTOR, solve_step_qp
 from wuerfel_cvx.solvers import SOLVERS, TOLERANCE_PRESETS
 
@@ -18,7 +18,7 @@ pytestmark = pytest.mark.filterwarnings(  # cvxpy reading its own sparse paramet
     "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")
 
 
-BUILDERS = {"OSQP": direct_osqp, "CLARABEL": direct_clarabel}
+BUILDERS = {"OSQP": direct_osqp, "PIQP": direct_piqp, "CLARABEL": direct_clarabel}
 
 
 @pytest.mark.parametrize("solver", list(BUILDERS))

@@ -17,7 +17,7 @@ A later step with the same structure only sets parameter values, and
 cvxpy re-solves through its cached parameter map without canonicalising again.  The model
 is the same cvxpy model; only its numbers change.
 
-For OSQP and CLARABEL a compiled structure is then solved on the direct path
+For OSQP, PIQP and CLARABEL a compiled structure is then solved on the direct path
 (:mod:`wuerfel_cvx.direct`): cvxpy's parameter map applied by hand and a persistent solver.
 
 A structure is compiled the second time it is seen (``compile_after=2``): a structure that
@@ -36,7 +36,7 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
-from .direct import DirectClarabel, DirectOSQP, direct_clarabel, direct_osqp
+from .direct import DirectSolver, direct_clarabel, direct_osqp, direct_piqp
 from .formulations.qp import DeclaredQP, StepQP
 
 StructureKey = tuple[int, bytes, tuple[int, int], bytes, bytes, tuple[int, int], bytes, bytes]
@@ -61,7 +61,7 @@ class CompiledQP:
     eq_rhs: cp.Parameter | None
     ineq_values: cp.Parameter | None
     ineq_rhs: cp.Parameter | None
-    direct: dict[str, DirectOSQP | DirectClarabel | None] = field(default_factory=dict)
+    direct: dict[str, DirectSolver | None] = field(default_factory=dict)
     """Per solver, the direct path for this structure once tried (see :mod:`wuerfel_cvx.direct`;
     ``None``: it does not apply)."""
 
@@ -153,13 +153,13 @@ class CompiledQPCache:
         return compiled.load(qp)
 
     def direct_solver(self, qp: StepQP, solver: str,
-                      options: dict[str, Any]) -> DirectOSQP | DirectClarabel | None:
-        """The direct path of ``solver`` (OSQP or CLARABEL) for ``qp``'s compiled structure.
+                      options: dict[str, Any]) -> DirectSolver | None:
+        """The direct path of ``solver`` (OSQP, PIQP or CLARABEL) for ``qp``'s compiled structure.
 
         ``None`` means: solve through cvxpy (not compiled yet, another solver, or the path
         does not apply).  A structure's path is set up with the options of its first use.
         """
-        builders = {"OSQP": direct_osqp, "CLARABEL": direct_clarabel}
+        builders = {"OSQP": direct_osqp, "PIQP": direct_piqp, "CLARABEL": direct_clarabel}
         key = structure_key(qp)
         compiled = self._problems.get(key)
         if compiled is None or solver not in builders:

@@ -10,18 +10,23 @@ the linear map from the parameter vector to the solver's data.  Each step then
 1. fills the parameter vector from the step QP's numbers (``sqrt(w) t``, the nonzeros of
    ``E`` and ``G`` in their canonical order, ``e``, ``h``),
 2. multiplies it by cvxpy's own reduced map, giving the nonzeros of the conic data,
-3. scatters them into the solver's data by index maps found once (OSQP: ``q``, ``l``,
-   ``u``, ``A``; Clarabel: ``q``, ``b``, ``A``), and
-4. updates a persistent ``osqp.OSQP`` or ``clarabel.DefaultSolver`` in place and solves.
+3. scatters them into the solver's data by index maps found once (OSQP and PIQP: cvxpy's
+   QP form ``A x = b``, ``F x <= g``, :class:`_QPForm`; Clarabel: ``q``, ``b``, ``A``), and
+4. updates a persistent ``osqp.OSQP``, ``piqp.SparseSolver`` or ``clarabel.DefaultSolver``
+   in place and solves.
 
 The model is the cvxpy one: no matrix is written by hand, only cvxpy's map is applied.
 The duals of our rows ``E x = e`` and ``G x >= h`` are read from the solver's by the row
 and coefficient each right-hand side takes in the conic data (:class:`ParameterMap`), so
 every step is checked by the same independent KKT residuals as any other solve.  The map
 uses cvxpy internals (the cached ``ParamConeProg`` and its reduced tensor);
-:func:`direct_osqp` and :func:`direct_clarabel` return ``None`` when they do not look as
-expected, and the caller falls back to
-``Problem.solve()``.  PIQP, PROXQP and SCS always go through ``Problem.solve()``.
+:func:`direct_osqp`, :func:`direct_piqp` and :func:`direct_clarabel` return ``None`` when
+they do not look as expected, and the caller falls back to ``Problem.solve()``.  PROXQP
+and SCS always go through ``Problem.solve()``.
+
+The solver time reported is the one cvxpy reports for the same solver: OSQP's and PIQP's
+``run_time`` (which on this path includes their update of the data; through cvxpy, their
+setup instead) and Clarabel's ``solve_time`` (the solve alone).
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ from .formulations.qp import StepQP
 from .geometry import FloatArray
 
 _NOT_OSQP_SETTINGS = {"warm_start"}
+_NOT_PIQP_SETTINGS = {"warm_start", "backend"}
 
 
 @dataclass(frozen=True)
@@ -101,20 +107,117 @@ class ParameterMap:
                                                       + qp.n_variables]
 
 
-@dataclass
-class DirectOSQP:
-    """A structure's parameter map and its persistent OSQP solver.
+@dataclass(frozen=True)
+class _Gather:
+    """Where the nonzeros of one of a solver's matrices come from in the conic data's.
 
-    OSQP takes cvxpy's rows as ``l <= [A_eq; -A_ineq] x <= u``; a multiplier ``y`` of a
-    row with coefficient ``c`` is ``-c y`` in our sign convention (both row kinds).
+    Built from the matrix's pattern with every entry a signed tag ``+-(k + 1)``: entry
+    ``k`` of the conic data's nonzeros, with that sign.
+    """
+
+    tags: sp.csc_array
+    index: np.ndarray
+    sign: FloatArray
+    matrix: sp.csc_matrix
+    """The pattern; :meth:`fill` overwrites its values."""
+
+    @classmethod
+    def of(cls, tags: sp.sparray) -> _Gather:
+        """The gather for a tagged matrix."""
+        tagged = sp.csc_array(tags)
+        tagged.sort_indices()
+        return cls(tags=tagged, index=np.abs(tagged.data).astype(np.int64) - 1,
+                   sign=np.sign(tagged.data),
+                   matrix=sp.csc_matrix(tagged, dtype=np.float64, copy=True))
+
+    def values(self, nonzeros: FloatArray) -> FloatArray:
+        """The matrix's nonzeros (CSC order) from the conic data's."""
+        return np.asarray(self.sign * nonzeros[self.index], dtype=np.float64)
+
+    def fill(self, nonzeros: FloatArray) -> sp.csc_matrix:
+        """The matrix with the values for ``nonzeros`` (the same object every call)."""
+        self.matrix.data[:] = self.values(nonzeros)
+        return self.matrix
+
+    def reproduces(self, reference: sp.sparray | sp.spmatrix, nonzeros: FloatArray) -> bool:
+        """Whether this gather gives cvxpy's own matrix ``reference`` (pattern and values)."""
+        matrix = sp.csc_array(reference)
+        matrix.sort_indices()
+        return bool(matrix.shape == self.tags.shape
+                    and np.array_equal(matrix.indptr, self.tags.indptr)
+                    and np.array_equal(matrix.indices, self.tags.indices)
+                    and np.allclose(self.values(nonzeros), matrix.data, rtol=0, atol=1e-12))
+
+
+@dataclass(frozen=True)
+class _QPForm:
+    """cvxpy's QP form of a structure (as given to OSQP and PIQP), read off its conic data.
+
+    cvxpy's QP solvers take ``min 1/2 x' P x + q' x`` s.t. ``A x = b``, ``F x <= g`` with
+    ``A = A_cone[eq]``, ``b = -b_cone[eq]``, ``F = -A_cone[ineq]``, ``g = b_cone[ineq]``
+    (the equality rows come first in the conic data).  ``P`` does not depend on the
+    parameters (the weights are part of the structure).
     """
 
     mapping: ParameterMap
-    ax_index: np.ndarray
-    ax_sign: FloatArray
+    n_eq: int
     b_index: np.ndarray
     has_b: np.ndarray
-    n_eq_rows: int
+    eq: _Gather
+    """``A`` from the conic data's nonzeros."""
+    ineq: _Gather
+    """``F`` from the conic data's nonzeros."""
+
+    def rhs(self, nonzeros: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``b`` and ``g`` from the conic data's nonzeros."""
+        b_cone = np.where(self.has_b, nonzeros[self.b_index], 0.0)
+        return -b_cone[:self.n_eq], b_cone[self.n_eq:]
+
+    def duals(self, eq_multiplier: FloatArray,
+              ineq_multiplier: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Our duals from the multipliers ``y`` of ``A x = b`` and ``z`` of ``F x <= g``.
+
+        With the Lagrangian ``P x + q + A' y + F' z = 0`` (OSQP's and PIQP's), the
+        multiplier of a row with coefficient ``c`` is ``-c`` times it in our convention.
+        """
+        m = self.mapping
+        return (-m.eq_coefficient * eq_multiplier[m.eq_rows],
+                -m.ineq_coefficient * ineq_multiplier[m.ineq_rows - self.n_eq])
+
+    @classmethod
+    def of(cls, problem: cp.Problem, names: dict[int, str], qp: StepQP,
+           solver: str) -> tuple[_QPForm, dict[str, Any]] | None:
+        """Compile ``problem`` for ``solver``; ``None`` unless the maps reproduce its data."""
+        built = _parameter_map(problem, names, qp, solver)
+        if built is None:
+            return None
+        mapping, data = built
+        n_eq = int(data["n_eq"])
+        tags = sp.csc_array((np.arange(1.0, len(mapping.indices) + 1), mapping.indices,
+                             mapping.indptr), shape=mapping.shape)
+        b_tags = tags[:, [-1]].toarray().ravel()
+        form = cls(mapping=mapping, n_eq=n_eq, b_index=np.abs(b_tags).astype(np.int64) - 1,
+                   has_b=b_tags != 0, eq=_Gather.of(tags[:, :-1][:n_eq]),
+                   ineq=_Gather.of(-tags[:, :-1][n_eq:]))
+        values, _ = mapping.values(qp)  # must reproduce the data cvxpy just formatted
+        b, g = form.rhs(values)
+        if not (form.eq.reproduces(data["A"], values) and form.ineq.reproduces(data["F"], values)
+                and np.allclose(b, data["b"], rtol=0, atol=1e-12)
+                and np.allclose(g, data["G"], rtol=0, atol=1e-12)):
+            return None
+        return form, data
+
+
+@dataclass
+class DirectOSQP:
+    """A structure's QP form and its persistent OSQP solver.
+
+    OSQP takes cvxpy's QP form as ``l <= [A; F] x <= u``.
+    """
+
+    form: _QPForm
+    stacked: _Gather
+    """``[A; F]`` from the conic data's nonzeros."""
     solver: Any
     settings: dict[str, Any]
 
@@ -122,23 +225,62 @@ class DirectOSQP:
         """Solve ``qp`` (this structure) with OSQP ``settings``."""
         from cvxpy.reductions.solvers.qp_solvers.osqp_qpif import OSQP as CvxpyOSQP
 
-        values, q = self.mapping.values(qp)
-        b_cone = np.where(self.has_b, values[self.b_index], 0.0)
-        n_eq = self.n_eq_rows
-        lower = np.concatenate([-b_cone[:n_eq], np.full(b_cone.shape[0] - n_eq, -np.inf)])
-        upper = np.concatenate([-b_cone[:n_eq], b_cone[n_eq:]])
+        values, q = self.form.mapping.values(qp)
+        b, g = self.form.rhs(values)
+        lower = np.concatenate([b, np.full(g.shape[0], -np.inf)])
+        upper = np.concatenate([b, g])
         osqp_settings = _osqp_settings(settings)
         if osqp_settings != self.settings:
             self.solver.update_settings(**osqp_settings)
             self.settings = osqp_settings
-        self.solver.update(q=q, l=lower, u=upper, Ax=self.ax_sign * values[self.ax_index])
+        self.solver.update(q=q, l=lower, u=upper, Ax=self.stacked.values(values))
         result = self.solver.solve(raise_error=False)
         y = np.asarray(result.y, dtype=np.float64)
-        m = self.mapping
+        eq_dual, ineq_dual = self.form.duals(y[:self.form.n_eq], y[self.form.n_eq:])
         return DirectResult(
-            x=m.primal(result.x, qp), eq_dual=-m.eq_coefficient * y[m.eq_rows],
-            ineq_dual=-m.ineq_coefficient * y[m.ineq_rows],
+            x=self.form.mapping.primal(result.x, qp), eq_dual=eq_dual, ineq_dual=ineq_dual,
             status=str(CvxpyOSQP.STATUS_MAP.get(result.info.status_val, cp.SOLVER_ERROR)),
+            solver_time=float(result.info.run_time), iterations=int(result.info.iter))
+
+
+@dataclass
+class DirectPIQP:
+    """A structure's QP form and its persistent PIQP (sparse) solver.
+
+    PIQP takes cvxpy's QP form as ``A x = b``, ``F x <= h_u`` (no lower bound, as cvxpy
+    passes it).  Its ``run_time``, the time cvxpy reports for PIQP, is the update of the
+    data plus the solve here (setup plus solve on a fresh solver); PIQP has no warm start.
+    """
+
+    form: _QPForm
+    solver: Any
+    settings: dict[str, Any]
+
+    def solve(self, qp: StepQP, settings: dict[str, Any]) -> DirectResult:
+        """Solve ``qp`` (this structure) with PIQP ``settings``."""
+        from cvxpy.reductions.solvers.qp_solvers.piqp_qpif import PIQP as CvxpyPIQP
+
+        form = self.form
+        values, q = form.mapping.values(qp)
+        b, g = form.rhs(values)
+        piqp_settings = _piqp_settings(settings)
+        if piqp_settings != self.settings:
+            _apply_piqp_settings(self.solver, piqp_settings)
+            self.settings = piqp_settings
+        data: dict[str, Any] = {"c": q}
+        if b.size:
+            data |= {"A": form.eq.fill(values), "b": b}
+        if g.size:
+            data |= {"G": form.ineq.fill(values), "h_u": g}
+        self.solver.update(**data)
+        self.solver.solve()
+        result = self.solver.result  # its arrays are views the next solve overwrites
+        eq_dual, ineq_dual = form.duals(np.array(result.y, dtype=np.float64),
+                                        np.array(result.z_u, dtype=np.float64))
+        return DirectResult(
+            x=np.array(form.mapping.primal(result.x, qp)), eq_dual=eq_dual,
+            ineq_dual=ineq_dual,
+            status=str(CvxpyPIQP.STATUS_MAP.get(result.info.status.name, cp.SOLVER_ERROR)),
             solver_time=float(result.info.run_time), iterations=int(result.info.iter))
 
 
@@ -176,6 +318,10 @@ class DirectClarabel:
             solver_time=float(result.solve_time), iterations=int(result.iterations))
 
 
+DirectSolver = DirectOSQP | DirectPIQP | DirectClarabel
+"""A structure's direct path for one solver."""
+
+
 def direct_osqp(problem: cp.Problem, names: dict[int, str], qp: StepQP,
                 options: dict[str, Any]) -> DirectOSQP | None:
     """Set up the direct OSQP path for a compiled ``problem`` whose parameters hold ``qp``.
@@ -199,6 +345,15 @@ def direct_clarabel(problem: cp.Problem, names: dict[int, str], qp: StepQP,
         return None
 
 
+def direct_piqp(problem: cp.Problem, names: dict[int, str], qp: StepQP,
+                options: dict[str, Any]) -> DirectPIQP | None:
+    """As :func:`direct_osqp`, for PIQP's sparse backend; ``None`` if the path does not apply."""
+    try:
+        return _build_piqp(problem, names, qp, options)
+    except Exception:  # any surprise in cvxpy's internals: use the public path instead
+        return None
+
+
 def _osqp_settings(options: dict[str, Any]) -> dict[str, Any]:
     settings = {key: value for key, value in options.items() if key not in _NOT_OSQP_SETTINGS}
     settings["warm_starting"] = bool(options.get("warm_start", True))
@@ -210,37 +365,53 @@ def _build_osqp(problem: cp.Problem, names: dict[int, str], qp: StepQP,
                 options: dict[str, Any]) -> DirectOSQP | None:
     import osqp
 
-    built = _parameter_map(problem, names, qp, cp.OSQP)
+    built = _QPForm.of(problem, names, qp, cp.OSQP)
     if built is None:
         return None
-    mapping, data = built
-    # OSQP's A stacks cvxpy's equality rows A and inequality rows F = -A_ineq; tag every
-    # nonzero of the conic data to find where it lands.
-    n_eq = int(data["n_eq"])
-    tags = sp.csc_array((np.arange(1.0, len(mapping.indices) + 1), mapping.indices,
-                         mapping.indptr), shape=mapping.shape)
-    stacked = sp.vstack([tags[:, :-1][:n_eq], -tags[:, :-1][n_eq:]]).tocsc()
-    stacked.sort_indices()
-    reference = sp.vstack([data["A"], data["F"]]).tocsc()
+    form, data = built
+    stacked = _Gather.of(sp.vstack([form.eq.tags, form.ineq.tags]))
+    reference = sp.csc_array(sp.vstack([data["A"], data["F"]]))
     reference.sort_indices()
-    if not (np.array_equal(reference.indptr, stacked.indptr)
-            and np.array_equal(reference.indices, stacked.indices)):
+    if not stacked.reproduces(reference, form.mapping.values(qp)[0]):
         return None
-    b_tags = tags[:, [-1]].toarray().ravel()
     settings = _osqp_settings(options)
-    direct = DirectOSQP(mapping=mapping, ax_index=np.abs(stacked.data).astype(np.int64) - 1,
-                        ax_sign=np.sign(stacked.data),
-                        b_index=np.abs(b_tags).astype(np.int64) - 1, has_b=b_tags != 0,
-                        n_eq_rows=n_eq, solver=osqp.OSQP(), settings=settings)
-    values, _ = mapping.values(qp)  # must reproduce the data cvxpy just formatted
-    if not np.allclose(direct.ax_sign * values[direct.ax_index], reference.data, rtol=0,
-                       atol=1e-12):
-        return None
+    direct = DirectOSQP(form=form, stacked=stacked, solver=osqp.OSQP(), settings=settings)
     direct.solver.setup(P=sp.csc_matrix(sp.triu(data["P"], format="csc")), q=data["q"],
                         A=sp.csc_matrix(reference),
                         l=np.concatenate([data["b"], np.full(data["G"].shape[0], -np.inf)]),
                         u=np.concatenate([data["b"], data["G"]]), **settings)
     return direct
+
+
+def _piqp_settings(options: dict[str, Any]) -> dict[str, Any]:
+    settings = {key: value for key, value in options.items() if key not in _NOT_PIQP_SETTINGS}
+    settings["verbose"] = False
+    return settings
+
+
+def _apply_piqp_settings(solver: Any, settings: dict[str, Any]) -> None:
+    """Set PIQP's settings as cvxpy does (attribute by attribute)."""
+    for name, value in settings.items():
+        setattr(solver.settings, name, value)
+
+
+def _build_piqp(problem: cp.Problem, names: dict[int, str], qp: StepQP,
+                options: dict[str, Any]) -> DirectPIQP | None:
+    import piqp
+
+    if options.get("backend", "sparse") != "sparse":
+        return None
+    built = _QPForm.of(problem, names, qp, cp.PIQP)
+    if built is None:
+        return None
+    form, data = built
+    settings = _piqp_settings(options)
+    solver = piqp.SparseSolver()
+    _apply_piqp_settings(solver, settings)
+    values, _ = form.mapping.values(qp)  # A and F in the (sorted) patterns updates will use
+    solver.setup(P=sp.csc_matrix(data["P"]), c=data["q"], A=form.eq.fill(values).copy(),
+                 b=data["b"], G=form.ineq.fill(values).copy(), h_u=data["G"])
+    return DirectPIQP(form=form, solver=solver, settings=settings)
 
 
 def _build_clarabel(problem: cp.Problem, names: dict[int, str], qp: StepQP,
