@@ -1,6 +1,9 @@
-"""The direct OSQP path: cvxpy's parameter map applied by hand, a persistent solver."""
+"""The direct path (OSQP, PIQP, Clarabel): cvxpy's parameter map, a persistent solver."""
 
 from __future__ import annotations
+
+import dataclasses
+from typing import Any
 
 import numpy as np
 import pytest
@@ -9,7 +12,15 @@ from qp_bank import qp_bank
 from test_solver_agreement import AGREEMENT
 from wuerfel_cvx import simulate
 from wuerfel_cvx.compiled import CompiledQP, CompiledQPCache
-from wuerfel_cvx.direct import direct_clarabel, direct_osqp, direct_piqp
+from wuerfel_cvx.direct import (
+    DirectClarabel,
+    DirectOSQP,
+    DirectPIQP,
+    direct_clarabel,
+    direct_osqp,
+    direct_piqp,
+)
+from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.solve import VERIFY_FACTOR, solve_step_qp
 from wuerfel_cvx.solvers import SOLVERS, TOLERANCE_PRESETS
 
@@ -74,5 +85,60 @@ def test_simulation_on_the_direct_path_equals_the_fresh_one(solver: str) -> None
     fresh = simulate("tilted-drop", steps=steps, solver=solver, tol="high", compiled=False)
     assert direct.info["steps_reusing_a_compiled_structure"] > steps // 2
     assert direct.metrics["verified"].all()
+    # Each step's velocities agree within AGREEMENT (m/s, from the "high" tolerance), and
+    # a step of 0.01 s moves the points by 0.01 s times them: after ``steps`` steps the
+    # points may differ by ``steps * 0.01 s * AGREEMENT``.
     np.testing.assert_allclose(direct.points, fresh.points, rtol=0,
                                atol=steps * 0.01 * AGREEMENT)
+
+
+DIRECT_CLASSES = {"OSQP": DirectOSQP, "PIQP": DirectPIQP, "CLARABEL": DirectClarabel}
+
+
+@pytest.mark.parametrize("solver", list(DIRECT_CLASSES))
+def test_direct_path_raising_becomes_a_step_failure(solver: str,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    def explode(self: Any, *args: Any, **kwargs: Any) -> Any:
+        raise RuntimeError("direct solver exploded")
+
+    monkeypatch.setattr(DIRECT_CLASSES[solver], "solve", explode)
+    with pytest.raises(StepFailure) as caught:
+        simulate("stack-3", steps=5, solver=solver)
+    # Step 1 is declared plainly, step 2 compiles the structure, step 3 is the first on
+    # the direct path.
+    assert (caught.value.step, caught.value.solver, caught.value.status) == (
+        3, solver, "exception")
+    assert "direct solver exploded" in caught.value.detail
+
+
+def test_piqp_direct_path_takes_new_settings_and_reports_its_status(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    cache = CompiledQPCache(compile_after=1)
+    entry = qp_bank()[0]
+    solve_step_qp(entry.build(), "PIQP", "high", cache=cache)  # compiles, through cvxpy
+    assert solve_step_qp(entry.build(), "PIQP", "high", cache=cache).verified  # direct
+    spec = SOLVERS["PIQP"]
+    starved = dataclasses.replace(spec, options=lambda eps: {**spec.options(eps), "max_iter": 1})
+    monkeypatch.setitem(SOLVERS, "PIQP", starved)
+    with pytest.raises(StepFailure) as caught:
+        solve_step_qp(entry.build(), "PIQP", "high", step=7, cache=cache)
+    assert cache.direct_solver(entry.build(), "PIQP", starved.options(HIGH)) is not None
+    # One interior-point iteration cannot reach 1e-9: PIQP stops at its iteration limit.
+    assert (caught.value.step, caught.value.solver, caught.value.status) == (
+        7, "PIQP", "user_limit")
+
+
+def test_piqp_direct_results_are_not_overwritten_by_the_next_solve() -> None:
+    # PIQP's result arrays are views of the solver's memory, which its next solve reuses.
+    options = SOLVERS["PIQP"].options(HIGH)
+    qp = next(e.build() for e in qp_bank() if e.build().n_inequalities)
+    compiled = CompiledQP.of(qp)
+    direct = direct_piqp(compiled.load(qp).problem, compiled.parameter_names(), qp, options)
+    assert direct is not None
+    first = direct.solve(qp, options)
+    kept = (first.x.copy(), first.eq_dual.copy(), first.ineq_dual.copy())
+    moved = dataclasses.replace(qp, target=qp.target + 0.5, _declared=None)
+    second = direct.solve(moved, options)
+    assert np.max(np.abs(second.x - first.x)) > 0.1  # a different solution...
+    for before, after in zip(kept, (first.x, first.eq_dual, first.ineq_dual), strict=True):
+        np.testing.assert_array_equal(before, after)  # ...and the first one intact
