@@ -102,7 +102,7 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     started = time.perf_counter()
     direct = cache.direct_solver(qp, spec.name, options) if cache is not None else None
     try:
-        if direct is not None:  # warm-started from the structure's last solution
+        if direct is not None:  # OSQP warm-starts from the structure's last solution
             raw = direct.solve(qp, options)
             answer = _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.solver_time,
                              raw.iterations)
