@@ -129,6 +129,7 @@ def run_variants(scene: Scene | str | Path, variants: Sequence[Variant], dt: flo
     step_tables = [_step_table(run) for run in runs]
     summary = pd.DataFrame([_summary_row(run, reference_points) for run in runs],
                            columns=list(SUMMARY_COLUMNS))
+    summary["failed_step"] = summary["failed_step"].astype("Int64")  # <NA>: no failure
     steps_table = pd.concat(step_tables, ignore_index=True) if step_tables else pd.DataFrame(
         columns=list(STEP_COLUMNS))
     return steps_table, summary
