@@ -7,6 +7,7 @@ import pytest
 import scipy.sparse as sp
 
 from wuerfel_cvx.contacts import Contacts
+from wuerfel_cvx.errors import InputError
 from wuerfel_cvx.formulations import declare_qp
 from wuerfel_cvx.solve import VERIFY_FACTOR
 from wuerfel_cvx.solvers import TOLERANCE_PRESETS
@@ -69,9 +70,9 @@ def test_a_failing_variant_is_a_row_with_its_step_and_status() -> None:
 
 
 def test_bad_labels_are_refused() -> None:
-    with pytest.raises(ValueError, match="unique"):
+    with pytest.raises(InputError, match="unique"):
         run_variants("single-drop", [Variant("a"), Variant("a")], steps=1)
-    with pytest.raises(ValueError, match="reference"):
+    with pytest.raises(InputError, match="reference"):
         run_variants("single-drop", [Variant("a")], steps=1, reference="b")
 
 

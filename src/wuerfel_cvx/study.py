@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .errors import StepFailure
+from .errors import InputError, StepFailure
 from .formulations import StepQP
 from .metrics import kinetic_energy, potential_energy
 from .model import Model, State
@@ -119,9 +119,9 @@ def run_variants(scene: Scene | str | Path, variants: Sequence[Variant], dt: flo
     """
     labels = [variant.label for variant in variants]
     if len(set(labels)) != len(labels):
-        raise ValueError(f"variant labels must be unique, got {labels}")
+        raise InputError(f"variant labels must be unique, got {labels}", field="variants")
     if reference is not None and reference not in labels:
-        raise ValueError(f"reference '{reference}' is not one of {labels}")
+        raise InputError(f"reference '{reference}' is not one of {labels}", field="reference")
     scene = resolve_scene(scene)
     runs = [run_variant(scene, variant, dt, steps) for variant in variants]
     reference_points = (runs[labels.index(reference)].trajectory.points
