@@ -88,6 +88,9 @@ def test_resolve_steps_agrees_on_an_aligned_stack_with_redundant_contacts() -> N
     trajectory, recorded = record_step_qps("stack-3", "velocity", 0.01, 6, every=2,
                                            min_contacts=1)
     assert [step for step, _, _ in recorded] == [2, 4, 6]
+    for _, qp, reference in recorded:  # the kept multipliers: one per side row, z >= 0
+        assert reference.ineq_dual.shape == (qp.n_inequalities,)
+        assert np.all(reference.ineq_dual >= -1e-9)  # interior-point iterates, tol 1e-9
     assert trajectory.n_steps == 6
     table = resolve_steps(recorded, ["CLARABEL", "OSQP"], ["high"])
     assert list(table.columns) == list(RESOLVE_COLUMNS)

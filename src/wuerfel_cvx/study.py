@@ -193,9 +193,9 @@ is ``max |z - z_ref|`` of the side multipliers, one per contact row, and
 the objective ``sum w (x - t)^2``, ``z/2`` is a contact impulse (N s) in ``velocity`` and a
 force (N) in ``seed``.  ``redundant_rows`` counts the linearly dependent rows among the
 equalities and the sides active in the reference (see :func:`redundant_active_rows`).
-``G^T z`` is unique (the QP is strongly convex), while ``z`` is not
-when contact rows are linearly dependent (redundant contacts): there solvers may agree on
-``x`` and ``G^T z`` and split ``z`` differently.  NaN for a failed solve, whose ``status``
+``x`` is unique (the QP is strongly convex), and so is ``G^T z - E^T y = 2 W (x - t)``;
+``z`` is not when rows are linearly dependent (redundant contacts): there solvers may
+agree on ``x`` and split ``z`` differently.  NaN for a failed solve, whose ``status``
 then names the failure.
 """
 
