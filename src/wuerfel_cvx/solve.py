@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cvxpy as cp
 import numpy as np
@@ -61,6 +61,8 @@ class StepSolution:
     solver_time: float
     """Time the solver itself reports (s); NaN if it reports none."""
     iterations: int
+    ineq_dual: FloatArray = field(default_factory=lambda: np.zeros(0))
+    """Multipliers z >= 0 of ``G x >= h`` (cvxpy's sign): ``2 W (x - t) = G^T z - E^T y``."""
 
 
 def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
@@ -130,7 +132,8 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
         solver_time = np.nan
     return StepSolution(x=x, solver=spec.name, status=status, residuals=residuals,
                         verified=verified, solve_wall_time=wall, solver_time=float(solver_time),
-                        iterations=int(answer.iterations))
+                        iterations=int(answer.iterations),
+                        ineq_dual=np.asarray(answer.ineq_dual, dtype=np.float64))
 
 
 @dataclass(frozen=True)

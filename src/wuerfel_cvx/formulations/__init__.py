@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import partial
+
 from ..errors import InputError
 from .base import Formulation
 from .qp import StepQP, declare_qp
@@ -9,13 +12,18 @@ from .rigid import RigidFormulation
 from .seed import SeedFormulation
 from .velocity import VelocityFormulation, rigid_step
 
-FORMULATIONS: dict[str, type[SeedFormulation] | type[VelocityFormulation]
-                   | type[RigidFormulation]] = {
+SEED_BAUMGARTE_RATE = 20.0
+"""Baumgarte rate alpha (1/s) of ``seed-baumgarte``: time constant 50 ms, alpha dt = 0.2
+at dt = 0.01 s (the discrete feedback is stable for alpha dt < 1)."""
+
+FORMULATIONS: dict[str, Callable[[], Formulation]] = {
     "velocity": VelocityFormulation,
     "seed": SeedFormulation,
     "rigid": RigidFormulation,
+    "seed-baumgarte": partial(SeedFormulation, name="seed-baumgarte",
+                              baumgarte_rate=SEED_BAUMGARTE_RATE),
 }
-"""Registry of formulation names (the first is the default)."""
+"""Registry of formulation names (the first is the default) and their factories."""
 
 
 def get_formulation(name: str | Formulation) -> Formulation:
@@ -26,10 +34,10 @@ def get_formulation(name: str | Formulation) -> Formulation:
     if key not in FORMULATIONS:
         raise InputError(f"unknown formulation '{name}' (available: {', '.join(FORMULATIONS)})",
                          field="formulation")
-    formulation: Formulation = FORMULATIONS[key]()
-    return formulation
+    return FORMULATIONS[key]()
 
 
-__all__ = ["FORMULATIONS", "Formulation", "RigidFormulation", "SeedFormulation", "StepQP",
+__all__ = ["FORMULATIONS", "SEED_BAUMGARTE_RATE", "Formulation", "RigidFormulation",
+           "SeedFormulation", "StepQP",
            "VelocityFormulation",
            "declare_qp", "get_formulation", "rigid_step"]
