@@ -172,7 +172,7 @@ def draw_frame(trajectory: Trajectory, index: int, ax: Axes | None = None, *,
     ax.add_collection(tables)
     ax.add_collection(squares)
     contacts = ax.scatter(np.zeros(0), np.zeros(0), s=14, color="#d62728", zorder=3,
-                          label=f"contact (within {1e3 * margin:g} mm)")
+                          label=f"contact (< {1e3 * margin:g} mm)")
     label = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", ha="left",
                     family="monospace", fontsize=9)
     ax.set_xlim(*xlim)
@@ -181,7 +181,8 @@ def draw_frame(trajectory: Trajectory, index: int, ax: Axes | None = None, *,
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title(str(trajectory.info.get("scene", "")))
-    ax.legend(loc="upper right", fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=3, fontsize=7,
+              frameon=False, handlelength=1.2, columnspacing=1.0)
     frame = Frame(ax, squares, tables, contacts, label, model, trajectory, margin)
     frame.show(index)
     return frame
