@@ -156,6 +156,7 @@ def draw_frame(trajectory: Trajectory, index: int, ax: Axes | None = None, *,
     """
     import matplotlib.pyplot as plt
     from matplotlib.collections import PolyCollection
+    from matplotlib.transforms import ScaledTranslation
 
     if not 0 <= index <= trajectory.n_steps:
         raise InputError(f"state {index} is outside 0..{trajectory.n_steps}", field="index")
@@ -181,8 +182,10 @@ def draw_frame(trajectory: Trajectory, index: int, ax: Axes | None = None, *,
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title(str(trajectory.info.get("scene", "")))
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=3, fontsize=7,
-              frameon=False, handlelength=1.2, columnspacing=1.0)
+    # Below the x label: a fixed 30 points under the axes, whatever the figure's size.
+    below_label = ax.transAxes + ScaledTranslation(0.0, -30 / 72, ax.figure.dpi_scale_trans)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below_label,
+              ncol=3, fontsize=7, frameon=False, handlelength=1.2, columnspacing=1.0)
     frame = Frame(ax, squares, tables, contacts, label, model, trajectory, margin)
     frame.show(index)
     return frame
