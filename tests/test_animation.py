@@ -158,3 +158,15 @@ def test_cli_rejects_a_bad_suffix_before_simulating(tmp_path: Path,
     assert status == 2
     assert "unsupported animation format '.txt'" in captured.err
     assert captured.out == ""  # no summary: the run never started
+
+
+def _ffmpeg_available() -> bool:
+    from matplotlib import animation
+
+    return bool(animation.writers.is_available("ffmpeg"))
+
+
+@pytest.mark.skipif(not _ffmpeg_available(), reason="ffmpeg is not installed")
+def test_mp4_is_written_where_ffmpeg_exists(falling: Trajectory, tmp_path: Path) -> None:
+    path = falling.animate(tmp_path / "drop.mp4", dpi=30, figsize=(3.0, 2.5))
+    assert path.read_bytes()[4:8] == b"ftyp"  # the MP4 container's first box
