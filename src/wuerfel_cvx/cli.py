@@ -49,6 +49,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write the trajectory (.npz) and metrics (.metrics.csv) here")
     run.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                      help="progress bar (default: on when standard error is a terminal)")
+    run.add_argument("--animate", default=None, metavar="PATH",
+                     help="write an animation here (.gif; .mp4 needs ffmpeg)")
+    run.add_argument("--fps", type=float, default=25.0,
+                     help="animation frames per simulated second (default 25)")
 
     bench = commands.add_parser("bench", help="run a benchmark suite (rows append; resumes)")
     bench.add_argument("--suite", required=True,
@@ -99,6 +103,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _simulate(args: argparse.Namespace) -> int:
     progress = sys.stderr.isatty() if args.progress is None else args.progress
+    if args.animate:  # a bad suffix or a missing ffmpeg is reported before the run
+        from .animation import animation_writer
+
+        animation_writer(args.animate)
     try:
         trajectory = simulate(args.scene, dt=args.dt, steps=args.steps, solver=args.solver,
                               formulation=args.formulation, tol=args.tol,
@@ -115,6 +123,8 @@ def _simulate(args: argparse.Namespace) -> int:
     if args.out:
         path = _save(trajectory, args.out)
         print(f"saved {path} and {trajectory.metrics_path(path)}")
+    if args.animate:
+        print(f"wrote {trajectory.animate(args.animate, fps=args.fps)}")
     return 0
 
 

@@ -5,12 +5,15 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 
 from .geometry import FloatArray
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 
 @dataclass
@@ -67,6 +70,26 @@ class Trajectory:
                    velocities=arrays["velocities"], metrics=metrics,
                    table_points=arrays.get("table_points", np.zeros((0, 2))),
                    info=json.loads(str(arrays["info"])) if "info" in arrays else {})
+
+    def plot(self, t: float, ax: Axes | None = None) -> Axes:
+        """Draw the stored state nearest to time ``t`` (s) (:func:`wuerfel_cvx.animation.plot`).
+
+        Squares as polygons, tables filled, touching corners marked; returns the Axes.
+        """
+        from .animation import plot
+
+        return plot(self, t, ax)
+
+    def animate(self, path: str | Path, *, fps: float = 25.0, max_frames: int = 300,
+                dpi: float = 80.0, figsize: tuple[float, float] = (6.0, 4.5)) -> Path:
+        """Write an animation: ``.gif`` (Pillow) or ``.mp4`` (needs ffmpeg); returns the path.
+
+        ``fps`` frames per simulated second, at most ``max_frames`` frames
+        (:func:`wuerfel_cvx.animation.animate`).
+        """
+        from .animation import animate
+
+        return animate(self, path, fps=fps, max_frames=max_frames, dpi=dpi, figsize=figsize)
 
     def summary(self) -> str:
         """A few lines on the run: duration, extremes of the metrics, timing."""
