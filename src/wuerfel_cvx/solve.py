@@ -184,7 +184,8 @@ def _dual(constraint: cp.Constraint | None, size: int) -> FloatArray:
 def _transposed_product(matrix: sp.csr_array, vector: FloatArray) -> FloatArray:
     """``matrix.T @ vector`` for a CSR matrix, without building the transpose."""
     per_entry = matrix.data * np.repeat(vector, np.diff(matrix.indptr))
-    return np.bincount(matrix.indices, weights=per_entry, minlength=matrix.shape[1])
+    return np.asarray(np.bincount(matrix.indices, weights=per_entry, minlength=matrix.shape[1]),
+                      dtype=np.float64)
 
 
 def _inf(values: FloatArray) -> float:
