@@ -48,6 +48,23 @@ def island_labels(n_squares: int, contacts: Contacts) -> IntArray:
     return np.asarray(labels, dtype=np.int64)
 
 
+def island_members(labels: IntArray, awake: np.ndarray | None = None) -> list[IntArray]:
+    """The squares of each island (ascending), islands ordered by their first square.
+
+    ``labels`` ``(n,)`` from :func:`island_labels`; with ``awake`` (boolean ``(n,)``) only
+    the islands of awake squares.
+    """
+    squares = np.arange(labels.size) if awake is None else np.flatnonzero(awake)
+    if squares.size == 0:
+        return []
+    order = np.argsort(labels[squares], kind="stable")  # ascending squares within an island
+    grouped = squares[order]
+    cuts = np.flatnonzero(np.diff(labels[grouped])) + 1
+    members = np.split(grouped, cuts)
+    members.sort(key=lambda island: int(island[0]))
+    return members
+
+
 @dataclass
 class SleepTracker:
     """Per-square stillness over time, and which squares sleep at a step."""
@@ -66,7 +83,10 @@ class SleepTracker:
         ``contacts`` are the step's contacts (with the step's reach), so an awake square
         near a sleeping island joins it and wakes it.
         """
-        labels = island_labels(self.n_squares, contacts)
+        return self.asleep_islands(island_labels(self.n_squares, contacts))
+
+    def asleep_islands(self, labels: IntArray) -> np.ndarray:
+        """As :meth:`asleep`, from the island index of each square ``(n,)``."""
         least_still = np.full(labels.max(initial=-1) + 1, np.inf)
         np.minimum.at(least_still, labels, self.still_for)
         return np.asarray(least_still[labels] >= self.settings.time)

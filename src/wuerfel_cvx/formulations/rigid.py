@@ -41,6 +41,11 @@ class RigidFormulation:
     """Distance (m) within which a point-edge pair is always constrained."""
     name: str = "rigid"
 
+    def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
+        """Contact reach (m) per body, as in the velocity formulation."""
+        velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin)
+        return velocity.body_reach(model, state, dt)
+
     def build(self, model: Model, state: State, dt: float) -> StepQP:
         """The step QP in the squares' new centre and angular velocities."""
         if model.table_mass is not None:
