@@ -131,6 +131,12 @@ def choose_edges(distances: FloatArray) -> IntArray:
     return np.asarray(np.argmax(score, axis=1), dtype=np.int64)
 
 
+_last_search: tuple[Model, bytes, bytes, Contacts] | None = None
+"""The last search's model, points and reach (as bytes) and contacts: a step that searches
+twice with the same inputs (islands for sleep, then the QP's rows) searches once.  One
+tuple, replaced whole, so that a reader never sees a mix of two searches."""
+
+
 def find_contacts(
     model: Model, points: FloatArray, margin: FloatArray | float
 ) -> Contacts:
@@ -139,10 +145,27 @@ def find_contacts(
     ``margin`` is a scalar or one value per body ``(n_bodies,)``; a pair uses the sum
     of its two bodies' values.  Returns one row per point that is within reach of a
     foreign body, with the edge chosen by the rule in the module docstring; rows are
-    ordered by pair (as from :func:`body_pairs`), then by corner.
+    ordered by pair (as from :func:`body_pairs`), then by corner.  A call with the same
+    model object and bit-identical points and margin as the last one returns its result
+    (the search is a pure function of them).
     """
-    all_points = model.all_points(points)
     reach = np.broadcast_to(np.asarray(margin, dtype=np.float64), (model.n_bodies,))
+    global _last_search
+    key_points = np.ascontiguousarray(points, dtype=np.float64).tobytes()
+    key_reach = np.ascontiguousarray(reach).tobytes()
+    last = _last_search
+    if (last is not None and last[0] is model and last[1] == key_points
+            and last[2] == key_reach):
+        return last[3]
+    contacts = _search(model, points, reach)
+    for name in ("point", "edge_i", "edge_j", "point_body", "edge_body", "distance"):
+        getattr(contacts, name).flags.writeable = False  # shared with the next caller
+    _last_search = (model, key_points, key_reach, contacts)
+    return contacts
+
+
+def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
+    all_points = model.all_points(points)
     pairs = body_pairs(model, all_points, reach)
     if len(pairs) == 0:
         return Contacts.empty()
