@@ -37,7 +37,9 @@ METRIC_COLUMNS = (
 
 ``build_time_s`` is the QP's construction, ``solve_time_s`` the wall time of the solve call
 (cvxpy's compilation included), ``solver_time_s`` the solver's own reported time, and
-``step_time_s`` the whole step: build, solve, check and advance (all in s).
+``step_time_s`` the whole step: islands and sleep if on, build, solve, check and advance
+(all in s).  The row's own diagnostics (rod drift, penetration, energies) are measured
+after ``step_time_s`` and are not part of it.
 """
 
 ASLEEP = "asleep"
