@@ -114,3 +114,35 @@ def test_heavy_table_variant_holds_the_table_and_matches_the_fixed_one() -> None
     # the solver's error grows with it: the seed's "largest mass" is a numerical hazard.
     assert errors[0] < 1e-7  # m, a light table: as good as a fixed one
     assert errors[1] > 100 * errors[0]
+
+
+def test_a_repeated_search_with_the_same_inputs_is_answered_once(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from wuerfel_cvx import contacts as module
+
+    searches = []
+    real_search = module._search
+
+    def counting(model: Model, points: np.ndarray, reach: np.ndarray) -> Contacts:
+        searches.append(1)
+        return real_search(model, points, reach)
+
+    monkeypatch.setattr(module, "_search", counting)
+    model, state = Model.from_scene(Scene.named("pyramid-4")), State.initial(
+        Scene.named("pyramid-4"))
+    first = find_contacts(model, state.points, 0.01)
+    again = find_contacts(model, state.points.copy(), np.full(model.n_bodies, 0.01))
+    assert again is first and len(searches) == 1  # equal bits: no second search
+    wider = find_contacts(model, state.points, 0.02)
+    assert len(searches) == 2 and len(wider) >= len(first)
+    moved = state.points.copy()
+    moved[0, 0] += 1e-3
+    shifted = find_contacts(model, moved, 0.02)
+    assert len(searches) == 3
+    assert np.array_equal(shifted.distance, real_search(model, moved, np.full(
+        model.n_bodies, 0.02)).distance)
+    other = Model.from_scene(Scene.named("pyramid-4"))  # another model object: searched
+    find_contacts(other, moved, 0.02)
+    assert len(searches) == 4
+    with pytest.raises(ValueError):
+        first.distance[0] = 1.0  # results are shared, so read-only

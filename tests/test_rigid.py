@@ -90,6 +90,54 @@ def test_structural_product_keeps_cancelled_entries() -> None:
     assert product.nnz == 2  # the cancelled (0, 0) entry stays in the pattern
 
 
+@pytest.mark.parametrize("scene", ["pyramid-4", "rain-10"])
+def test_body_rows_and_velocities_equal_the_corner_map_products(scene: str) -> None:
+    # The rigid build writes G's rows and the corner velocities directly; they must be the
+    # sparse products with corner_velocity_map bit for bit (pattern, order and values), so
+    # that trajectories do not change.
+    from wuerfel_cvx.contacts import find_contacts
+    from wuerfel_cvx.formulations.rigid import body_rows, structural_product
+    from wuerfel_cvx.model import State
+    from wuerfel_cvx.scene import Scene
+
+    velocity = get_formulation("velocity")
+    traj = simulate(scene, steps=60, formulation="rigid")
+    model = Model.from_scene(Scene.named(scene))
+    rng = np.random.default_rng(3)
+    seen_rows = 0
+    for k in (0, 30, 60):
+        state = State(traj.points[k], traj.velocities[k])
+        contacts = find_contacts(model, state.points, velocity.body_reach(model, state, 0.01))
+        corner_rows, _ = velocity.contact_rows(model, model.all_points(state.points), contacts,
+                                               0.01)
+        ours = body_rows(corner_rows, state.points)
+        product = structural_product(corner_rows, corner_velocity_map(state.points))
+        assert ours.shape == product.shape and ours.has_canonical_format
+        np.testing.assert_array_equal(ours.indptr, product.indptr)
+        np.testing.assert_array_equal(ours.indices, product.indices)
+        np.testing.assert_array_equal(ours.data, product.data)
+        seen_rows += ours.shape[0]
+        body = rng.normal(size=3 * model.n_squares)
+        np.testing.assert_array_equal(
+            RigidFormulation().new_velocities(state, body, 0.01),
+            (corner_velocity_map(state.points) @ body).reshape(-1, 2))
+    assert seen_rows > 0
+
+
+def test_body_rows_keep_a_cancelled_torque() -> None:
+    # A contact whose two edge-corner torques cancel exactly keeps the omega entry (0.0).
+    from wuerfel_cvx.formulations.rigid import body_rows, structural_product
+
+    points = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    import scipy.sparse as sp
+
+    corner_rows = sp.csr_array(np.array([[0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0]]))
+    ours = body_rows(corner_rows, points)
+    product = structural_product(corner_rows, corner_velocity_map(points))
+    np.testing.assert_array_equal(ours.toarray(), product.toarray())
+    assert ours.nnz == product.nnz == 2 and ours.data[-1] == 0.0
+
+
 def test_a_resting_scene_compiles_once_in_rigid_coordinates() -> None:
     # Constant weights (inertia from the exact squares) and a cancellation-proof pattern
     # keep the structure key constant while nothing moves.

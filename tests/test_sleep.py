@@ -11,7 +11,7 @@ from wuerfel_cvx.formulations import get_formulation
 from wuerfel_cvx.library import FLOOR
 from wuerfel_cvx.model import Model, State
 from wuerfel_cvx.simulate import ASLEEP
-from wuerfel_cvx.sleep import SleepSettings, island_labels
+from wuerfel_cvx.sleep import SleepSettings, island_labels, island_members
 from wuerfel_cvx.solve import solve_step_qp
 
 DT = 0.01
@@ -53,6 +53,57 @@ def test_separate_islands_solve_to_the_joint_qps_answer() -> None:
         # Both are verified solutions of the same island's rows (bound derived in
         # test_solver_agreement).
         assert np.max(np.abs(alone.x - joint_part)) <= AGREEMENT
+
+
+def test_island_members_groups_squares_by_island() -> None:
+    labels = np.array([2, 0, 2, 1, 0, 1])
+    members = island_members(labels)
+    assert [m.tolist() for m in members] == [[0, 2], [1, 4], [3, 5]]
+    awake = np.array([True, False, True, False, False, True])
+    assert [m.tolist() for m in island_members(labels, awake)] == [[0, 2], [5]]
+    assert island_members(labels, np.zeros(6, dtype=bool)) == []
+
+
+def test_simulate_with_islands_solves_one_qp_per_island_with_the_joint_answer() -> None:
+    scene = two_stacks_and_a_faller()
+    seen: list[tuple[int, int]] = []
+    islands = simulate(scene, steps=1, tol="high", islands=True,
+                       observer=lambda step, qp, solution: seen.append(
+                           (qp.n_variables, qp.n_inequalities)))
+    joint = simulate(scene, steps=1, tol="high")
+    # Three QPs: the two 3-stacks (24 unknowns each) and the faller (8, no contacts).
+    assert [n for n, _ in seen] == [24, 24, 8] and seen[2][1] == 0
+    row, joint_row = islands.metrics.iloc[0], joint.metrics.iloc[0]
+    for column in ("n_variables", "n_equalities", "n_inequalities", "n_contacts"):
+        assert row[column] == joint_row[column]
+    assert row["verified"] and row["solver_time_s"] > 0
+    # Verified solutions of the same rows: new velocities within AGREEMENT (m/s), and
+    # positions, moved rigidly by dt times them, within dt * AGREEMENT (m) up to round-off.
+    assert np.max(np.abs(islands.velocities[1] - joint.velocities[1])) <= 2 * AGREEMENT
+    assert np.max(np.abs(islands.points[1] - joint.points[1])) <= DT * 2 * AGREEMENT + 1e-12
+
+
+def test_islands_keep_their_own_compiled_structures_and_sleep_still_works() -> None:
+    # The resting 5-stack repeats its structure while the faller is alone; once it lands
+    # the merged island is a new structure.  With sleep the stack sleeps, then wakes.
+    steps = 250
+    traj = simulate(drop_on_stack(), steps=steps, tol="high", sleep=SleepSettings(),
+                    islands=True)
+    joint = simulate(drop_on_stack(), steps=steps, tol="high", sleep=SleepSettings())
+    sizes = traj.metrics["n_variables"].to_numpy()
+    np.testing.assert_array_equal(sizes, joint.metrics["n_variables"].to_numpy())
+    assert traj.metrics["verified"].all()
+    np.testing.assert_array_equal(traj.metrics["status"] == ASLEEP,
+                                  joint.metrics["status"] == ASLEEP)
+    # Each island is cached by its own structure: the stack, the lone faller and the
+    # landed pile; a step with both islands awake re-solves two of them.
+    assert traj.info["compiled_structures"] <= 3
+    assert (traj.info["steps_reusing_a_compiled_structure"]
+            > joint.info["steps_reusing_a_compiled_structure"])
+    # Same physics: the landing square rests on the stack (to solver tolerance).
+    top = traj.points[-1, 20:24]
+    np.testing.assert_allclose(top[:, 1].min(), 5.0, atol=1e-6)
+    np.testing.assert_allclose(traj.points, joint.points, rtol=0, atol=1e-6)
 
 
 def drop_on_stack() -> Scene:

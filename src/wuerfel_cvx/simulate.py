@@ -17,11 +17,12 @@ from .compiled import CompiledQPCache
 from .contacts import find_contacts
 from .errors import InputError, StepFailure
 from .formulations import Formulation, StepQP, VelocityFormulation, get_formulation
+from .geometry import FloatArray
 from .metrics import deepest_penetration, kinetic_energy, potential_energy, rod_length_drift
 from .model import IntArray, Model, State
 from .scene import Scene
-from .sleep import SleepSettings, SleepTracker
-from .solve import Residuals, StepSolution, solve_step_qp
+from .sleep import SleepSettings, SleepTracker, island_labels, island_members
+from .solve import SOLVED, Residuals, StepSolution, solve_step_qp
 from .solvers import get_solver, tolerance_value
 from .trajectory import Trajectory
 
@@ -36,7 +37,9 @@ METRIC_COLUMNS = (
 
 ``build_time_s`` is the QP's construction, ``solve_time_s`` the wall time of the solve call
 (cvxpy's compilation included), ``solver_time_s`` the solver's own reported time, and
-``step_time_s`` the whole step: build, solve, check and advance (all in s).
+``step_time_s`` the whole step: islands and sleep if on, build, solve, check and advance
+(all in s).  The row's own diagnostics (rod drift, penetration, energies) are measured
+after ``step_time_s`` and are not part of it.
 """
 
 ASLEEP = "asleep"
@@ -76,6 +79,7 @@ def simulate(
     observer: StepObserver | None = None,
     compiled: bool = True,
     sleep: SleepSettings | None = None,
+    islands: bool = False,
 ) -> Trajectory:
     """Simulate ``steps`` steps of ``dt`` seconds, one QP per step.
 
@@ -114,6 +118,12 @@ def simulate(
         squares that have been still long enough sleep (frozen, left out of the QP) until
         an awake square touches them (:mod:`wuerfel_cvx.sleep`).  A step in which every
         island sleeps has status ``"asleep"`` and no QP.
+    islands:
+        Solve each island (squares connected by contacts) as its own QP, each cached by its
+        own structure, instead of all awake squares in one QP (see :mod:`wuerfel_cvx.sleep`
+        for the trade-off).  Same model; answers agree to solver tolerance.  A step's
+        metrics row then sums sizes and times over the islands and takes the worst
+        residuals and status; ``observer`` is called once per island QP.
 
     Raises
     ------
@@ -160,16 +170,20 @@ def simulate(
     for step in tqdm(range(1, int(steps) + 1), disable=not progress, unit="step",
                      desc=scene.name):
         started = time.perf_counter()
-        step_model, step_state = model, state
-        awake_squares: IntArray | None = None  # None: every square takes part
-        if tracker is not None:
+        groups: list[IntArray | None] = [None]  # squares of each QP; None: every square
+        if tracker is not None or islands:
             # When everything slept in the last step nothing moved: it all sleeps still.
-            asleep = (np.ones(model.n_squares, dtype=bool) if all_asleep else
-                      tracker.asleep(find_contacts(model, state.points,
-                                                   _SLEEP_REACH.body_reach(model, state, dt))))
-            all_asleep = bool(asleep.all())
+            if all_asleep:
+                asleep = np.ones(model.n_squares, dtype=bool)
+            else:
+                labels = island_labels(model.n_squares, find_contacts(
+                    model, state.points, _island_reach(scheme, model, state, float(dt))))
+                asleep = (tracker.asleep_islands(labels) if tracker is not None
+                          else np.zeros(model.n_squares, dtype=bool))
+            all_asleep = tracker is not None and bool(asleep.all())
             if all_asleep:
                 state = State(state.points, np.zeros_like(state.velocities))
+                assert tracker is not None
                 tracker.record(state.velocities, float(dt))
                 times.append(step * float(dt))
                 points.append(state.points)
@@ -177,35 +191,48 @@ def simulate(
                 rows.append(_asleep_row(model, state, step, float(dt),
                                         time.perf_counter() - started))
                 continue
-            if asleep.any():
-                awake_squares = np.flatnonzero(~asleep)
-                step_model = model.subset(awake_squares)
-                step_state = _restrict(state, awake_squares)
-        qp = scheme.build(step_model, step_state, float(dt))
-        build_time = time.perf_counter() - started
-        try:
-            solution = solve_step_qp(qp, spec.name, tol, step=step, cache=cache)
-        except StepFailure as failure:
-            failure.trajectory = trajectory()
-            raise
-        moved = scheme.advance(step_model, step_state, solution.x, float(dt))
-        state = moved if awake_squares is None else _merge(state, moved, awake_squares)
+            if islands:
+                groups = list(island_members(labels, ~asleep)) or [None]
+            elif asleep.any():
+                groups = [np.flatnonzero(~asleep)]
+        solved: list[tuple[IntArray | None, StepQP, StepSolution, State]] = []
+        build_time, mark = 0.0, started
+        for squares in groups:
+            part_model, part_state = ((model, state) if squares is None else
+                                      (model.subset(squares), _restrict(state, squares)))
+            qp = scheme.build(part_model, part_state, float(dt))
+            build_time += time.perf_counter() - mark
+            try:
+                solution = solve_step_qp(qp, spec.name, tol, step=step, cache=cache)
+            except StepFailure as failure:
+                failure.trajectory = trajectory()
+                raise
+            moved = scheme.advance(part_model, part_state, solution.x, float(dt))
+            solved.append((squares, qp, solution, moved))
+            mark = time.perf_counter()
+        state = solved[0][3] if groups[0] is None else _merge(
+            state, [(squares, moved) for squares, _, _, moved in solved if squares is not None])
         if tracker is not None:
             tracker.record(state.velocities, float(dt))
         step_time = time.perf_counter() - started
+        solutions = [solution for _, _, solution, _ in solved]
         if not (np.all(np.isfinite(state.points)) and np.all(np.isfinite(state.velocities))):
-            bad_state = StepFailure(step, spec.name, solution.status, "non-finite state")
+            bad_state = StepFailure(step, spec.name, solutions[-1].status, "non-finite state")
             bad_state.trajectory = trajectory()
             raise bad_state
         times.append(step * float(dt))
         points.append(state.points)
         velocities.append(state.velocities)
-        rows.append(_metrics_row(model, state, qp.n_variables, qp.n_equalities,
-                                 qp.n_inequalities, len(qp.contacts), step, float(dt),
-                                 build_time, step_time, solution))
+        qps = [qp for _, qp, _, _ in solved]
+        rows.append(_metrics_row(model, state, sum(qp.n_variables for qp in qps),
+                                 sum(qp.n_equalities for qp in qps),
+                                 sum(qp.n_inequalities for qp in qps),
+                                 sum(len(qp.contacts) for qp in qps), step, float(dt),
+                                 build_time, step_time, _combined(solutions)))
         if observer is not None:
             try:
-                observer(step, qp, solution)
+                for qp, solution in zip(qps, solutions, strict=True):
+                    observer(step, qp, solution)
             except StepFailure as stop:  # an observer may end the run (e.g. a time limit)
                 stop.trajectory = trajectory()
                 raise
@@ -216,19 +243,53 @@ _SLEEP_REACH = VelocityFormulation()
 """Whose contact reach (margin plus one step of travel) decides which squares touch."""
 
 
+def _island_reach(scheme: Formulation, model: Model, state: State, dt: float) -> FloatArray:
+    """Reach (m) per body for finding islands: at least the formulation's own contact reach.
+
+    So that no contact of the joint QP joins two islands, islands are found with the
+    larger of the velocity formulation's reach and the formulation's own, if it has one.
+    """
+    reach = _SLEEP_REACH.body_reach(model, state, dt)
+    own = getattr(scheme, "body_reach", None)
+    if own is None:
+        return reach
+    return np.maximum(reach, np.asarray(own(model, state, dt), dtype=np.float64))
+
+
 def _restrict(state: State, squares: IntArray) -> State:
     corners = (4 * squares[:, None] + np.arange(4)).ravel()
     return State(state.points[corners], state.velocities[corners])
 
 
-def _merge(state: State, moved: State, squares: IntArray) -> State:
-    """``state`` with ``squares`` replaced by ``moved``; the others frozen at rest."""
-    corners = (4 * squares[:, None] + np.arange(4)).ravel()
+def _merge(state: State, parts: list[tuple[IntArray, State]]) -> State:
+    """``state`` with each part's ``squares`` replaced by its moved state; others frozen."""
     points = state.points.copy()
     velocities = np.zeros_like(state.velocities)
-    points[corners] = moved.points
-    velocities[corners] = moved.velocities
+    for squares, moved in parts:
+        corners = (4 * squares[:, None] + np.arange(4)).ravel()
+        points[corners] = moved.points
+        velocities[corners] = moved.velocities
     return State(points, velocities)
+
+
+def _combined(solutions: list[StepSolution]) -> StepSolution:
+    """One step's solutions (one per island) as one solution.
+
+    The worst residuals and status (an inaccurate optimum if any), summed times, the most
+    iterations any island took, and the unknowns one after another.
+    """
+    if len(solutions) == 1:
+        return solutions[0]
+    statuses = [solution.status for solution in solutions]
+    return StepSolution(
+        x=np.concatenate([solution.x for solution in solutions]), solver=solutions[0].solver,
+        status=SOLVED[1] if SOLVED[1] in statuses else statuses[0],
+        residuals=Residuals(*(max(getattr(solution.residuals, name) for solution in solutions)
+                              for name in ("primal", "dual", "complementarity"))),
+        verified=all(solution.verified for solution in solutions),
+        solve_wall_time=sum(solution.solve_wall_time for solution in solutions),
+        solver_time=float(sum(solution.solver_time for solution in solutions)),
+        iterations=max(solution.iterations for solution in solutions))
 
 
 def _asleep_row(model: Model, state: State, step: int, dt: float,

@@ -9,10 +9,28 @@ recomputed from contacts every step, so an awake square that comes within contac
 of a sleeping one joins its island, whose stillness is then that of its least still
 member: the whole island wakes in the same step and takes part in the QP.
 
-The awake islands are solved together as one QP over the awake squares (a model
-restricted by :meth:`wuerfel_cvx.model.Model.subset`).  Separately solved islands would
-give the same answer (they share no rows), but each solve would pay cvxpy's fixed
-per-call cost, which today exceeds a small island's solver time.
+By default the awake islands are solved together as one QP over the awake squares (a
+model restricted by :meth:`wuerfel_cvx.model.Model.subset`).  With
+``simulate(..., islands=True)`` each awake island is its own QP on its own restricted
+model, cached by its own structure, so a resting stack keeps its compiled structure while
+a separate pile changes.  Both give the same answer to solver tolerance (no row couples two
+islands; islands are found with at least the formulation's contact reach).  One QP per
+island costs more, because every QP pays a fixed per-call cost (building, the solve call,
+the residual check, the update: about 1-3 ms) that exceeds a small island's solver time.
+Measured (velocity, dt = 0.01 s, 100 steps, one run each on a loaded 2-core machine,
+median step time joint -> per island, and median step / solver time)::
+
+    scene                      solver     step (ms)       step / solver
+    rain-50                    OSQP       24   -> 183      3.2 -> 24
+    rain-50                    CLARABEL   16   -> 128      3.4 -> 14
+    stack-20 + falling square  OSQP        5.8 ->   7.5    3.0 -> 13
+    stack-20 + falling square  CLARABEL    6.6 ->   8.9    1.8 ->  4.9
+    two separated 10-stacks    OSQP        6.4 ->   9.0    4.2 -> 14
+    two separated 10-stacks    CLARABEL    6.5 ->  10.9    1.6 ->  5.9
+
+(rain-50 has up to 50 islands per step while the squares fall apart.)  The joint QP is
+therefore the default; ``islands=True`` is there for scenes with few large islands whose
+structures change independently.
 """
 
 from __future__ import annotations
@@ -48,6 +66,23 @@ def island_labels(n_squares: int, contacts: Contacts) -> IntArray:
     return np.asarray(labels, dtype=np.int64)
 
 
+def island_members(labels: IntArray, awake: np.ndarray | None = None) -> list[IntArray]:
+    """The squares of each island (ascending), islands ordered by their first square.
+
+    ``labels`` ``(n,)`` from :func:`island_labels`; with ``awake`` (boolean ``(n,)``) only
+    the islands of awake squares.
+    """
+    squares = np.arange(labels.size) if awake is None else np.flatnonzero(awake)
+    if squares.size == 0:
+        return []
+    order = np.argsort(labels[squares], kind="stable")  # ascending squares within an island
+    grouped = squares[order]
+    cuts = np.flatnonzero(np.diff(labels[grouped])) + 1
+    members = np.split(grouped, cuts)
+    members.sort(key=lambda island: int(island[0]))
+    return members
+
+
 @dataclass
 class SleepTracker:
     """Per-square stillness over time, and which squares sleep at a step."""
@@ -66,7 +101,10 @@ class SleepTracker:
         ``contacts`` are the step's contacts (with the step's reach), so an awake square
         near a sleeping island joins it and wakes it.
         """
-        labels = island_labels(self.n_squares, contacts)
+        return self.asleep_islands(island_labels(self.n_squares, contacts))
+
+    def asleep_islands(self, labels: IntArray) -> np.ndarray:
+        """As :meth:`asleep`, from the island index of each square ``(n,)``."""
         least_still = np.full(labels.max(initial=-1) + 1, np.inf)
         np.minimum.at(least_still, labels, self.still_for)
         return np.asarray(least_still[labels] >= self.settings.time)

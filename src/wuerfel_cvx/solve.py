@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import cvxpy as cp
 import numpy as np
+import scipy.sparse as sp
 
 from .compiled import CompiledQPCache
 from .errors import StepFailure
@@ -69,16 +70,17 @@ def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
                   ineq_dual: FloatArray) -> Residuals:
     """Relative primal, dual and complementarity residuals of ``(x, y, z)``."""
     objective_grad = 2.0 * qp.weights * (x - qp.target)
-    eq_term = qp.eq_matrix.T @ eq_dual
-    ineq_term = qp.ineq_matrix.T @ ineq_dual
+    eq_term = _transposed_product(qp.eq_matrix, eq_dual)
+    ineq_term = _transposed_product(qp.ineq_matrix, ineq_dual)
     stationarity = objective_grad + eq_term - ineq_term
     dual_scale = 1.0 + max(_inf(objective_grad), _inf(eq_term), _inf(ineq_term))
     dual = max(_inf(stationarity), _inf(np.minimum(ineq_dual, 0.0))) / dual_scale
 
-    eq_violation = qp.eq_matrix @ x - qp.eq_rhs
-    slack = qp.ineq_matrix @ x - qp.ineq_rhs
-    primal_scale = 1.0 + max(_inf(qp.eq_rhs), _inf(qp.ineq_rhs), _inf(qp.eq_matrix @ x),
-                             _inf(qp.ineq_matrix @ x))
+    eq_lhs = qp.eq_matrix @ x
+    ineq_lhs = qp.ineq_matrix @ x
+    eq_violation = eq_lhs - qp.eq_rhs
+    slack = ineq_lhs - qp.ineq_rhs
+    primal_scale = 1.0 + max(_inf(qp.eq_rhs), _inf(qp.ineq_rhs), _inf(eq_lhs), _inf(ineq_lhs))
     primal = max(_inf(eq_violation), _inf(np.minimum(slack, 0.0))) / primal_scale
 
     complementarity = (_inf(ineq_dual * slack) / (1.0 + _inf(ineq_dual) * primal_scale)
@@ -180,6 +182,13 @@ def _dual(constraint: cp.Constraint | None, size: int) -> FloatArray:
     if value is None:
         return np.full(size, np.nan)
     return np.atleast_1d(np.asarray(value, dtype=np.float64))
+
+
+def _transposed_product(matrix: sp.csr_array, vector: FloatArray) -> FloatArray:
+    """``matrix.T @ vector`` for a CSR matrix, without building the transpose."""
+    per_entry = matrix.data * np.repeat(vector, np.diff(matrix.indptr))
+    return np.asarray(np.bincount(matrix.indices, weights=per_entry, minlength=matrix.shape[1]),
+                      dtype=np.float64)
 
 
 def _inf(values: FloatArray) -> float:

@@ -111,6 +111,9 @@ def declare_qp(
 
 
 def _canonical(matrix: sp.csr_array) -> sp.csr_array:
+    """``matrix`` itself if canonical already (as from :func:`point_rows`), else a copy."""
+    if isinstance(matrix, sp.csr_array) and matrix.has_canonical_format:
+        return matrix
     canonical = sp.csr_array(matrix, copy=True)
     canonical.sum_duplicates()
     canonical.sort_indices()
@@ -141,7 +144,9 @@ def point_rows(
     Each block is ``(point_index (R,), gradient (R, 2))`` for rows ``0..R-1`` with
     ``R = n_rows``; a point index ``< 0`` (a fixed point) contributes nothing.  Columns
     are ``2 point + axis``; entries that meet in one place are summed.  The CSR arrays
-    are written directly, row by row, and brought to canonical form (sorted columns).
+    are written directly in canonical form: each row's entries sorted by column (a stable
+    sort, so the values are the very numbers given), or, if a point occurs twice in a row,
+    summed by scipy.
     """
     shape = (n_rows, 2 * n_points)
     if not blocks:
@@ -150,9 +155,18 @@ def point_rows(
     grad = np.stack([gradient for _, gradient in blocks], axis=1)  # (R, B, 2)
     moving = index >= 0
     keep = np.repeat(moving.ravel(), 2)  # entries in (row, block, axis) order
-    cols = (2 * index[:, :, None] + np.arange(2)).reshape(-1)
+    cols = (2 * index[:, :, None] + np.arange(2)).reshape(-1)[keep]
+    values = grad.reshape(-1)[keep]
+    per_row = 2 * moving.sum(axis=1, dtype=np.int64)
     indptr = np.zeros(n_rows + 1, dtype=np.int64)
-    np.cumsum(2 * moving.sum(axis=1, dtype=np.int64), out=indptr[1:])
-    matrix = sp.csr_array((grad.reshape(-1)[keep], cols[keep], indptr), shape=shape)
-    matrix.sum_duplicates()
+    np.cumsum(per_row, out=indptr[1:])
+    key = np.repeat(np.arange(n_rows, dtype=np.int64), per_row) * shape[1] + cols
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    if np.any(sorted_key[1:] == sorted_key[:-1]):  # a point twice in a row: let scipy sum
+        matrix = sp.csr_array((values, cols, indptr), shape=shape)
+        matrix.sum_duplicates()
+        return matrix
+    matrix = sp.csr_array((values[order], cols[order], indptr), shape=shape)
+    matrix.has_canonical_format = True  # sorted above, no duplicates
     return matrix

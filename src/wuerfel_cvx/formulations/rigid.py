@@ -41,6 +41,11 @@ class RigidFormulation:
     """Distance (m) within which a point-edge pair is always constrained."""
     name: str = "rigid"
 
+    def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
+        """Contact reach (m) per body, as in the velocity formulation."""
+        velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin)
+        return velocity.body_reach(model, state, dt)
+
     def build(self, model: Model, state: State, dt: float) -> StepQP:
         """The step QP in the squares' new centre and angular velocities."""
         if model.table_mass is not None:
@@ -49,7 +54,6 @@ class RigidFormulation:
         points = state.points
         contacts = find_contacts(model, points, velocity.body_reach(model, state, dt))
         corner_rows, rhs = velocity.contact_rows(model, model.all_points(points), contacts, dt)
-        corner_map = corner_velocity_map(points)
         masses = model.point_masses.reshape(-1, 4)
         # from the exact squares, not the current corners: constant weights keep the
         # compiled-problem cache's key constant
@@ -59,11 +63,15 @@ class RigidFormulation:
         target = np.column_stack([centre_velocity + dt * model.gravity, spin]).ravel()
         no_rows = sp.csr_array((0, weights.shape[0]))
         return declare_qp(weights, target, no_rows, np.zeros(0),
-                          structural_product(corner_rows, corner_map), rhs, contacts)
+                          body_rows(corner_rows, points), rhs, contacts)
 
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
         """The corner velocities ``(4 n, 2)`` (m/s) of the new body velocities."""
-        return (corner_velocity_map(state.points) @ solution).reshape(-1, 2)
+        body = solution.reshape(-1, 3)
+        turned = rot90(_offsets(state.points))  # (n, 4, 2)
+        # u + omega rot90(r), summed as corner_velocity_map(points) @ solution would be
+        corners = (0.0 + body[:, None, :2]) + turned * body[:, None, 2:]
+        return np.asarray(corners.reshape(-1, 2), dtype=np.float64)
 
     def advance(self, model: Model, state: State, solution: FloatArray, dt: float) -> State:
         """Move each square rigidly with its new centre and angular velocity."""
@@ -85,6 +93,49 @@ def corner_velocity_map(points: FloatArray) -> sp.csr_array:
     values = np.concatenate([np.ones(n_corners), np.ones(n_corners), turned[:, 0],
                              turned[:, 1]])
     return sp.csr_array((values, (rows, cols)), shape=(2 * n_corners, 3 * (n_corners // 4)))
+
+
+def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
+    """``corner_rows @ corner_velocity_map(points)`` as :func:`structural_product` gives it.
+
+    ``corner_rows`` (canonical CSR, one column per square-corner coordinate) in the
+    unknowns ``(u_x, u_y, omega)`` of each square: an entry ``v`` in the column of corner
+    ``c`` (axis ``a``) of square ``b`` adds ``v`` to column ``3 b + a`` and
+    ``v rot90(r_c)_a`` to column ``3 b + 2``.  The entries of a cell are summed from 0 in
+    the row's column order, as scipy's sparse product sums them, so the values are bit
+    for bit those of the product; no entry that cancels to 0.0 is dropped.
+    """
+    n_rows = corner_rows.shape[0]
+    turned = rot90(_offsets(points)).reshape(-1)  # per corner coordinate (4 n * 2,)
+    row = np.repeat(np.arange(n_rows, dtype=np.int64), np.diff(corner_rows.indptr))
+    col = corner_rows.indices.astype(np.int64)
+    value = corner_rows.data
+    body, axis = col // 8, col % 2
+    n_cols = 3 * (corner_rows.shape[1] // 8)
+    out_row = np.concatenate([row, row])
+    out_col = np.concatenate([3 * body + axis, 3 * body + 2])
+    out_value = np.concatenate([value * 1.0, value * turned[col]])
+    # by (row, column); the sort is stable, so a cell's entries stay in corner-column order
+    # (each half of the concatenation is in the row-major order of corner_rows)
+    unsorted_key = out_row * n_cols + out_col
+    order = np.argsort(unsorted_key, kind="stable")
+    key = unsorted_key[order]
+    first = np.ones(key.size, dtype=bool)
+    first[1:] = key[1:] != key[:-1]
+    cell = np.cumsum(first) - 1
+    start = np.flatnonzero(first)
+    position = np.arange(key.size) - start[cell]
+    sums = np.zeros(start.size)
+    ordered = out_value[order]
+    for k in range(int(position.max(initial=-1)) + 1):
+        at = position == k
+        sums[cell[at]] += ordered[at]
+    indptr = np.zeros(n_rows + 1, dtype=np.int32)
+    np.cumsum(np.bincount(key[start] // n_cols, minlength=n_rows), out=indptr[1:])
+    columns = (key[start] % n_cols).astype(np.int32)
+    matrix = sp.csr_array((sums, columns, indptr), shape=(n_rows, n_cols))
+    matrix.has_canonical_format = True  # sorted by column, one entry per cell
+    return matrix
 
 
 def structural_product(left: sp.csr_array, right: sp.csr_array) -> sp.csr_array:

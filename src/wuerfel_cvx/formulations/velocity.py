@@ -80,13 +80,13 @@ class VelocityFormulation:
         rod_matrix = point_rows(len(rod_error), n_unknown, blocks)
         held = held_table_blocks(model)
         held_matrix = point_rows(len(held[0][0]), n_unknown, held) if held else None
-        eq_matrix = sp.vstack([rod_matrix] + ([held_matrix] if held_matrix is not None else []),
-                              format="csr")
+        eq_matrix = (rod_matrix if held_matrix is None else
+                     sp.csr_array(sp.vstack([rod_matrix, held_matrix], format="csr")))
         eq_rhs = np.concatenate([-(self.beta / dt) * rod_error,
                                  np.zeros(held_matrix.shape[0] if held_matrix is not None else 0)])
 
         ineq_matrix, ineq_rhs = self.contact_rows(model, all_points, contacts, dt)
-        return declare_qp(weights, target.ravel(), sp.csr_array(eq_matrix), eq_rhs,
+        return declare_qp(weights, target.ravel(), eq_matrix, eq_rhs,
                           ineq_matrix, ineq_rhs, contacts)
 
     def contact_rows(self, model: Model, all_points: FloatArray, contacts: Contacts,
@@ -131,19 +131,20 @@ def rigid_step(reference: FloatArray, points: FloatArray, velocities: FloatArray
         np.sum(reference[..., 0] * offsets[..., 1] - reference[..., 1] * offsets[..., 0], axis=1),
         np.sum(reference * offsets, axis=(1, 2)),
     )
-    fitted = np.einsum("nij,nkj->nki", _rotations(angle), reference)
+    fitted = _rotated(angle, reference)
     center_velocity = vel.mean(axis=1)
     relative = vel - center_velocity[:, None, :]
     omega = (np.sum(fitted[..., 0] * relative[..., 1] - fitted[..., 1] * relative[..., 0], axis=1)
              / np.sum(fitted * fitted, axis=(1, 2)))
-    new_offsets = np.einsum("nij,nkj->nki", _rotations(angle + omega * dt), reference)
+    new_offsets = _rotated(angle + omega * dt, reference)
     new_center = center + dt * center_velocity
     new_points = new_center[:, None, :] + new_offsets
     new_velocities = center_velocity[:, None, :] + omega[:, None, None] * rot90(new_offsets)
     return State(new_points.reshape(-1, 2), new_velocities.reshape(-1, 2))
 
 
-def _rotations(angles: FloatArray) -> FloatArray:
-    """Rotation matrices ``(n, 2, 2)`` for angles ``(n,)`` (rad)."""
-    cos, sin = np.cos(angles), np.sin(angles)
-    return np.stack([np.stack([cos, -sin], axis=-1), np.stack([sin, cos], axis=-1)], axis=-2)
+def _rotated(angles: FloatArray, reference: FloatArray) -> FloatArray:
+    """``reference`` ``(n, 4, 2)`` with square ``k`` turned by ``angles[k]`` (rad)."""
+    cos, sin = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    x, y = reference[..., 0], reference[..., 1]
+    return np.stack([cos * x - sin * y, sin * x + cos * y], axis=-1)
