@@ -43,6 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help=f"tolerance preset ({', '.join(TOLERANCE_PRESETS)}) or a number")
     run.add_argument("--table-mass", type=float, default=None,
                      help="seed variant: table corners as variables of this mass (kg)")
+    run.add_argument("--fallback", action="append", default=[], metavar="NAME",
+                     help="solver to retry a failed step with (repeatable; the metrics "
+                          "record it in 'solver' and the failed status in 'primary_status')")
     run.add_argument("--sleep", action="store_true",
                      help="let islands at rest sleep (left out of the QP until touched)")
     run.add_argument("--out", default=None,
@@ -103,7 +106,8 @@ def _simulate(args: argparse.Namespace) -> int:
         trajectory = simulate(args.scene, dt=args.dt, steps=args.steps, solver=args.solver,
                               formulation=args.formulation, tol=args.tol,
                               table_mass=args.table_mass, progress=progress,
-                              sleep=SleepSettings() if args.sleep else None)
+                              sleep=SleepSettings() if args.sleep else None,
+                              fallback=args.fallback)
     except StepFailure as failure:
         print(f"{PROG}: {failure}", file=sys.stderr)
         if args.out and failure.trajectory is not None:
@@ -112,6 +116,11 @@ def _simulate(args: argparse.Namespace) -> int:
                   file=sys.stderr)
         return 1
     print(trajectory.summary())
+    rescued = trajectory.metrics["status"] != trajectory.metrics["primary_status"]
+    if rescued.any():
+        print(f"fallback             {int(rescued.sum())} steps solved by "
+              f"{', '.join(sorted(set(trajectory.metrics['solver'][rescued])))} after "
+              f"{trajectory.info['solver']} failed")
     if args.out:
         path = _save(trajectory, args.out)
         print(f"saved {path} and {trajectory.metrics_path(path)}")

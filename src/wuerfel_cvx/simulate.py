@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from importlib.metadata import version
 from pathlib import Path
 from typing import Any
@@ -21,12 +21,13 @@ from .metrics import deepest_penetration, kinetic_energy, potential_energy, rod_
 from .model import IntArray, Model, State
 from .scene import Scene
 from .sleep import SleepSettings, SleepTracker
-from .solve import Residuals, StepSolution, solve_step_qp
+from .solve import INVALID_DATA, Residuals, StepSolution, solve_step_qp
 from .solvers import get_solver, tolerance_value
 from .trajectory import Trajectory
 
 METRIC_COLUMNS = (
-    "step", "time_s", "solver", "status", "verified", "n_variables", "n_equalities",
+    "step", "time_s", "solver", "status", "primary_status", "verified", "n_variables",
+    "n_equalities",
     "n_inequalities", "n_contacts", "build_time_s", "solve_time_s", "solver_time_s",
     "step_time_s",
     "iterations", "primal_residual", "dual_residual", "complementarity", "rod_drift",
@@ -37,6 +38,9 @@ METRIC_COLUMNS = (
 ``build_time_s`` is the QP's construction, ``solve_time_s`` the wall time of the solve call
 (cvxpy's compilation included), ``solver_time_s`` the solver's own reported time, and
 ``step_time_s`` the whole step: build, solve, check and advance (all in s).
+``solver`` and ``status`` are those of the solver that produced the step;
+``primary_status`` is the run's own solver's status on it, which differs only when that
+solver failed and a ``fallback`` solver took over.
 """
 
 DT_RANGE = (1e-6, 100.0)
@@ -81,6 +85,7 @@ def simulate(
     observer: StepObserver | None = None,
     compiled: bool = True,
     sleep: SleepSettings | None = None,
+    fallback: Sequence[str] = (),
 ) -> Trajectory:
     """Simulate ``steps`` steps of ``dt`` seconds, one QP per step.
 
@@ -119,13 +124,19 @@ def simulate(
         squares that have been still long enough sleep (frozen, left out of the QP) until
         an awake square touches them (:mod:`wuerfel_cvx.sleep`).  A step in which every
         island sleeps has status ``"asleep"`` and no QP.
+    fallback:
+        Solvers to try, in order, on a step that ``solver`` fails (a status other than
+        optimal, non-finite or unusable data, an exception).  The step's metrics row then
+        names the solver that succeeded in ``solver`` and keeps the failed status in
+        ``primary_status``.  Only when every solver fails does the run stop.
 
     Raises
     ------
     InputError
         For a bad argument.
     StepFailure
-        When a step cannot be solved; its ``trajectory`` holds the steps before it.
+        When a step cannot be solved (by ``solver`` nor any ``fallback``); its
+        ``trajectory`` holds the steps before it.
 
     """
     scene = resolve_scene(scene)
@@ -137,6 +148,7 @@ def simulate(
     if isinstance(steps, bool) or not isinstance(steps, int | np.integer) or steps < 0:
         raise InputError(f"must be a non-negative integer, got {steps}", field="steps")
     spec = get_solver(solver)
+    solver_chain = [spec.name] + [get_solver(name).name for name in fallback]
     tolerance_value(tol)
     scheme = get_formulation(formulation)
     model = Model.from_scene(scene, table_mass=table_mass, extra_rod=extra_rod)
@@ -150,6 +162,7 @@ def simulate(
     info = {
         "scene": scene.name, "formulation": scheme.name, "solver": spec.name, "tol": str(tol),
         "dt": float(dt), "steps": int(steps), "table_mass": table_mass, "extra_rod": extra_rod,
+        "fallback": solver_chain[1:],
         "versions": _versions(spec.cvxpy_name),
         "compiled_structures": 0, "steps_reusing_a_compiled_structure": 0,
     }
@@ -192,7 +205,7 @@ def simulate(
         qp = scheme.build(step_model, step_state, float(dt))
         build_time = time.perf_counter() - started
         try:
-            solution = solve_step_qp(qp, spec.name, tol, step=step, cache=cache)
+            solution, primary_status = _solve_with_fallback(qp, solver_chain, tol, step, cache)
         except StepFailure as failure:
             failure.trajectory = trajectory()
             raise
@@ -210,7 +223,7 @@ def simulate(
         velocities.append(state.velocities)
         rows.append(_metrics_row(model, state, qp.n_variables, qp.n_equalities,
                                  qp.n_inequalities, len(qp.contacts), step, float(dt),
-                                 build_time, step_time, solution))
+                                 build_time, step_time, solution, primary_status))
         if observer is not None:
             try:
                 observer(step, qp, solution)
@@ -222,6 +235,32 @@ def simulate(
 
 _SLEEP_REACH = VelocityFormulation()
 """Whose contact reach (margin plus one step of travel) decides which squares touch."""
+
+
+def _solve_with_fallback(qp: StepQP, solvers: Sequence[str], tol: str | float, step: int,
+                         cache: CompiledQPCache | None) -> tuple[StepSolution, str]:
+    """Solve with ``solvers[0]``, on failure with the next; the solution and first status.
+
+    Raises the first solver's :class:`StepFailure`, its detail extended by what each
+    fallback gave, when every solver fails.
+    """
+    failures: list[StepFailure] = []
+    for name in solvers:
+        try:
+            solution = solve_step_qp(qp, name, tol, step=step, cache=cache)
+        except StepFailure as failure:
+            if failure.status == INVALID_DATA:  # the same data would fail every solver
+                raise
+            failures.append(failure)
+            continue
+        return solution, failures[0].status if failures else solution.status
+    first = failures[0]
+    if len(failures) == 1:
+        raise first
+    then = [f"then {f.solver} failed with '{f.status}'" + (f" ({f.detail})" if f.detail else "")
+            for f in failures[1:]]
+    raise StepFailure(step, first.solver, first.status,
+                      "; ".join(([first.detail] if first.detail else []) + then)) from first
 
 
 def _restrict(state: State, squares: IntArray) -> State:
@@ -251,11 +290,13 @@ def _asleep_row(model: Model, state: State, step: int, dt: float,
 
 def _metrics_row(model: Model, state: State, n_var: int, n_eq: int, n_in: int,
                  n_contacts: int, step: int, dt: float, build_time: float,
-                 step_time: float, solution: StepSolution) -> dict[str, Any]:
+                 step_time: float, solution: StepSolution,
+                 primary_status: str | None = None) -> dict[str, Any]:
     kinetic = kinetic_energy(model, state)
     potential = potential_energy(model, state)
     return {
         "step": step, "time_s": step * dt, "solver": solution.solver, "status": solution.status,
+        "primary_status": solution.status if primary_status is None else primary_status,
         "verified": solution.verified, "n_variables": n_var, "n_equalities": n_eq,
         "n_inequalities": n_in, "n_contacts": n_contacts, "build_time_s": build_time,
         "solve_time_s": solution.solve_wall_time, "solver_time_s": solution.solver_time,
