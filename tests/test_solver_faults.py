@@ -27,6 +27,7 @@ from wuerfel_cvx.errors import InputError, StepFailure
 from wuerfel_cvx.formulations import StepQP
 from wuerfel_cvx.formulations.velocity import VelocityFormulation
 from wuerfel_cvx.model import Model, State
+from wuerfel_cvx.robustness.faults import SQUEEZED_SCENE, NaNInQP
 from wuerfel_cvx.scene import Square, Table
 from wuerfel_cvx.solve import Residuals, solve_step_qp
 from wuerfel_cvx.solvers import available_solvers
@@ -37,12 +38,7 @@ simulate_module = importlib.import_module("wuerfel_cvx.simulate")
 
 SCENE = "stack-3"  # every square touches its neighbour or the floor from step 1
 
-#: A unit square overlapping two fixed walls by 0.1 m each, one on either side.
-SQUEEZED = Scene(
-    "squeezed", (Square(center=(0.0, 0.5)),),
-    (Table(center=(-0.9, 0.5), size=(1.0, 3.0)), Table(center=(0.9, 0.5), size=(1.0, 3.0))),
-    allow_overlap=True,
-)
+SQUEEZED = SQUEEZED_SCENE
 
 SQUEEZED_TOML = """\
 allow_overlap = true
@@ -201,23 +197,6 @@ def test_false_infeasible_at_extreme_speed_is_rescued_by_the_fallback() -> None:
 
 
 # ------------------------------------------------------------------ NaN data
-@dataclasses.dataclass(frozen=True)
-class NaNInQP(VelocityFormulation):
-    """The velocity formulation, with one NaN written into the QP of step ``bad_step``."""
-
-    bad_step: int = 3
-    array: str = "target"
-    built: list[int] = dataclasses.field(default_factory=lambda: [0])
-
-    def build(self, model: Model, state: State, dt: float) -> StepQP:
-        """The step QP, poisoned in step ``bad_step``."""
-        qp = super().build(model, state, dt)
-        self.built[0] += 1
-        if self.built[0] == self.bad_step:
-            getattr(qp, self.array)[0] = np.nan
-        return qp
-
-
 @dataclasses.dataclass(frozen=True)
 class NaNState(VelocityFormulation):
     """The velocity formulation, advancing to a NaN velocity in step ``bad_step``."""

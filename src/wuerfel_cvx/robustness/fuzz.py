@@ -110,6 +110,8 @@ class FuzzResult:
     crashes: list[Crash] = field(default_factory=list)
     rejection_reasons: Counter[str] = field(default_factory=Counter)
     """How often each kind of rejection occurred (its message up to the first detail)."""
+    step_failure_statuses: Counter[str] = field(default_factory=Counter)
+    """How often each solver status ended a loaded scene's first step."""
     seconds: float = 0.0
     """Wall time of the run (s)."""
 
@@ -202,6 +204,8 @@ def run_fuzz(n_inputs: int, seed: int, *, step: bool = True, crash_dir: Path | N
                 result.rejection_reasons[rejection_kind(detail)] += 1
             elif outcome == "step_failure":
                 result.step_failures += 1
+                status = re.search(r"status '([^']*)'", detail)
+                result.step_failure_statuses[status.group(1) if status else detail] += 1
             else:
                 saved = None
                 if crash_dir is not None:
