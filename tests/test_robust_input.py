@@ -190,7 +190,8 @@ def test_loading_never_unpickles_or_executes(tmp_path: Path,
 
 # ------------------------------------------------------------------ the fuzzer
 def test_fuzzed_files_through_the_loader_never_crash() -> None:
-    result = run_fuzz(300, seed=11, step=False)
+    seeds = [("example", EXAMPLE.read_bytes()), *seed_files()]  # the example file too
+    result = run_fuzz(300, seed=11, step=False, seeds=seeds)
     assert result.crashes == []
     assert result.tried == 300 == result.accepted + result.rejected
     assert result.step_failures == 0  # nothing was stepped
