@@ -21,12 +21,15 @@ from typing import Any
 
 import numpy as np
 import pytest
+import tomli_w
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.errors import InputError
+from wuerfel_cvx.robustness.faults import SQUEEZED_SCENE
 from wuerfel_cvx.robustness.fuzz import (
+    _cross_check,
     check_input,
     generate_inputs,
     rejection_kind,
@@ -210,6 +213,16 @@ def test_fuzzed_files_that_load_also_step() -> None:
     assert result.crashes == []
     assert result.tried == 60 == (result.accepted + result.rejected + result.step_failures)
     assert result.accepted >= 5
+
+
+def test_a_loaded_scene_whose_step_fails_is_a_clear_step_failure(tmp_path: Path) -> None:
+    """An allowed overlap no velocity resolves (a square squeezed by two walls)."""
+    path = tmp_path / "squeezed.toml"
+    path.write_text(tomli_w.dumps(SQUEEZED_SCENE.to_dict()))
+    outcome, detail = check_input(path)
+    assert outcome == "step_failure"
+    assert detail == "step 1: solver CLARABEL failed with status 'infeasible'"
+    assert _cross_check(path) == "other solvers: OSQP infeasible, PIQP infeasible"
 
 
 def test_fuzz_inputs_are_reproducible_from_the_seed() -> None:

@@ -90,8 +90,10 @@ def test_every_injected_fault_ends_clearly() -> None:
 
 
 def test_render_lists_crashes_and_broken_invariants() -> None:
-    fuzz = FuzzResult(tried=5, accepted=1, rejected=3,
+    fuzz = FuzzResult(tried=6, accepted=1, rejected=3, step_failures=1,
                       crashes=[Crash(4, "stack-3: set x | y", "ValueError: boom", "c/4.toml")])
+    fuzz.step_failure_statuses["infeasible"] += 1
+    fuzz.step_failure_examples.append((5, "overlap-recovery: size", "step 1: ...; other"))
     sweep = PropertySweepResult(
         tried=3, failures=[PropertyFailure(1, {}, ("penetration 2e-3 m above bound 1e-9 m",))],
         seconds=1.0, seed=0, steps=50)
@@ -99,4 +101,6 @@ def test_render_lists_crashes_and_broken_invariants() -> None:
     assert "| 4 | stack-3: set x / y | ValueError: boom | c/4.toml |" in text
     assert "| 1 | penetration 2e-3 m above bound 1e-9 m |" in text
     assert "| **crash** (anything else) | 1 |" in text
+    assert "Step failures by status: 'infeasible' 1." in text
+    assert "| 5 | overlap-recovery: size | step 1: ...; other |" in text
     assert "| 3 | 2 | 1 |" in text  # the sweep's tried, passed, failed

@@ -43,6 +43,12 @@ from ..scene import Scene
 
 Outcome = Literal["accepted", "rejected", "step_failure", "crash"]
 
+#: How many step failures a :class:`FuzzResult` keeps as examples.
+MAX_EXAMPLES = 10
+
+#: Solvers that re-run a file whose first step failed (with CLARABEL), as a cross-check.
+CROSS_CHECK = ("OSQP", "PIQP")
+
 #: Library scenes whose files seed the structured mutations (small: one step is cheap).
 SEED_SCENES = ("tilted-drop", "stack-3", "overlap-recovery", "wall-contact", "rain-4")
 
@@ -112,6 +118,9 @@ class FuzzResult:
     """How often each kind of rejection occurred (its message up to the first detail)."""
     step_failure_statuses: Counter[str] = field(default_factory=Counter)
     """How often each solver status ended a loaded scene's first step."""
+    step_failure_examples: list[tuple[int, str, str]] = field(default_factory=list)
+    """The first few step failures: input index, mutation, message and what the
+    :data:`CROSS_CHECK` solvers make of the same file."""
     seconds: float = 0.0
     """Wall time of the run (s)."""
 
@@ -206,6 +215,9 @@ def run_fuzz(n_inputs: int, seed: int, *, step: bool = True, crash_dir: Path | N
                 result.step_failures += 1
                 status = re.search(r"status '([^']*)'", detail)
                 result.step_failure_statuses[status.group(1) if status else detail] += 1
+                if len(result.step_failure_examples) < MAX_EXAMPLES:
+                    result.step_failure_examples.append(
+                        (item.index, item.label, f"{detail}; {_cross_check(path)}"))
             else:
                 saved = None
                 if crash_dir is not None:
@@ -218,6 +230,18 @@ def run_fuzz(n_inputs: int, seed: int, *, step: bool = True, crash_dir: Path | N
                 progress(result.tried)
     result.seconds = time.perf_counter() - started
     return result
+
+
+def _cross_check(path: Path) -> str:
+    """What the other solvers make of a file whose first step failed."""
+    from ..solvers import available_solvers
+
+    found = []
+    for solver in (name for name in CROSS_CHECK if name in available_solvers()):
+        outcome, detail = check_input(path, solver=solver)
+        status = re.search(r"status '([^']*)'", detail)
+        found.append(f"{solver} {status.group(1) if status else outcome}")
+    return "other solvers: " + ", ".join(found)
 
 
 def seed_files() -> list[tuple[str, bytes]]:

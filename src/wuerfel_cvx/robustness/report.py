@@ -230,7 +230,13 @@ def _fuzz_section(fuzz: FuzzResult) -> list[str]:
     if fuzz.step_failure_statuses:
         lines += ["Step failures by status: " + ", ".join(
             f"'{status}' {count}" for status, count in fuzz.step_failure_statuses.most_common())
-            + ".", ""]
+            + ".  A scene with `allow_overlap = true` may start in an overlap that no "
+            "velocity can resolve (like the squeezed square below); each failure is re-run "
+            "with the other solvers as a cross-check.", "",
+            "| input | mutation | message |", "|---:|---|---|"]
+        lines += [f"| {index} | {label.replace('|', '/')} | {detail.replace('|', '/')} |"
+                  for index, label, detail in fuzz.step_failure_examples]
+        lines.append("")
     lines += ["Most frequent rejections:", "", "| reason | files |", "|---|---:|"]
     lines += [f"| {reason.replace('|', '/')} | {count} |"
               for reason, count in fuzz.rejection_reasons.most_common(15)]
