@@ -95,6 +95,8 @@ import numpy as np
 from ..errors import StepFailure
 from ..formulations import VelocityFormulation
 from ..library import FLOOR
+from ..metrics import deepest_penetration
+from ..model import Model
 from ..scene import Scene, Square
 from ..simulate import simulate
 from ..trajectory import Trajectory
@@ -102,7 +104,6 @@ from ..trajectory import Trajectory
 #: Largest relative rod-length error accepted (see the module docstring).
 ROD_DRIFT_LIMIT = 1e-6
 
-#: Absolute slack (m, J) for round-off in positions and energies of order 10 to 1e3.
 ROUND_OFF_LENGTH = 1e-9
 """Round-off floor (m) for the penetration bound: positions are O(10) m, eps 2e-16."""
 ROUND_OFF_ENERGY_RELATIVE = 1e-11
@@ -228,13 +229,14 @@ def run_bounds(trajectory: Trajectory, scene: Scene,
     total_mass = float(masses.sum())
     radius = max(s.size for s in scene.squares) / math.sqrt(2.0)
     spin, speed = _spins_and_speeds(trajectory, n)
+    depth_start = deepest_penetration(Model.from_scene(scene), trajectory.points[0])
     metrics = trajectory.metrics
     primal, dual, complementarity = (
         np.nan_to_num(metrics[column].to_numpy()[:steps], nan=1.0)
         for column in ("primal_residual", "dual_residual", "complementarity"))
     n_rows = metrics[["n_equalities", "n_inequalities"]].to_numpy().sum(axis=1)[:steps]
     n_variables = metrics["n_variables"].to_numpy()[:steps]
-    depth_measured = np.concatenate([[0.0], metrics["penetration_m"].to_numpy()[:steps]])
+    depth_measured = np.concatenate([[depth_start], metrics["penetration_m"].to_numpy()[:steps]])
 
     # the spin and speed of step k are those of the state after it (rigid_step keeps them)
     omega, velocity = spin[1:], np.maximum(speed[1:], speed[:-1])
@@ -242,7 +244,7 @@ def run_bounds(trajectory: Trajectory, scene: Scene,
     overshoot = (0.5 * dt**2 * (4.0 * omega**2 * radius + 4.0 * omega * velocity)
                  + dt * primal * primal_scale)
     penetration = np.empty(steps)
-    depth = 0.0  # generated scenes start apart
+    depth = depth_start  # 0 for scenes that start apart
     for k in range(steps):
         depth = (1.0 - beta) * depth + overshoot[k] + ROUND_OFF_LENGTH
         penetration[k] = depth
