@@ -31,8 +31,8 @@ TRAJECTORY_LISTS = ("points", "velocities", "times", "rows")
 #: exact: measured on stack-10, it counts about 130 B per step more than tracemalloc
 #: sees (Python reuses freed float objects, whose memory tracemalloc saw once), so the
 #: untracked memory drifts down slowly and a leak smaller than that can hide.  A leak of
-#: one small array per step (a 100 B object plus its data and shape) or more is caught:
-#: over the last 7500 steps of the long run it adds more than 1.5 MB.
+#: one small array per step (about 200 B with its data and shape) or more is caught: over
+#: the last 7500 steps of the long run it adds about 0.5 MB.
 MEMORY_GROWTH_LIMIT = 32 * 1024
 
 

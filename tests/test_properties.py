@@ -112,12 +112,13 @@ WEDGED_CORNER = {  # run_property_sweep(200, seed=100), scene 186
 def test_wedged_corner_is_a_known_energy_leak() -> None:
     """Known limitation, pinned: energy rises here beyond the Baumgarte bound.
 
-    A corner wedged between two faces of another square gives two penetrated rows with
-    nearly opposite normals; their Baumgarte terms carry opposing impulses of ~1e3 N s
-    and inject up to 2e-3 J per step at 1e-9 to 4e-7 m of depth, far more than pushing
-    out that depth can explain.  The run is otherwise sound (no NaN, no drift,
-    penetration within its bound).  A fix of the formulation makes this test fail: then
-    assert ``problems == []`` instead.
+    A heavy square straddling a corner of a lighter one that rests on the table: the
+    lighter one's corner penetrates the heavy one by 1e-9 to 4e-7 m and can hardly be
+    pushed out without breaking the other contacts (nearly redundant rows).  Baumgarte's
+    push-out then takes impulses of 1e2 to 4e3 N s and injects up to 2e-3 J per step,
+    far more than pushing out that depth can explain.  The run is otherwise sound (no
+    NaN, no drift, penetration within its bound).  A fix of the formulation makes this
+    test fail: then assert ``problems == []`` instead.
     """
     problems = check_scene(Scene.from_dict(WEDGED_CORNER), steps=STEPS, dt=DT)
     assert len(problems) == 1 and problems[0].startswith("energy rose by"), problems

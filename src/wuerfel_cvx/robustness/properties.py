@@ -65,14 +65,14 @@ Energy
     ``n`` stacked squares gives a velocity change ``u <= n beta P / dt`` to a total
     mass ``M`` whose corners move at most at ``V``: kinetic energy grows by at most
     ``M (V u + u^2 / 2)`` and potential energy by ``M |g| dt u``.  This assumes the
-    impulses are of the size of the momentum they change; two penetrated rows whose
-    normals nearly oppose each other (a corner wedged between two faces) can carry
-    far larger opposing impulses and inject more: such runs are reported, as they
-    should be.  (b) With relative residuals ``p`` (primal), ``d`` (dual), ``c``
-    (complementarity) as :func:`~wuerfel_cvx.solve.kkt_residuals` defines them, the
-    identity above is off by ``sum nu_i s_i`` (``s`` the rows' slack, bounded through
-    ``c`` and ``p`` times the primal scale) and by the stationarity error times ``V``;
-    bounding every dual by twice the momentum ``M (2 V + dt |g|)`` gives
+    impulses are of the size of the momentum they change; a penetrated corner that can
+    hardly be pushed out without breaking the contacts around it (nearly redundant
+    rows) takes far larger impulses and injects more: such runs are reported.
+    (b) With relative residuals ``p`` (primal), ``d`` (dual), ``c`` (complementarity)
+    as :func:`~wuerfel_cvx.solve.kkt_residuals` defines them, the identity above is off
+    by ``sum nu_i s_i`` (``s`` the rows' slack, bounded through ``c`` and ``p`` times
+    the primal scale) and by the stationarity error times ``V``; bounding every dual by
+    twice the momentum ``M (2 V + dt |g|)`` gives
     ``N_rows (c (1 + Z S) + p Z S) / 2 + N_var d (1 + Z_1) V / 2`` with ``Z`` that bound,
     ``Z_1`` the same for the heaviest square, ``S`` the primal scale.  A rise above
     (a) + (b) + round-off is a violation.  Free flight itself loses
