@@ -79,6 +79,14 @@ def test_generated_scenes_keep_the_invariants(draws: list[SquareDraw]) -> None:
     assert check_scene(scene, steps=STEPS, dt=DT) == []
 
 
+@pytest.mark.parametrize("name", ["overlap-recovery", "fast-drop", "wall-contact",
+                                  "heavy-on-light-100", "corner-drop"])
+def test_hard_library_scenes_keep_the_invariants(name: str) -> None:
+    # overlap-recovery starts 25 % overlapped: its penetration bound starts at that depth
+
+    assert check_scene(Scene.named(name), steps=STEPS, dt=DT) == []
+
+
 # Scenes found by sweeps and hypothesis, pinned.  Each is a concrete scene in the file
 # schema; the comment says what it found.
 WEDGED_CORNER = {  # run_property_sweep(200, seed=100), scene 186
