@@ -40,10 +40,13 @@ Penetration
         eps_k = dt^2 / 2 (4 Omega^2 R + 4 Omega V) + dt * s_k
 
     where ``s_k`` is the contact-rate error the residual check admits (``s_k = r_k
-    (1 + 6 V + margin / dt + dt |g|)`` with ``r_k`` the step's relative primal residual
-    and the bracket the primal scale of :func:`~wuerfel_cvx.solve.kkt_residuals`, whose
-    contact rows have unit-normal gradients).  The depth measured after the step is at
-    most that of the matched edge, so the recursion bounds the metric.  This is the
+    (1 + 6 V + margin / dt + 2 dt |g|)`` with ``r_k`` the step's relative primal
+    residual and the bracket a bound on the primal scale of
+    :func:`~wuerfel_cvx.solve.kkt_residuals`: right-hand sides ``|d| / dt`` with ``|d|``
+    within the two bodies' reach ``margin + dt (2 V + 2 dt |g|)``, and rows ``|G v+| <=
+    3 V``, the gradient of a distance being a unit normal split over three points).
+    The depth measured after the step is at most that of the matched edge, so the
+    recursion bounds the metric.  This is the
     ``(omega dt)^2 r / 2`` of the README's "Known limitations", with the edge's own
     spin and the Coriolis term included; for a body at rest or sliding without spin
     the bound is the solver's tolerance alone.
@@ -240,7 +243,7 @@ def run_bounds(trajectory: Trajectory, scene: Scene,
 
     # the spin and speed of step k are those of the state after it (rigid_step keeps them)
     omega, velocity = spin[1:], np.maximum(speed[1:], speed[:-1])
-    primal_scale = 1.0 + 6.0 * velocity + scheme.contact_margin / dt + dt * gravity
+    primal_scale = 1.0 + 6.0 * velocity + scheme.contact_margin / dt + 2.0 * dt * gravity
     overshoot = (0.5 * dt**2 * (4.0 * omega**2 * radius + 4.0 * omega * velocity)
                  + dt * primal * primal_scale)
     penetration = np.empty(steps)
