@@ -40,26 +40,46 @@ Penetration
         eps_k = dt^2 / 2 (4 Omega^2 R + 4 Omega V) + dt * s_k
 
     where ``s_k`` is the contact-rate error the residual check admits (``s_k = r_k
-    (1 + 6 V + margin / dt + dt |g|)`` with ``r_k`` the step's relative primal residual
-    and the bracket the primal scale of :func:`~wuerfel_cvx.solve.kkt_residuals`, whose
-    contact rows have unit-normal gradients).  The depth measured after the step is at
-    most that of the matched edge, so the recursion bounds the metric.  This is the
+    (1 + 6 V + margin / dt + 2 dt |g|)`` with ``r_k`` the step's relative primal
+    residual and the bracket a bound on the primal scale of
+    :func:`~wuerfel_cvx.solve.kkt_residuals`: right-hand sides ``|d| / dt`` with ``|d|``
+    within the two bodies' reach ``margin + dt (2 V + 2 dt |g|)``, and rows ``|G v+| <=
+    3 V``, the gradient of a distance being a unit normal split over three points).
+    The depth measured after the step is at most that of the matched edge, so the
+    recursion bounds the metric.  This is the
     ``(omega dt)^2 r / 2`` of the README's "Known limitations", with the edge's own
     spin and the Coriolis term included; for a body at rest or sliding without spin
     the bound is the solver's tolerance alone.
 
 Energy
-    Frictionless contacts with restitution 0 do no positive work: the total energy
-    (kinetic plus potential) of a step can only fall, except by (a) Baumgarte pushing a
-    penetrated corner out and (b) the solver's inexactness.  (a) A depth ``P`` pushed
-    out at rate ``beta / dt`` through at most ``n`` stacked squares gives a velocity
-    change ``u <= n beta P / dt`` to a total mass ``M``: kinetic energy grows by at most
-    ``M (V u + u^2 / 2)`` and potential energy by ``M |g| dt u``.  (b) A solution whose
-    relative residual is ``r`` is off by about ``r (1 + V)`` in velocity, amplified by
-    the mass ratio of the weighted objective: energy error ``<= M (V + dt |g|) r (1 + V)
-    m_max / m_min``.  A rise above the sum of (a), (b) and round-off is a violation.
-    Free flight itself loses ``M |g|^2 dt^2 / 2`` per step (semi-implicit Euler), which
-    is not credited.
+    With ``w = v + dt g`` and the step's multipliers ``nu`` (impulses: the objective has
+    no 1/2, so they are half the QP's duals), stationarity gives
+    ``M (v+ - w) = J^T nu``, and with complementarity ``nu . J v+ = nu . h`` the energy
+    change of a step (kinetic ``|v|_M^2 / 2`` plus potential ``-M g . p``; the centres
+    move by ``dt`` times the mean corner velocity) is, in the mass norm::
+
+        E+ - E = nu . h - |v+ - v|_M^2 / 2
+
+    (checked against the QP's own duals in ``tests/test_properties.py``).  Speculative
+    rows have ``h <= 0`` and ``nu >= 0``, rods have ``h = 0`` to round-off: frictionless
+    contacts with restitution 0 do no positive work, and energy only falls, except
+    (a) through Baumgarte rows (``h = beta depth / dt > 0``) and (b) the solver's
+    inexactness.  (a) A depth ``P`` pushed out at rate ``beta / dt`` through at most
+    ``n`` stacked squares gives a velocity change ``u <= n beta P / dt`` to a total
+    mass ``M`` whose corners move at most at ``V``: kinetic energy grows by at most
+    ``M (V u + u^2 / 2)`` and potential energy by ``M |g| dt u``.  This assumes the
+    impulses are of the size of the momentum they change; a penetrated corner that can
+    hardly be pushed out without breaking the contacts around it (nearly redundant
+    rows) takes far larger impulses and injects more: such runs are reported.
+    (b) With relative residuals ``p`` (primal), ``d`` (dual), ``c`` (complementarity)
+    as :func:`~wuerfel_cvx.solve.kkt_residuals` defines them, the identity above is off
+    by ``sum nu_i s_i`` (``s`` the rows' slack, bounded through ``c`` and ``p`` times
+    the primal scale) and by the stationarity error times ``V``; bounding every dual by
+    twice the momentum ``M (2 V + dt |g|)`` gives
+    ``N_rows (c (1 + Z S) + p Z S) / 2 + N_var d (1 + Z_1) V / 2`` with ``Z`` that bound,
+    ``Z_1`` the same for the heaviest square, ``S`` the primal scale.  A rise above
+    (a) + (b) + round-off is a violation.  Free flight itself loses
+    ``M |g|^2 dt^2 / 2`` per step (semi-implicit Euler), which is not credited.
 
 :func:`run_property_sweep` runs many generated scenes through :func:`check_run` and
 collects what fails, for the robustness report.
@@ -78,6 +98,8 @@ import numpy as np
 from ..errors import StepFailure
 from ..formulations import VelocityFormulation
 from ..library import FLOOR
+from ..metrics import deepest_penetration
+from ..model import Model
 from ..scene import Scene, Square
 from ..simulate import simulate
 from ..trajectory import Trajectory
@@ -85,7 +107,6 @@ from ..trajectory import Trajectory
 #: Largest relative rod-length error accepted (see the module docstring).
 ROD_DRIFT_LIMIT = 1e-6
 
-#: Absolute slack (m, J) for round-off in positions and energies of order 10 to 1e3.
 ROUND_OFF_LENGTH = 1e-9
 """Round-off floor (m) for the penetration bound: positions are O(10) m, eps 2e-16."""
 ROUND_OFF_ENERGY_RELATIVE = 1e-11
@@ -209,30 +230,38 @@ def run_bounds(trajectory: Trajectory, scene: Scene,
     gravity = float(np.hypot(*scene.gravity))
     masses = np.array([s.mass for s in scene.squares])
     total_mass = float(masses.sum())
-    mass_ratio = float(masses.max() / masses.min())
     radius = max(s.size for s in scene.squares) / math.sqrt(2.0)
     spin, speed = _spins_and_speeds(trajectory, n)
+    depth_start = deepest_penetration(Model.from_scene(scene), trajectory.points[0])
     metrics = trajectory.metrics
-    residual = np.nan_to_num(
-        metrics[["primal_residual", "dual_residual", "complementarity"]].to_numpy()
-        .max(axis=1)[:steps], nan=1.0)
-    primal = np.nan_to_num(metrics["primal_residual"].to_numpy()[:steps], nan=1.0)
-    depth_measured = np.concatenate([[0.0], metrics["penetration_m"].to_numpy()[:steps]])
+    primal, dual, complementarity = (
+        np.nan_to_num(metrics[column].to_numpy()[:steps], nan=1.0)
+        for column in ("primal_residual", "dual_residual", "complementarity"))
+    n_rows = metrics[["n_equalities", "n_inequalities"]].to_numpy().sum(axis=1)[:steps]
+    n_variables = metrics["n_variables"].to_numpy()[:steps]
+    depth_measured = np.concatenate([[depth_start], metrics["penetration_m"].to_numpy()[:steps]])
 
     # the spin and speed of step k are those of the state after it (rigid_step keeps them)
     omega, velocity = spin[1:], np.maximum(speed[1:], speed[:-1])
-    rate_error = primal * (1.0 + 6.0 * velocity + scheme.contact_margin / dt + dt * gravity)
-    overshoot = 0.5 * dt**2 * (4.0 * omega**2 * radius + 4.0 * omega * velocity) + dt * rate_error
+    primal_scale = 1.0 + 6.0 * velocity + scheme.contact_margin / dt + 2.0 * dt * gravity
+    overshoot = (0.5 * dt**2 * (4.0 * omega**2 * radius + 4.0 * omega * velocity)
+                 + dt * primal * primal_scale)
     penetration = np.empty(steps)
-    depth = 0.0  # generated scenes start apart
+    depth = depth_start  # 0 for scenes that start apart
     for k in range(steps):
         depth = (1.0 - beta) * depth + overshoot[k] + ROUND_OFF_LENGTH
         penetration[k] = depth
 
     push = n * beta * depth_measured[:steps] / dt  # Baumgarte push-out speed (m/s)
     baumgarte = total_mass * (velocity * push + 0.5 * push**2 + gravity * dt * push)
-    inexact = (total_mass * (velocity + dt * gravity) * residual * (1.0 + velocity)
-               * mass_ratio)
+    # multipliers are twice the impulses (objective without 1/2); an impulse is at most
+    # the momentum that stops or reverses the whole scene, or one square for the
+    # stationarity terms
+    impulse_total = 2.0 * total_mass * (2.0 * velocity + dt * gravity)
+    impulse_square = 2.0 * masses.max() * (2.0 * velocity + dt * gravity)
+    inexact = (0.5 * n_rows * (complementarity * (1.0 + impulse_total * primal_scale)
+                               + primal * impulse_total * primal_scale)
+               + 0.5 * n_variables * dual * (1.0 + impulse_square) * velocity)
     energy = metrics["total_energy_J"].to_numpy()
     scale = max(1.0, float(np.nanmax(np.abs(energy))) if energy.size else 1.0)
     energy_rise = baumgarte + inexact + ROUND_OFF_ENERGY_RELATIVE * scale
