@@ -3,6 +3,7 @@
 ``wuerfel-cvx simulate SCENE ...`` runs a simulation and prints a summary;
 ``wuerfel-cvx bench --suite NAME`` runs a benchmark suite into a results CSV and
 ``wuerfel-cvx report RESULTS.csv`` turns one into ``reports/<suite>/README.md``;
+``wuerfel-cvx robustness`` writes ``reports/robustness.md``;
 ``wuerfel-cvx scenes`` lists the named scenes; ``wuerfel-cvx solvers`` lists the
 installed solvers.  Bad input ends with one line on standard error and exit status 2;
 a failed step ends with status 1 after saving the trajectory computed so far.
@@ -43,6 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help=f"tolerance preset ({', '.join(TOLERANCE_PRESETS)}) or a number")
     run.add_argument("--table-mass", type=float, default=None,
                      help="seed variant: table corners as variables of this mass (kg)")
+    run.add_argument("--fallback", action="append", default=[], metavar="NAME",
+                     help="solver to retry a failed step with (repeatable; the metrics "
+                          "record it in 'solver' and the failed status in 'primary_status')")
     run.add_argument("--sleep", action="store_true",
                      help="let islands at rest sleep (left out of the QP until touched)")
     run.add_argument("--out", default=None,
@@ -73,6 +77,19 @@ def build_parser() -> argparse.ArgumentParser:
                         help="scene of the large speed/accuracy plot (default: the scene "
                              "with the most points)")
 
+    robust = commands.add_parser(
+        "robustness", help="generated scenes, fuzzed scene files and solver faults "
+                           "-> reports/robustness.md")
+    robust.add_argument("--scenes", type=int, default=200,
+                        help="random valid scenes to simulate and check (default 200)")
+    robust.add_argument("--fuzz", type=int, default=2000,
+                        help="mutated scene files to load and step (default 2000)")
+    robust.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    robust.add_argument("--steps", type=int, default=200,
+                        help="steps per generated scene (default 200)")
+    robust.add_argument("--out", default="reports/robustness.md",
+                        help="report file (default reports/robustness.md)")
+
     commands.add_parser("scenes", help="list the named scenes")
     commands.add_parser("solvers", help="list the installed solvers")
     return parser
@@ -95,6 +112,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _bench(args)
         if args.command == "report":
             return _report(args)
+        if args.command == "robustness":
+            return _robustness(args, argv)
         return _simulate(args)
     except InputError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
@@ -111,7 +130,8 @@ def _simulate(args: argparse.Namespace) -> int:
         trajectory = simulate(args.scene, dt=args.dt, steps=args.steps, solver=args.solver,
                               formulation=args.formulation, tol=args.tol,
                               table_mass=args.table_mass, progress=progress,
-                              sleep=SleepSettings() if args.sleep else None)
+                              sleep=SleepSettings() if args.sleep else None,
+                              fallback=args.fallback)
     except StepFailure as failure:
         print(f"{PROG}: {failure}", file=sys.stderr)
         if args.out and failure.trajectory is not None:
@@ -120,6 +140,11 @@ def _simulate(args: argparse.Namespace) -> int:
                   file=sys.stderr)
         return 1
     print(trajectory.summary())
+    rescued = trajectory.metrics["status"] != trajectory.metrics["primary_status"]
+    if rescued.any():
+        print(f"fallback             {int(rescued.sum())} steps solved by "
+              f"{', '.join(sorted(set(trajectory.metrics['solver'][rescued])))} after "
+              f"{trajectory.info['solver']} failed")
     if args.out:
         path = _save(trajectory, args.out)
         print(f"saved {path} and {trajectory.metrics_path(path)}")
@@ -147,6 +172,22 @@ def _report(args: argparse.Namespace) -> int:
     from .bench.report import write_report
 
     path = write_report(args.results, args.root, headline=args.headline)
+    print(f"wrote {path}")
+    return 0
+
+
+def _robustness(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
+    from .robustness.report import write_robustness_report
+
+    for name in ("scenes", "fuzz", "steps"):
+        if getattr(args, name) < 0:
+            raise InputError(f"must be a non-negative integer, got {getattr(args, name)}",
+                             field=f"--{name}")
+    words = sys.argv[1:] if argv is None else list(argv)
+    path = write_robustness_report(
+        Path(args.out), args.scenes, args.fuzz, args.seed, steps=args.steps,
+        command=" ".join([PROG, *words]),
+        say=lambda text: print(text, file=sys.stderr))
     print(f"wrote {path}")
     return 0
 

@@ -21,11 +21,15 @@ every key but ``center`` has a default)::
     angular_velocity = 0.0    # rad/s
 
 Loading never executes or unpickles anything: it is :mod:`tomllib` and checks.
+Every number must be finite and within the ranges of :data:`LIMITS`, so that the
+geometry and the step QPs built from a scene that loads stay finite.
 """
 
 from __future__ import annotations
 
+import json
 import math
+import re
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -33,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .errors import InputError
 from .geometry import FloatArray, polygon_overlap_depth, rectangle_corners, rot90, square_corners
@@ -43,6 +48,36 @@ Vec2 = tuple[float, float]
 OVERLAP_TOLERANCE = 1e-6
 
 DEFAULT_GRAVITY: Vec2 = (0.0, -9.81)
+
+
+@dataclass(frozen=True)
+class Limit:
+    """The accepted range of one kind of quantity in a scene."""
+
+    largest: float
+    """Largest magnitude accepted (in ``unit``)."""
+    smallest: float = 0.0
+    """Smallest magnitude accepted for a positive quantity (0: none)."""
+    unit: str = ""
+
+
+LIMITS: dict[str, Limit] = {
+    # Coordinates and lengths: the geometry squares them (rod errors, signed areas), so
+    # 1e308 overflows to inf and 1e-308 underflows to 0.  Within 1e6 m the spacing of
+    # doubles (1.2e-10 m) is far below the overlap tolerance (1e-6 m), which is also
+    # the smallest side that can be told apart from touching.
+    "position": Limit(1e6, unit="m"),
+    "length": Limit(1e6, smallest=OVERLAP_TOLERANCE, unit="m"),
+    # Masses become the QP's weights; 1e6 kg to 1e-6 kg keeps their ratio (1e12) within
+    # what the solvers' scaling handles and the KKT residuals can check.
+    "mass": Limit(1e6, smallest=1e-6, unit="kg"),
+    # Speeds and gravity set the contact reach (dt |v| + dt^2 |g|) and the QP's target.
+    "speed": Limit(1e6, unit="m/s"),
+    "angular_speed": Limit(1e6, unit="rad/s"),
+    "acceleration": Limit(1e6, unit="m/s^2"),
+}
+"""Ranges of the numbers in a scene; beyond them a step's data is no longer finite or
+meaningful, so such a scene is an :class:`InputError` rather than a failed step."""
 
 
 @dataclass(frozen=True)
@@ -129,6 +164,9 @@ class Scene:
             raise InputError("not UTF-8 text", source=source) from None
         except tomllib.TOMLDecodeError as exc:
             raise InputError(f"malformed TOML ({exc})", source=source) from None
+        except RecursionError:  # tomllib parses nested arrays and tables recursively
+            raise InputError("malformed TOML (arrays or tables nested too deeply)",
+                             source=source) from None
         return cls.from_dict(data, source=source)
 
     @classmethod
@@ -201,7 +239,11 @@ def _number(value: Any, source: str, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise InputError(f"expected a number, got {type(value).__name__}", source=source,
                          field=where)
-    number = float(value)
+    try:
+        number = float(value)
+    except OverflowError:  # TOML integers have no size limit in tomllib
+        raise InputError(f"out of range, got an integer of {len(str(value))} digits",
+                         source=source, field=where) from None
     if not math.isfinite(number):
         raise InputError(f"must be finite, got {value}", source=source, field=where)
     return number
@@ -212,6 +254,25 @@ def _positive(value: Any, source: str, where: str) -> float:
     if number <= 0.0:
         raise InputError(f"must be positive, got {value}", source=source, field=where)
     return number
+
+
+def _within(value: float, kind: str, source: str, where: str) -> None:
+    """Check ``value`` against ``LIMITS[kind]``."""
+    limit = LIMITS[kind]
+    unit = f" {limit.unit}" if limit.unit else ""
+    if abs(value) > limit.largest:
+        raise InputError(f"out of range: magnitude at most {limit.largest:g}{unit}, "
+                         f"got {value:g}", source=source, field=where)
+    if abs(value) < limit.smallest:
+        raise InputError(f"out of range: at least {limit.smallest:g}{unit}, got {value:g}",
+                         source=source, field=where)
+
+
+def _vector_within(value: Any, kind: str, source: str, where: str) -> Vec2:
+    vector = _vector(value, source, where)
+    for axis, component in enumerate(vector):
+        _within(component, kind, source, f"{where}[{axis}]")
+    return vector
 
 
 def _vector(value: Any, source: str, where: str) -> Vec2:
@@ -226,11 +287,25 @@ def _table_of(value: Any, source: str, where: str, keys: set[str]) -> Mapping[st
                          field=where)
     unknown = sorted(set(value) - keys)
     if unknown:
+        key = _printable_key(unknown[0])
         raise InputError(
-            f"unknown key '{unknown[0]}' (allowed: {', '.join(sorted(keys))})",
-            source=source, field=f"{where}.{unknown[0]}" if where else unknown[0],
+            f"unknown key '{unknown[0]}' (allowed: {', '.join(sorted(keys))})"
+            if key == unknown[0] else
+            f"unknown key {key} (allowed: {', '.join(sorted(keys))})",
+            source=source, field=f"{where}.{key}" if where else key,
         )
     return value
+
+
+def _printable_key(key: str) -> str:
+    """``key`` as written, or quoted with escapes if it is not a bare TOML key.
+
+    An empty key, spaces, or invisible characters (a right-to-left override, a BOM)
+    would make the error line blank, confusing or scrambled.
+    """
+    if re.fullmatch(r"[A-Za-z0-9_-]+", key):
+        return key
+    return json.dumps(key, ensure_ascii=not key.isprintable())
 
 
 def _list_of_tables(data: Mapping[str, Any], key: str, source: str) -> list[Any]:
@@ -292,46 +367,69 @@ def _check_scene(scene: Scene) -> None:
     source = scene.source
     if not scene.squares:
         raise InputError("a scene needs at least one square", source=source, field="squares")
-    _vector(list(scene.gravity), source, "gravity")
+    _vector_within(list(scene.gravity), "acceleration", source, "gravity")
     for index, sq in enumerate(scene.squares):
         where = f"squares[{index}]"
         if not isinstance(sq, Square):
             raise InputError(f"expected a Square, got {type(sq).__name__}", source=source,
                              field=where)
-        _vector(list(sq.center), source, f"{where}.center")
-        _vector(list(sq.velocity), source, f"{where}.velocity")
+        _vector_within(list(sq.center), "position", source, f"{where}.center")
+        _vector_within(list(sq.velocity), "speed", source, f"{where}.velocity")
         _number(sq.angle, source, f"{where}.angle")
-        _number(sq.angular_velocity, source, f"{where}.angular_velocity")
-        _positive(sq.size, source, f"{where}.size")
-        _positive(sq.mass, source, f"{where}.mass")
+        _within(_number(sq.angular_velocity, source, f"{where}.angular_velocity"),
+                "angular_speed", source, f"{where}.angular_velocity")
+        _within(_positive(sq.size, source, f"{where}.size"), "length", source,
+                f"{where}.size")
+        _within(_positive(sq.mass, source, f"{where}.mass"), "mass", source, f"{where}.mass")
     for index, tb in enumerate(scene.tables):
         where = f"tables[{index}]"
         if not isinstance(tb, Table):
             raise InputError(f"expected a Table, got {type(tb).__name__}", source=source,
                              field=where)
-        _vector(list(tb.center), source, f"{where}.center")
+        _vector_within(list(tb.center), "position", source, f"{where}.center")
         _number(tb.angle, source, f"{where}.angle")
         for axis, value in enumerate(_vector(list(tb.size), source, f"{where}.size")):
-            _positive(value, source, f"{where}.size[{axis}]")
+            _within(_positive(value, source, f"{where}.size[{axis}]"), "length", source,
+                    f"{where}.size[{axis}]")
     if not scene.allow_overlap:
         _check_no_overlap(scene)
 
 
 def _check_no_overlap(scene: Scene) -> None:
-    polygons = [(f"squares[{i}]", s.corners(), s.size / math.sqrt(2))
-                for i, s in enumerate(scene.squares)]
-    bodies = polygons + [(f"tables[{j}]", t.corners(), math.hypot(*t.size) / 2)
-                         for j, t in enumerate(scene.tables)]
-    centers = np.array([poly.mean(axis=0) for _, poly, _ in bodies])
-    for a, (name_a, poly_a, radius_a) in enumerate(polygons):
-        for b in range(a + 1, len(bodies)):
-            name_b, poly_b, radius_b = bodies[b]
-            if np.linalg.norm(centers[a] - centers[b]) > radius_a + radius_b:
-                continue
-            depth = polygon_overlap_depth(poly_a, poly_b)
-            if depth > OVERLAP_TOLERANCE:
-                raise InputError(
-                    f"overlaps {name_b} by {depth:.3g} m at the start "
-                    "(set allow_overlap = true to permit it)",
-                    source=scene.source, field=name_a,
-                )
+    """Raise for the first overlapping pair (squares first, then tables, in index order).
+
+    A :class:`~scipy.spatial.cKDTree` on the square centres and one distance test per
+    table keep only pairs whose bounding circles meet, so a scene of thousands of
+    squares loads in well under a second instead of testing every pair.
+    """
+    names = ([f"squares[{i}]" for i in range(scene.n_squares)]
+             + [f"tables[{j}]" for j in range(len(scene.tables))])
+    polygons = [s.corners() for s in scene.squares] + [t.corners() for t in scene.tables]
+    for a, b in _candidate_pairs(scene):
+        depth = polygon_overlap_depth(polygons[a], polygons[b])
+        if depth > OVERLAP_TOLERANCE:
+            raise InputError(
+                f"overlaps {names[b]} by {depth:.3g} m at the start "
+                "(set allow_overlap = true to permit it)",
+                source=scene.source, field=names[a],
+            )
+
+
+def _candidate_pairs(scene: Scene) -> list[tuple[int, int]]:
+    """Body pairs ``(a, b)``, ``a`` a square and ``a < b``, whose bounding circles meet.
+
+    Bodies are numbered squares first, then tables; pairs come sorted.
+    """
+    n = scene.n_squares
+    centers = np.array([s.center for s in scene.squares], dtype=np.float64)
+    radii = np.array([s.size for s in scene.squares]) / math.sqrt(2)
+    found = cKDTree(centers).query_pairs(2.0 * float(radii.max()), output_type="ndarray")
+    first, second = found[:, 0], found[:, 1]
+    near = (np.linalg.norm(centers[first] - centers[second], axis=1)
+            <= radii[first] + radii[second])
+    pairs = {(int(a), int(b)) for a, b in np.sort(found[near], axis=1)}
+    for j, table in enumerate(scene.tables):
+        reach = radii + math.hypot(*table.size) / 2
+        touching = np.linalg.norm(centers - np.asarray(table.center), axis=1) <= reach
+        pairs.update((int(a), n + j) for a in np.flatnonzero(touching))
+    return sorted(pairs)

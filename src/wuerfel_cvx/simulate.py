@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from importlib.metadata import version
 from pathlib import Path
 from typing import Any
@@ -22,12 +22,13 @@ from .metrics import deepest_penetration, kinetic_energy, potential_energy, rod_
 from .model import IntArray, Model, State
 from .scene import Scene
 from .sleep import SleepSettings, SleepTracker, island_labels, island_members
-from .solve import SOLVED, Residuals, StepSolution, solve_step_qp
+from .solve import INVALID_DATA, SOLVED, Residuals, StepSolution, solve_step_qp
 from .solvers import get_solver, tolerance_value
 from .trajectory import Trajectory
 
 METRIC_COLUMNS = (
-    "step", "time_s", "solver", "status", "verified", "n_variables", "n_equalities",
+    "step", "time_s", "solver", "status", "primary_status", "verified", "n_variables",
+    "n_equalities",
     "n_inequalities", "n_contacts", "build_time_s", "solve_time_s", "solver_time_s",
     "step_time_s",
     "iterations", "primal_residual", "dual_residual", "complementarity", "rod_drift",
@@ -40,7 +41,15 @@ METRIC_COLUMNS = (
 ``step_time_s`` the whole step: islands and sleep if on, build, solve, check and advance
 (all in s).  The row's own diagnostics (rod drift, penetration, energies) are measured
 after ``step_time_s`` and are not part of it.
+``solver`` and ``status`` are those of the solver that produced the step;
+``primary_status`` is the run's own solver's status on it, which differs only when that
+solver failed and a ``fallback`` solver took over.
 """
+
+DT_RANGE = (1e-6, 100.0)
+"""Accepted time steps (s).  Baumgarte's ``beta / dt`` turns round-off in rod lengths
+into speed: stack-3 at rest gains 3e-8 J in 3 steps of 1e-6 s, 1.5e-6 J at 1e-14 s, and
+the tilted drop 9e6 J at 1e-300 s; a step of 1e300 s overflows the contact reach."""
 
 ASLEEP = "asleep"
 """Status of a step in which every island slept: no QP was solved, nothing moved.  Its
@@ -80,6 +89,7 @@ def simulate(
     compiled: bool = True,
     sleep: SleepSettings | None = None,
     islands: bool = False,
+    fallback: Sequence[str] = (),
 ) -> Trajectory:
     """Simulate ``steps`` steps of ``dt`` seconds, one QP per step.
 
@@ -124,21 +134,31 @@ def simulate(
         for the trade-off).  Same model; answers agree to solver tolerance.  A step's
         metrics row then sums sizes and times over the islands and takes the worst
         residuals and status; ``observer`` is called once per island QP.
+    fallback:
+        Solvers to try, in order, on a step that ``solver`` fails (a status other than
+        optimal, non-finite or unusable data, an exception).  The step's metrics row then
+        names the solver that succeeded in ``solver`` and keeps the failed status in
+        ``primary_status``.  Only when every solver fails does the run stop.
 
     Raises
     ------
     InputError
         For a bad argument.
     StepFailure
-        When a step cannot be solved; its ``trajectory`` holds the steps before it.
+        When a step cannot be solved (by ``solver`` nor any ``fallback``); its
+        ``trajectory`` holds the steps before it.
 
     """
     scene = resolve_scene(scene)
     if not (isinstance(dt, int | float) and math.isfinite(dt) and dt > 0):
         raise InputError(f"must be a positive finite number of seconds, got {dt}", field="dt")
+    if not DT_RANGE[0] <= dt <= DT_RANGE[1]:
+        raise InputError(f"must be between {DT_RANGE[0]:g} and {DT_RANGE[1]:g} s, got {dt:g}",
+                         field="dt")
     if isinstance(steps, bool) or not isinstance(steps, int | np.integer) or steps < 0:
         raise InputError(f"must be a non-negative integer, got {steps}", field="steps")
     spec = get_solver(solver)
+    solver_chain = [spec.name] + [get_solver(name).name for name in fallback]
     tolerance_value(tol)
     scheme = get_formulation(formulation)
     model = Model.from_scene(scene, table_mass=table_mass, extra_rod=extra_rod)
@@ -152,6 +172,7 @@ def simulate(
     info = {
         "scene": scene.name, "formulation": scheme.name, "solver": spec.name, "tol": str(tol),
         "dt": float(dt), "steps": int(steps), "table_mass": table_mass, "extra_rod": extra_rod,
+        "fallback": solver_chain[1:],
         "versions": _versions(spec.cvxpy_name),
         "compiled_structures": 0, "steps_reusing_a_compiled_structure": 0,
     }
@@ -196,6 +217,7 @@ def simulate(
             elif asleep.any():
                 groups = [np.flatnonzero(~asleep)]
         solved: list[tuple[IntArray | None, StepQP, StepSolution, State]] = []
+        primary_statuses: list[str] = []
         build_time, mark = 0.0, started
         for squares in groups:
             part_model, part_state = ((model, state) if squares is None else
@@ -203,12 +225,14 @@ def simulate(
             qp = scheme.build(part_model, part_state, float(dt))
             build_time += time.perf_counter() - mark
             try:
-                solution = solve_step_qp(qp, spec.name, tol, step=step, cache=cache)
+                solution, primary_status = _solve_with_fallback(qp, solver_chain, tol, step,
+                                                                cache)
             except StepFailure as failure:
                 failure.trajectory = trajectory()
                 raise
             moved = scheme.advance(part_model, part_state, solution.x, float(dt))
             solved.append((squares, qp, solution, moved))
+            primary_statuses.append(primary_status)
             mark = time.perf_counter()
         state = solved[0][3] if groups[0] is None else _merge(
             state, [(squares, moved) for squares, _, _, moved in solved if squares is not None])
@@ -228,7 +252,8 @@ def simulate(
                                  sum(qp.n_equalities for qp in qps),
                                  sum(qp.n_inequalities for qp in qps),
                                  sum(len(qp.contacts) for qp in qps), step, float(dt),
-                                 build_time, step_time, _combined(solutions)))
+                                 build_time, step_time, _combined(solutions),
+                                 _combined_primary_status(solutions, primary_statuses)))
         if observer is not None:
             try:
                 for qp, solution in zip(qps, solutions, strict=True):
@@ -256,6 +281,32 @@ def _island_reach(scheme: Formulation, model: Model, state: State, dt: float) ->
     return np.maximum(reach, np.asarray(own(model, state, dt), dtype=np.float64))
 
 
+def _solve_with_fallback(qp: StepQP, solvers: Sequence[str], tol: str | float, step: int,
+                         cache: CompiledQPCache | None) -> tuple[StepSolution, str]:
+    """Solve with ``solvers[0]``, on failure with the next; the solution and first status.
+
+    Raises the first solver's :class:`StepFailure`, its detail extended by what each
+    fallback gave, when every solver fails.
+    """
+    failures: list[StepFailure] = []
+    for name in solvers:
+        try:
+            solution = solve_step_qp(qp, name, tol, step=step, cache=cache)
+        except StepFailure as failure:
+            if failure.status == INVALID_DATA:  # the same data would fail every solver
+                raise
+            failures.append(failure)
+            continue
+        return solution, failures[0].status if failures else solution.status
+    first = failures[0]
+    if len(failures) == 1:
+        raise first
+    then = [f"then {f.solver} failed with '{f.status}'" + (f" ({f.detail})" if f.detail else "")
+            for f in failures[1:]]
+    raise StepFailure(step, first.solver, first.status,
+                      "; ".join(([first.detail] if first.detail else []) + then)) from first
+
+
 def _restrict(state: State, squares: IntArray) -> State:
     corners = (4 * squares[:, None] + np.arange(4)).ravel()
     return State(state.points[corners], state.velocities[corners])
@@ -276,13 +327,15 @@ def _combined(solutions: list[StepSolution]) -> StepSolution:
     """One step's solutions (one per island) as one solution.
 
     The worst residuals and status (an inaccurate optimum if any), summed times, the most
-    iterations any island took, and the unknowns one after another.
+    iterations any island took, the unknowns one after another, and the solvers that
+    produced them (``"OSQP+CLARABEL"`` when a fallback solved some islands).
     """
     if len(solutions) == 1:
         return solutions[0]
     statuses = [solution.status for solution in solutions]
     return StepSolution(
-        x=np.concatenate([solution.x for solution in solutions]), solver=solutions[0].solver,
+        x=np.concatenate([solution.x for solution in solutions]),
+        solver="+".join(dict.fromkeys(solution.solver for solution in solutions)),
         status=SOLVED[1] if SOLVED[1] in statuses else statuses[0],
         residuals=Residuals(*(max(getattr(solution.residuals, name) for solution in solutions)
                               for name in ("primal", "dual", "complementarity"))),
@@ -290,6 +343,15 @@ def _combined(solutions: list[StepSolution]) -> StepSolution:
         solve_wall_time=sum(solution.solve_wall_time for solution in solutions),
         solver_time=float(sum(solution.solver_time for solution in solutions)),
         iterations=max(solution.iterations for solution in solutions))
+
+
+def _combined_primary_status(solutions: list[StepSolution], primary_statuses: list[str]) -> str:
+    """The step's ``primary_status``: the first failed status of the run's own solver on
+    any island QP, else the combined status (see :func:`_combined`)."""
+    for solution, primary in zip(solutions, primary_statuses, strict=True):
+        if primary != solution.status:  # a fallback solver took over this island
+            return primary
+    return _combined(solutions).status
 
 
 def _asleep_row(model: Model, state: State, step: int, dt: float,
@@ -304,11 +366,13 @@ def _asleep_row(model: Model, state: State, step: int, dt: float,
 
 def _metrics_row(model: Model, state: State, n_var: int, n_eq: int, n_in: int,
                  n_contacts: int, step: int, dt: float, build_time: float,
-                 step_time: float, solution: StepSolution) -> dict[str, Any]:
+                 step_time: float, solution: StepSolution,
+                 primary_status: str | None = None) -> dict[str, Any]:
     kinetic = kinetic_energy(model, state)
     potential = potential_energy(model, state)
     return {
         "step": step, "time_s": step * dt, "solver": solution.solver, "status": solution.status,
+        "primary_status": solution.status if primary_status is None else primary_status,
         "verified": solution.verified, "n_variables": n_var, "n_equalities": n_eq,
         "n_inequalities": n_in, "n_contacts": n_contacts, "build_time_s": build_time,
         "solve_time_s": solution.solve_wall_time, "solver_time_s": solution.solver_time,

@@ -13,6 +13,7 @@ when all three are below ``VERIFY_FACTOR * eps``.
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -34,6 +35,9 @@ VERIFY_FACTOR = 100.0
 
 SOLVED = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
 
+INVALID_DATA = "invalid_data"
+"""Status of a step whose QP data holds NaN or inf: no solver is called."""
+
 
 @dataclass(frozen=True)
 class Residuals:
@@ -44,8 +48,9 @@ class Residuals:
     complementarity: float
 
     def worst(self) -> float:
-        """The largest of the three."""
-        return max(self.primal, self.dual, self.complementarity)
+        """The largest of the three; ``inf`` if any is NaN (``max`` would skip it)."""
+        values = (self.primal, self.dual, self.complementarity)
+        return math.inf if any(math.isnan(v) for v in values) else max(values)
 
 
 @dataclass(frozen=True)
@@ -95,7 +100,8 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     With a ``cache``, a QP whose structure repeats is solved through its compiled,
     parametrised problem (:mod:`wuerfel_cvx.compiled`); without, it is declared afresh.
 
-    Raises :class:`StepFailure` (with ``step``) if the solver raises, reports a status
+    Raises :class:`StepFailure` (with ``step``) if the QP's data is not finite (status
+    ``invalid_data``, before any solver runs), if the solver raises, reports a status
     other than optimal, returns non-finite numbers, or claims an inaccurate optimum
     that fails the residual check.  A claimed optimum that fails the check is
     returned with ``verified=False`` for the caller to record.
@@ -103,9 +109,13 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     spec = get_solver(solver)
     eps = tolerance_value(tol)
     options = spec.options(eps)
+    bad_data = _non_finite_data(qp)
+    if bad_data:  # no solver is handed NaN or inf (some would panic or return garbage)
+        raise StepFailure(step, spec.name, INVALID_DATA, f"non-finite {bad_data}")
     started = time.perf_counter()
-    direct = cache.direct_solver(qp, spec.name, options) if cache is not None else None
     try:
+        # inside the try: applying a compiled structure's parameters can raise too
+        direct = cache.direct_solver(qp, spec.name, options) if cache is not None else None
         if direct is not None:  # OSQP warm-starts from the structure's last solution
             raw = direct.solve(qp, options)
             answer = _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.solver_time,
@@ -189,6 +199,14 @@ def _transposed_product(matrix: sp.csr_array, vector: FloatArray) -> FloatArray:
     per_entry = matrix.data * np.repeat(vector, np.diff(matrix.indptr))
     return np.asarray(np.bincount(matrix.indices, weights=per_entry, minlength=matrix.shape[1]),
                       dtype=np.float64)
+
+
+def _non_finite_data(qp: StepQP) -> str:
+    """Names of the QP's arrays holding NaN or inf ('' if all are finite)."""
+    arrays = {"weights": qp.weights, "target": qp.target, "eq_matrix": qp.eq_matrix.data,
+              "eq_rhs": qp.eq_rhs, "ineq_matrix": qp.ineq_matrix.data, "ineq_rhs": qp.ineq_rhs}
+    return ", ".join(name for name, values in arrays.items()
+                     if not np.all(np.isfinite(values)))
 
 
 def _inf(values: FloatArray) -> float:

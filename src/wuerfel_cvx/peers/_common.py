@@ -140,6 +140,7 @@ def run_peer(engine: str, package: str, scene: Scene, world: PeerWorld, dt: floa
     info: dict[str, Any] = {
         "scene": scene.name, "formulation": "peer", "solver": engine, "tol": "native",
         "dt": float(dt), "steps": int(steps), "table_mass": None, "extra_rod": False,
+        "fallback": [],
         "versions": {"wuerfel_cvx": package_version("wuerfel_cvx"),
                      package: package_version(package)},
         "compiled_structures": None, "steps_reusing_a_compiled_structure": None,
@@ -178,7 +179,8 @@ def _metrics_row(model: Model, state: State, engine: str, step: int, dt: float,
     potential = potential_energy(model, state)
     return {
         "step": step, "time_s": step * dt, "solver": engine, "status": "peer",
-        "verified": pd.NA, "n_variables": 3 * model.n_squares, "n_equalities": 0,
+        "primary_status": "peer", "verified": pd.NA, "n_variables": 3 * model.n_squares,
+        "n_equalities": 0,
         "n_inequalities": pd.NA, "n_contacts": pd.NA if n_contacts is None else n_contacts,
         "build_time_s": step_time - solver_time, "solve_time_s": solver_time,
         "solver_time_s": solver_time, "step_time_s": step_time,

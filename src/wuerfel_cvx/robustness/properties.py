@@ -1,0 +1,396 @@
+"""Random valid scenes and the physical invariants every run of them must keep.
+
+A generated scene is 1 to 8 squares of random size, angle, mass (ratio up to 100),
+velocity and spin, placed without overlap above one wide table (top face at y = 0).
+:func:`random_scene` draws one from a :class:`numpy.random.Generator`; the property
+tests draw the same :class:`SquareDraw` numbers with hypothesis and call the same
+builder, :func:`scene_from_draws`.
+
+:func:`check_run` checks a trajectory of the default formulation (``velocity``:
+speculative contacts, Baumgarte ``beta``, rigid position update) against four
+invariants.  The bounds are derived here, not fitted.
+
+No NaN
+    Every position, velocity and metric is finite.
+
+Rod drift
+    Positions are advanced by the rigid motion of each square (Procrustes fit, then a
+    rotation), so rod lengths hold to round-off: a relative drift of 1e-6 is ten orders
+    above double-precision round-off and would mean the rigid update is broken.
+
+Penetration
+    Let ``d(t)`` be the signed distance of corner ``k`` of body B from the edge line of
+    body A it is matched to, while both move rigidly over a step with the constant
+    centre velocities and spins ``omega_A``, ``omega_B`` that the step's solution
+    describes (exactly the motion of :func:`~wuerfel_cvx.formulations.velocity.rigid_step`).
+    With ``n`` the edge's unit normal (turning at ``omega_A``), ``Delta = p_k - p_i``::
+
+        d = n . Delta,   d'' = -omega_A^2 d + 2 omega_A rot90(n) . Delta' + n . Delta''
+
+    and ``|Delta''| <= omega_A^2 r_A + omega_B^2 r_B`` (centripetal accelerations of
+    the two corners, ``r`` the half diagonal), ``|Delta'| <= 2 V`` (``V`` the largest
+    corner speed), ``|d| <= r_A + r_B`` for a matched pair.  So with ``Omega`` the largest
+    spin and ``R`` the largest half diagonal, ``|d''| <= 4 Omega^2 R + 4 Omega V``.  The QP
+    constrains the first-order prediction ``d + dt d'(0)`` (``d'(0) = grad d . v+``):
+    ``>= 0`` for a point outside (speculative contact) and ``>= (1 - beta) d`` for a
+    point inside (Baumgarte).  Taylor's theorem with the remainder gives the depth after
+    the step::
+
+        depth_k <= (1 - beta) depth_{k-1} + eps_k,
+        eps_k = dt^2 / 2 (4 Omega^2 R + 4 Omega V) + dt * s_k
+
+    where ``s_k`` is the contact-rate error the residual check admits (``s_k = r_k
+    (1 + 6 V + margin / dt + 2 dt |g|)`` with ``r_k`` the step's relative primal
+    residual and the bracket a bound on the primal scale of
+    :func:`~wuerfel_cvx.solve.kkt_residuals`: right-hand sides ``|d| / dt`` with ``|d|``
+    within the two bodies' reach ``margin + dt (2 V + 2 dt |g|)``, and rows ``|G v+| <=
+    3 V``, the gradient of a distance being a unit normal split over three points).
+    The depth measured after the step is at most that of the matched edge, so the
+    recursion bounds the metric.  This is the
+    ``(omega dt)^2 r / 2`` of the README's "Known limitations", with the edge's own
+    spin and the Coriolis term included; for a body at rest or sliding without spin
+    the bound is the solver's tolerance alone.
+
+Energy
+    With ``w = v + dt g`` and the step's multipliers ``nu`` (impulses: the objective has
+    no 1/2, so they are half the QP's duals), stationarity gives
+    ``M (v+ - w) = J^T nu``, and with complementarity ``nu . J v+ = nu . h`` the energy
+    change of a step (kinetic ``|v|_M^2 / 2`` plus potential ``-M g . p``; the centres
+    move by ``dt`` times the mean corner velocity) is, in the mass norm::
+
+        E+ - E = nu . h - |v+ - v|_M^2 / 2
+
+    (checked against the QP's own duals in ``tests/test_properties.py``).  Speculative
+    rows have ``h <= 0`` and ``nu >= 0``, rods have ``h = 0`` to round-off: frictionless
+    contacts with restitution 0 do no positive work, and energy only falls, except
+    (a) through Baumgarte rows (``h = beta depth / dt > 0``) and (b) the solver's
+    inexactness.  (a) A depth ``P`` pushed out at rate ``beta / dt`` through at most
+    ``n`` stacked squares gives a velocity change ``u <= n beta P / dt`` to a total
+    mass ``M`` whose corners move at most at ``V``: kinetic energy grows by at most
+    ``M (V u + u^2 / 2)`` and potential energy by ``M |g| dt u``.  This assumes the
+    impulses are of the size of the momentum they change; a penetrated corner that can
+    hardly be pushed out without breaking the contacts around it (nearly redundant
+    rows) takes far larger impulses and injects more: such runs are reported.
+    (b) With relative residuals ``p`` (primal), ``d`` (dual), ``c`` (complementarity)
+    as :func:`~wuerfel_cvx.solve.kkt_residuals` defines them, the identity above is off
+    by ``sum nu_i s_i`` (``s`` the rows' slack, bounded through ``c`` and ``p`` times
+    the primal scale) and by the stationarity error times ``V``; bounding every dual by
+    twice the momentum ``M (2 V + dt |g|)`` gives
+    ``N_rows (c (1 + Z S) + p Z S) / 2 + N_var d (1 + Z_1) V / 2`` with ``Z`` that bound,
+    ``Z_1`` the same for the heaviest square, ``S`` the primal scale.  A rise above
+    (a) + (b) + round-off is a violation.  Free flight itself loses
+    ``M |g|^2 dt^2 / 2`` per step (semi-implicit Euler), which is not credited.
+
+:func:`run_property_sweep` runs many generated scenes through :func:`check_run` and
+collects what fails, for the robustness report.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import StepFailure
+from ..formulations import VelocityFormulation
+from ..library import FLOOR
+from ..metrics import deepest_penetration
+from ..model import Model
+from ..scene import Scene, Square
+from ..simulate import simulate
+from ..trajectory import Trajectory
+
+#: Largest relative rod-length error accepted (see the module docstring).
+ROD_DRIFT_LIMIT = 1e-6
+
+ROUND_OFF_LENGTH = 1e-9
+"""Round-off floor (m) for the penetration bound: positions are O(10) m, eps 2e-16."""
+ROUND_OFF_ENERGY_RELATIVE = 1e-11
+"""Round-off floor for energy, relative to the largest energy magnitude of the run."""
+
+#: Parameter ranges of the generated scenes.
+MAX_SQUARES = 8
+SIZE_RANGE = (0.2, 2.0)
+"""Side length (m)."""
+MASS_RANGE = (0.1, 10.0)
+"""Mass (kg): a ratio of at most 100."""
+SPEED_LIMIT = 5.0
+"""Largest initial velocity component (m/s)."""
+SPIN_LIMIT = 10.0
+"""Largest initial angular velocity (rad/s)."""
+X_RANGE = (-4.0, 4.0)
+"""Horizontal centre position (m)."""
+GAP_RANGE = (0.0, 1.0)
+"""Clearance (m) between a square's bounding circle and what is below it."""
+
+
+@dataclass(frozen=True)
+class SquareDraw:
+    """The random numbers of one generated square (placed by :func:`scene_from_draws`)."""
+
+    size: float
+    """Side length (m)."""
+    angle: float
+    """Orientation (rad)."""
+    mass: float
+    """Mass (kg)."""
+    velocity: tuple[float, float]
+    """Centre velocity (m/s)."""
+    angular_velocity: float
+    """Spin (rad/s)."""
+    x: float
+    """Horizontal centre position (m)."""
+    gap: float
+    """Clearance (m) above the table or the squares already placed below."""
+
+
+def scene_from_draws(draws: Sequence[SquareDraw], name: str = "generated") -> Scene:
+    """Place the drawn squares above the library's floor without overlap.
+
+    Squares are placed in order; each is kept apart from the floor and from every
+    square placed before it by its bounding circle (radius half the diagonal) plus
+    its ``gap``: it sits ``gap`` above the floor, or above the highest earlier square
+    whose circle it would meet horizontally.  Circles apart means squares apart, so
+    the scene passes the loader's overlap check for any draws.
+    """
+    placed: list[tuple[float, float, float]] = []  # x, y, radius
+    squares = []
+    for draw in draws:
+        radius = draw.size / math.sqrt(2.0)
+        y = radius + draw.gap
+        for x_other, y_other, radius_other in placed:
+            if abs(draw.x - x_other) < radius + radius_other + draw.gap:
+                y = max(y, y_other + radius_other + radius + draw.gap)
+        placed.append((draw.x, y, radius))
+        squares.append(Square(center=(draw.x, y), size=draw.size, angle=draw.angle,
+                              mass=draw.mass, velocity=draw.velocity,
+                              angular_velocity=draw.angular_velocity))
+    return Scene(name, tuple(squares), (FLOOR,))
+
+
+def random_draws(rng: np.random.Generator, n_squares: int | None = None) -> list[SquareDraw]:
+    """Random square parameters in the documented ranges (``n_squares`` 1..8 if None)."""
+    count = int(rng.integers(1, MAX_SQUARES + 1)) if n_squares is None else n_squares
+    draws = []
+    for _ in range(count):
+        draws.append(SquareDraw(
+            size=float(rng.uniform(*SIZE_RANGE)),
+            angle=float(rng.uniform(-math.pi, math.pi)),
+            mass=float(math.exp(rng.uniform(math.log(MASS_RANGE[0]), math.log(MASS_RANGE[1])))),
+            velocity=(float(rng.uniform(-SPEED_LIMIT, SPEED_LIMIT)),
+                      float(rng.uniform(-SPEED_LIMIT, SPEED_LIMIT))),
+            angular_velocity=float(rng.uniform(-SPIN_LIMIT, SPIN_LIMIT)),
+            x=float(rng.uniform(*X_RANGE)),
+            gap=float(rng.uniform(*GAP_RANGE)),
+        ))
+    return draws
+
+
+def random_scene(rng: np.random.Generator, n_squares: int | None = None,
+                 name: str = "generated") -> Scene:
+    """A random valid scene: 1 to 8 squares (or ``n_squares``) above the floor."""
+    return scene_from_draws(random_draws(rng, n_squares), name=name)
+
+
+# ---------------------------------------------------------------------- invariants
+@dataclass(frozen=True)
+class RunBounds:
+    """Per-step bounds of a run, derived from its own states (see the module docstring)."""
+
+    penetration: np.ndarray
+    """Largest depth (m) the formulation allows after each step, ``(steps,)``."""
+    energy_rise: np.ndarray
+    """Largest total-energy rise (J) each step may show, ``(steps,)``."""
+
+
+def _spins_and_speeds(trajectory: Trajectory, n_squares: int) -> tuple[np.ndarray, np.ndarray]:
+    """Largest spin (rad/s) and corner speed (m/s) per state, ``(steps + 1,)`` each."""
+    points = trajectory.points.reshape(-1, n_squares, 4, 2)
+    velocities = trajectory.velocities.reshape(-1, n_squares, 4, 2)
+    offsets = points - points.mean(axis=2, keepdims=True)
+    relative = velocities - velocities.mean(axis=2, keepdims=True)
+    spin = (np.sum(offsets[..., 0] * relative[..., 1] - offsets[..., 1] * relative[..., 0],
+                   axis=2) / np.sum(offsets**2, axis=(2, 3)))
+    speed = np.linalg.norm(velocities, axis=3)
+    return np.abs(spin).max(axis=1), speed.max(axis=(1, 2))
+
+
+def run_bounds(trajectory: Trajectory, scene: Scene,
+               formulation: VelocityFormulation | None = None) -> RunBounds:
+    """The penetration and energy-rise bounds of each step of ``trajectory``."""
+    scheme = formulation if formulation is not None else VelocityFormulation()
+    dt = float(trajectory.info["dt"])
+    beta = scheme.beta
+    steps = trajectory.n_steps
+    n = scene.n_squares
+    gravity = float(np.hypot(*scene.gravity))
+    masses = np.array([s.mass for s in scene.squares])
+    total_mass = float(masses.sum())
+    radius = max(s.size for s in scene.squares) / math.sqrt(2.0)
+    spin, speed = _spins_and_speeds(trajectory, n)
+    depth_start = deepest_penetration(Model.from_scene(scene), trajectory.points[0])
+    metrics = trajectory.metrics
+    primal, dual, complementarity = (
+        np.nan_to_num(metrics[column].to_numpy()[:steps], nan=1.0)
+        for column in ("primal_residual", "dual_residual", "complementarity"))
+    n_rows = metrics[["n_equalities", "n_inequalities"]].to_numpy().sum(axis=1)[:steps]
+    n_variables = metrics["n_variables"].to_numpy()[:steps]
+    depth_measured = np.concatenate([[depth_start], metrics["penetration_m"].to_numpy()[:steps]])
+
+    # the spin and speed of step k are those of the state after it (rigid_step keeps them)
+    omega, velocity = spin[1:], np.maximum(speed[1:], speed[:-1])
+    primal_scale = 1.0 + 6.0 * velocity + scheme.contact_margin / dt + 2.0 * dt * gravity
+    overshoot = (0.5 * dt**2 * (4.0 * omega**2 * radius + 4.0 * omega * velocity)
+                 + dt * primal * primal_scale)
+    penetration = np.empty(steps)
+    depth = depth_start  # 0 for scenes that start apart
+    for k in range(steps):
+        depth = (1.0 - beta) * depth + overshoot[k] + ROUND_OFF_LENGTH
+        penetration[k] = depth
+
+    push = n * beta * depth_measured[:steps] / dt  # Baumgarte push-out speed (m/s)
+    baumgarte = total_mass * (velocity * push + 0.5 * push**2 + gravity * dt * push)
+    # multipliers are twice the impulses (objective without 1/2); an impulse is at most
+    # the momentum that stops or reverses the whole scene, or one square for the
+    # stationarity terms
+    impulse_total = 2.0 * total_mass * (2.0 * velocity + dt * gravity)
+    impulse_square = 2.0 * masses.max() * (2.0 * velocity + dt * gravity)
+    inexact = (0.5 * n_rows * (complementarity * (1.0 + impulse_total * primal_scale)
+                               + primal * impulse_total * primal_scale)
+               + 0.5 * n_variables * dual * (1.0 + impulse_square) * velocity)
+    energy = metrics["total_energy_J"].to_numpy()
+    scale = max(1.0, float(np.nanmax(np.abs(energy))) if energy.size else 1.0)
+    energy_rise = baumgarte + inexact + ROUND_OFF_ENERGY_RELATIVE * scale
+    return RunBounds(penetration=penetration, energy_rise=energy_rise)
+
+
+def check_run(trajectory: Trajectory, scene: Scene,
+              formulation: VelocityFormulation | None = None) -> list[str]:
+    """The invariants ``trajectory`` (a run of ``scene``) breaks, one readable line each.
+
+    Empty when the run keeps them all.  Each line names the invariant, the first
+    offending step, the value and the bound.  ``formulation`` must be the one the run
+    used (default: the default ``velocity`` formulation).
+    """
+    violations: list[str] = []
+    metrics = trajectory.metrics
+    steps = trajectory.n_steps
+    if steps == 0:
+        return violations
+    finite_states = np.isfinite(trajectory.points).all(axis=(1, 2)) & np.isfinite(
+        trajectory.velocities).all(axis=(1, 2))
+    metric_values = metrics[["rod_drift", "penetration_m", "total_energy_J"]].to_numpy()
+    finite_metrics = np.concatenate([[True], np.isfinite(metric_values).all(axis=1)])
+    bad = np.flatnonzero(~(finite_states & finite_metrics))
+    if bad.size:
+        violations.append(f"NaN or inf: first at step {int(bad[0])}")
+        return violations
+
+    drift = metrics["rod_drift"].to_numpy()
+    over = np.flatnonzero(drift > ROD_DRIFT_LIMIT)
+    if over.size:
+        k = int(over[0])
+        violations.append(f"rod drift {drift[k]:.3e} at step {k + 1} above {ROD_DRIFT_LIMIT:g}"
+                          f" (largest {drift.max():.3e})")
+
+    bounds = run_bounds(trajectory, scene, formulation)
+    depth = metrics["penetration_m"].to_numpy()
+    over = np.flatnonzero(depth > bounds.penetration)
+    if over.size:
+        k = int(over[0])
+        violations.append(f"penetration {depth[k]:.3e} m at step {k + 1} above the bound "
+                          f"{bounds.penetration[k]:.3e} m ({over.size} steps over)")
+
+    energy = np.concatenate([[_initial_energy(trajectory, scene)],
+                             metrics["total_energy_J"].to_numpy()])
+    rise = np.diff(energy)
+    over = np.flatnonzero(rise > bounds.energy_rise)
+    if over.size:
+        k = int(over[0])
+        violations.append(f"energy rose by {rise[k]:.3e} J at step {k + 1}, above the bound "
+                          f"{bounds.energy_rise[k]:.3e} J ({over.size} steps over)")
+
+    unverified = np.flatnonzero(~metrics["verified"].to_numpy(dtype=bool))
+    if unverified.size:
+        k = int(unverified[0])
+        violations.append(f"step {k + 1} failed the residual check "
+                          f"({unverified.size} steps unverified)")
+    return violations
+
+
+def _initial_energy(trajectory: Trajectory, scene: Scene) -> float:
+    """Kinetic plus potential energy (J) of the first state."""
+    masses = np.repeat([s.mass / 4.0 for s in scene.squares], 4)
+    points, velocities = trajectory.points[0], trajectory.velocities[0]
+    kinetic = 0.5 * float(np.sum(masses * np.sum(velocities**2, axis=1)))
+    potential = -float(np.sum(masses * (points @ np.asarray(scene.gravity))))
+    return kinetic + potential
+
+
+# ---------------------------------------------------------------------- sweeps
+@dataclass(frozen=True)
+class PropertyFailure:
+    """A generated scene whose run broke an invariant or raised."""
+
+    index: int
+    """Position of the scene in the sweep."""
+    scene: dict[str, Any]
+    """The scene in the TOML schema (:meth:`Scene.to_dict`): enough to rerun it."""
+    problems: tuple[str, ...]
+    """The violations, or the exception as one line."""
+
+
+@dataclass(frozen=True)
+class PropertySweepResult:
+    """What :func:`run_property_sweep` found."""
+
+    tried: int
+    """Number of scenes run."""
+    failures: list[PropertyFailure] = field(default_factory=list)
+    """Each scene that broke an invariant or raised."""
+    seconds: float = 0.0
+    """Wall time of the sweep (s)."""
+    seed: int = 0
+    """Seed of the generator the scenes were drawn from."""
+    steps: int = 200
+    """Steps run per scene."""
+    dt: float = 0.01
+    """Time step (s)."""
+
+
+def check_scene(scene: Scene, steps: int = 200, dt: float = 0.01, solver: str = "CLARABEL",
+                tol: str | float = "default") -> list[str]:
+    """Run ``scene`` with the default formulation and return the invariants it breaks.
+
+    A step failure or any other exception becomes one line naming it.
+    """
+    try:
+        trajectory = simulate(scene, dt=dt, steps=steps, solver=solver, tol=tol)
+    except StepFailure as failure:
+        problems = [f"step failure: {failure}"]
+        if failure.trajectory is not None and failure.trajectory.n_steps:
+            problems += check_run(failure.trajectory, scene)
+        return problems
+    except Exception as exc:  # any other exception is a finding, reported with its type
+        return [f"exception {type(exc).__name__}: {exc}"]
+    return check_run(trajectory, scene)
+
+
+def run_property_sweep(n_scenes: int, seed: int, steps: int = 200,
+                       dt: float = 0.01) -> PropertySweepResult:
+    """Run ``n_scenes`` generated scenes (generator seeded with ``seed``) and check each."""
+    started = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    failures = []
+    for index in range(n_scenes):
+        scene = random_scene(rng, name=f"generated-{seed}-{index}")
+        problems = check_scene(scene, steps=steps, dt=dt)
+        if problems:
+            failures.append(PropertyFailure(index, scene.to_dict(), tuple(problems)))
+    return PropertySweepResult(tried=n_scenes, failures=failures,
+                               seconds=time.perf_counter() - started, seed=seed, steps=steps,
+                               dt=dt)

@@ -1,0 +1,237 @@
+"""Property-based tests: generated scenes keep the physical invariants over 200 steps.
+
+Scenes: 1 to 8 squares of random size, angle, mass (ratio up to 100), velocity and spin,
+placed without overlap above a table (:mod:`wuerfel_cvx.robustness.properties`, whose
+docstring derives every bound).  Hypothesis draws the same numbers as
+:func:`random_scene` and calls the same builder.
+
+Profiles (environment variable ``WUERFEL_PROPERTY_PROFILE``): ``ci`` (default) runs a few
+fixed examples (derandomised, no example database, so every run tries the same scenes);
+``deep`` runs 300 and is for a search by hand, e.g.
+``WUERFEL_PROPERTY_PROFILE=deep pytest tests/test_properties.py -k invariants``.  Every
+failing example found that way is pinned below as a concrete scene.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from wuerfel_cvx import Scene, simulate
+from wuerfel_cvx.formulations import VelocityFormulation
+from wuerfel_cvx.metrics import kinetic_energy, potential_energy
+from wuerfel_cvx.model import Model, State
+from wuerfel_cvx.robustness.properties import (
+    GAP_RANGE,
+    MASS_RANGE,
+    MAX_SQUARES,
+    ROD_DRIFT_LIMIT,
+    SIZE_RANGE,
+    SPEED_LIMIT,
+    SPIN_LIMIT,
+    X_RANGE,
+    SquareDraw,
+    check_run,
+    check_scene,
+    random_scene,
+    run_property_sweep,
+    scene_from_draws,
+)
+from wuerfel_cvx.trajectory import Trajectory
+
+settings.register_profile(
+    "wuerfel-ci", max_examples=10, deadline=None, derandomize=True, database=None,
+    suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile(
+    "wuerfel-deep", max_examples=300, deadline=None, database=None,
+    suppress_health_check=[HealthCheck.too_slow])
+PROFILE = settings.get_profile(f"wuerfel-{os.environ.get('WUERFEL_PROPERTY_PROFILE', 'ci')}")
+
+STEPS = 200
+DT = 0.01
+
+
+def _range(bounds: tuple[float, float]) -> st.SearchStrategy[float]:
+    return st.floats(*bounds, allow_nan=False, allow_infinity=False)
+
+
+square_draws = st.builds(
+    SquareDraw,
+    size=_range(SIZE_RANGE),
+    angle=_range((-math.pi, math.pi)),
+    mass=_range(MASS_RANGE),
+    velocity=st.tuples(_range((-SPEED_LIMIT, SPEED_LIMIT)), _range((-SPEED_LIMIT, SPEED_LIMIT))),
+    angular_velocity=_range((-SPIN_LIMIT, SPIN_LIMIT)),
+    x=_range(X_RANGE),
+    gap=_range(GAP_RANGE),
+)
+
+
+@settings(PROFILE)
+@given(st.lists(square_draws, min_size=1, max_size=MAX_SQUARES))
+def test_generated_scenes_keep_the_invariants(draws: list[SquareDraw]) -> None:
+    scene = scene_from_draws(draws)
+    assert check_scene(scene, steps=STEPS, dt=DT) == []
+
+
+@pytest.mark.parametrize("name", ["overlap-recovery", "fast-drop", "wall-contact",
+                                  "heavy-on-light-100", "corner-drop"])
+def test_hard_library_scenes_keep_the_invariants(name: str) -> None:
+    # overlap-recovery starts 25 % overlapped: its penetration bound starts at that depth
+
+    assert check_scene(Scene.named(name), steps=STEPS, dt=DT) == []
+
+
+# Scenes found by sweeps and hypothesis, pinned.  Each is a concrete scene in the file
+# schema; the comment says what it found.
+WEDGED_CORNER = {  # run_property_sweep(200, seed=100), scene 186
+    "name": "wedged-corner", "gravity": [0.0, -9.81], "allow_overlap": False,
+    "tables": [{"center": [0.0, -0.5], "size": [40.0, 1.0], "angle": 0.0}],
+    "squares": [
+        {"center": [3.1099924006578883, 1.0486852880201247], "size": 0.7604086033654687,
+         "angle": -3.1247976523445105, "mass": 2.368812775695756,
+         "velocity": [3.5368948939966245, 1.0549295607564346],
+         "angular_velocity": -3.2601243212231363},
+        {"center": [0.5572887584903485, 1.796500062913081], "size": 1.6541030004403032,
+         "angle": -1.8770948838022747, "mass": 0.8165357364566206,
+         "velocity": [-4.768337406478399, 1.8227755354266284],
+         "angular_velocity": -4.469059004759323},
+        {"center": [-3.580220523036097, 0.8130042996188092], "size": 0.6864477947718535,
+         "angle": 0.7886247005500948, "mass": 1.7057198309492716,
+         "velocity": [1.2174787962970441, 0.40679454471448384],
+         "angular_velocity": -0.9646822056501119},
+        {"center": [-0.07017699614663275, 3.549899596139809], "size": 0.7985891860730174,
+         "angle": -2.490051679154298, "mass": 0.13110234832729237,
+         "velocity": [3.0173982803609967, 0.3733384128054338],
+         "angular_velocity": 1.0248122358567464},
+        {"center": [-3.3648980572839653, 2.102354056569947], "size": 0.5603781208738501,
+         "angle": -0.6578939663642602, "mass": 6.547215546607483,
+         "velocity": [1.2926317436674184, 0.684145710084846],
+         "angular_velocity": 3.9773984321061064},
+    ],
+}
+
+
+def test_wedged_corner_is_a_known_energy_leak() -> None:
+    """Known limitation, pinned: energy rises here beyond the Baumgarte bound.
+
+    A heavy square straddling a corner of a lighter one that rests on the table: the
+    lighter one's corner penetrates the heavy one by 1e-9 to 4e-7 m and can hardly be
+    pushed out without breaking the other contacts (nearly redundant rows).  Baumgarte's
+    push-out then takes impulses of 1e2 to 4e3 N s and injects up to 2e-3 J per step,
+    far more than pushing out that depth can explain.  The run is otherwise sound (no
+    NaN, no drift, penetration within its bound).  A fix of the formulation makes this
+    test fail: then assert ``problems == []`` instead.
+    """
+    problems = check_scene(Scene.from_dict(WEDGED_CORNER), steps=STEPS, dt=DT)
+    assert len(problems) == 1 and problems[0].startswith("energy rose by"), problems
+
+
+# ---------------------------------------------------------------------- the generator
+def test_random_scenes_are_valid_and_reproducible() -> None:
+    first = [random_scene(np.random.default_rng(seed)) for seed in range(20)]
+    again = [random_scene(np.random.default_rng(seed)) for seed in range(20)]
+    assert [s.to_dict() for s in first] == [s.to_dict() for s in again]
+    counts = {scene.n_squares for scene in first}
+    assert counts <= set(range(1, MAX_SQUARES + 1)) and len(counts) > 3
+    for scene in first:  # the constructor already refused overlaps; check the ranges
+        masses = [s.mass for s in scene.squares]
+        assert max(masses) / min(masses) <= MASS_RANGE[1] / MASS_RANGE[0]
+        lowest = min(float(s.corners()[:, 1].min()) for s in scene.squares)
+        assert lowest >= 0.0  # above the table's top face
+        assert Scene.from_dict(scene.to_dict()) == scene
+
+
+# ---------------------------------------------------------------------- the checks
+def test_energy_identity_holds_with_the_qp_duals() -> None:
+    """``E+ - E = nu . h - |v+ - v|_M^2 / 2`` on real contact steps (module docstring).
+
+    The duals come from an independent high-accuracy solve of the same QP; the energy
+    change from the package's own update and metrics.  Agreement to 1e-9 J (energies
+    of order 10 J, solver tolerance 1e-12) confirms the algebra.
+    """
+    scene = Scene.from_dict(WEDGED_CORNER)
+    model = Model.from_scene(scene)
+    scheme = VelocityFormulation()
+    trajectory = simulate(scene, dt=DT, steps=150)
+    masses = np.repeat(model.point_masses, 2)
+    checked = 0
+    for step in (60, 100, 143):  # sliding, resting and wedged contacts
+        state = State(trajectory.points[step - 1], trajectory.velocities[step - 1])
+        qp = scheme.build(model, state, DT)
+        declared = qp.declared()
+        declared.problem.solve(solver="CLARABEL", tol_gap_abs=1e-12, tol_gap_rel=1e-12,
+                               tol_feas=1e-12)
+        x = np.asarray(declared.variable.value)
+        eq_dual = np.atleast_1d(declared.eq_constraint.dual_value)
+        ineq_dual = np.atleast_1d(declared.ineq_constraint.dual_value)
+        # cvxpy: 2 W (x - t) + E^T y - G^T z = 0, so the impulses are z / 2 and -y / 2
+        work = 0.5 * ineq_dual @ qp.ineq_rhs - 0.5 * eq_dual @ qp.eq_rhs
+        dissipated = 0.5 * np.sum(masses * (x - state.velocities.ravel()) ** 2)
+        after = scheme.advance(model, state, x, DT)
+        change = (kinetic_energy(model, after) + potential_energy(model, after)
+                  - kinetic_energy(model, state) - potential_energy(model, state))
+        assert change == pytest.approx(work - dissipated, abs=1e-9)
+        checked += len(qp.contacts) > 0
+    assert checked == 3
+
+
+def _doctored(trajectory: Trajectory, step: int, **changes: float) -> Trajectory:
+    """A copy of ``trajectory`` with one metric changed at ``step`` (1-based)."""
+    metrics = trajectory.metrics.copy()
+    for column, value in changes.items():
+        metrics.loc[step - 1, column] = value
+    return Trajectory(trajectory.times, trajectory.points.copy(),
+                      trajectory.velocities.copy(), metrics, trajectory.table_points,
+                      trajectory.info)
+
+
+@pytest.fixture(scope="module")
+def sound_run() -> tuple[Scene, Trajectory]:
+    """A run that keeps every invariant: a tilted square lands and settles."""
+    scene = Scene.named("tilted-drop")
+    trajectory = simulate(scene, dt=DT, steps=120)
+    assert check_run(trajectory, scene) == []
+    return scene, trajectory
+
+
+def test_each_invariant_can_fail(sound_run: tuple[Scene, Trajectory]) -> None:
+    scene, run = sound_run
+    energy = run.metrics["total_energy_J"].to_numpy()
+    cases = {
+        "NaN or inf: first at step 30": _doctored(run, 30, penetration_m=np.nan),
+        "rod drift 2.000e-06 at step 40": _doctored(run, 40, rod_drift=2 * ROD_DRIFT_LIMIT),
+        "penetration 1.000e-02 m at step 70": _doctored(run, 70, penetration_m=0.01),
+        "energy rose by 1.000e-03 J at step 90": _doctored(
+            run, 90, total_energy_J=energy[88] + 1e-3),
+        "step 100 failed the residual check": _doctored(run, 100, verified=False),
+    }
+    for expected, doctored in cases.items():
+        problems = check_run(doctored, scene)
+        assert any(p.startswith(expected) for p in problems), (expected, problems)
+
+
+def test_a_non_finite_state_is_reported(sound_run: tuple[Scene, Trajectory]) -> None:
+    scene, run = sound_run
+    points = run.points.copy()
+    points[12, 3, 0] = np.inf
+    broken = Trajectory(run.times, points, run.velocities, run.metrics, run.table_points,
+                        run.info)
+    assert check_run(broken, scene) == ["NaN or inf: first at step 12"]
+
+
+def test_sweep_counts_scenes_and_names_failures() -> None:
+    result = run_property_sweep(n_scenes=3, seed=11, steps=30)
+    assert result.tried == 3 and result.seconds > 0.0
+    assert (result.seed, result.steps) == (11, 30)
+    rng = np.random.default_rng(11)  # the sweep's scenes, drawn again
+    expected = {index: check_scene(random_scene(rng), steps=30) for index in range(3)}
+    assert {f.index: list(f.problems) for f in result.failures} == {
+        index: problems for index, problems in expected.items() if problems}
+    for failure in result.failures:
+        assert Scene.from_dict(failure.scene).n_squares >= 1
