@@ -352,3 +352,23 @@ def test_cli_fallback_completes_the_run_and_says_so(
     assert list(loaded.metrics["primary_status"]) == ["optimal"] * 2 + [cp.USER_LIMIT] * 2
     assert list(loaded.metrics["solver"]) == ["CLARABEL"] * 2 + ["OSQP"] * 2
     assert loaded.info["fallback"] == ["OSQP"]
+
+
+def test_fallback_takes_over_island_by_island(monkeypatch: pytest.MonkeyPatch) -> None:
+    from test_sleep import two_stacks_and_a_faller
+    from wuerfel_cvx.direct import DirectClarabel
+
+    def explode(self: DirectClarabel, *args: Any, **kwargs: Any) -> Any:
+        raise RuntimeError("direct solver exploded")
+
+    monkeypatch.setattr(DirectClarabel, "solve", explode)
+    traj = simulate(two_stacks_and_a_faller(), steps=6, islands=True, fallback=("OSQP",))
+    m = traj.metrics
+    assert traj.n_steps == 6 and m["verified"].all()
+    # An island QP on CLARABEL's direct path raises and OSQP solves it; islands still on
+    # cvxpy's path stay CLARABEL's.  The row names every solver that produced the step.
+    rescued = m["primary_status"] == "exception"
+    assert rescued.any()
+    assert m.loc[rescued, "solver"].str.contains("OSQP").all()
+    assert (m.loc[~rescued, "solver"] == "CLARABEL").all()
+    assert (m["status"] == cp.OPTIMAL).all()

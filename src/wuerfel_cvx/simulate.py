@@ -346,8 +346,11 @@ def _combined(solutions: list[StepSolution]) -> StepSolution:
 
 
 def _combined_primary_status(solutions: list[StepSolution], primary_statuses: list[str]) -> str:
-    """The step's ``primary_status``: the first failed status of the run's own solver on
-    any island QP, else the combined status (see :func:`_combined`)."""
+    """The step's ``primary_status``.
+
+    The run's own solver's first failed status on any island QP, else the combined status
+    (see :func:`_combined`).
+    """
     for solution, primary in zip(solutions, primary_statuses, strict=True):
         if primary != solution.status:  # a fallback solver took over this island
             return primary
