@@ -372,3 +372,18 @@ def test_fallback_takes_over_island_by_island(monkeypatch: pytest.MonkeyPatch) -
     assert m.loc[rescued, "solver"].str.contains("OSQP").all()
     assert (m.loc[~rescued, "solver"] == "CLARABEL").all()
     assert (m["status"] == cp.OPTIMAL).all()
+
+
+def test_cli_animates_the_partial_run_of_a_failed_step(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from PIL import Image
+
+    _inject_iteration_limit(monkeypatch)  # fails at step 3
+    out = tmp_path / "partial.gif"
+    assert main(["simulate", SCENE, "--steps", "5", "--fps", "100", "--animate",
+                 str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and f"animated the 2 steps before it in {out}" in err
+    with Image.open(out) as image:
+        assert image.n_frames == 3  # the states at 0, 0.01 and 0.02 s

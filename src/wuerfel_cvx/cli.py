@@ -49,6 +49,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "record it in 'solver' and the failed status in 'primary_status')")
     run.add_argument("--sleep", action="store_true",
                      help="let islands at rest sleep (left out of the QP until touched)")
+    run.add_argument("--islands", action="store_true",
+                     help="solve each island (squares joined by contacts) as its own QP")
     run.add_argument("--out", default=None,
                      help="write the trajectory (.npz) and metrics (.metrics.csv) here")
     run.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
@@ -131,13 +133,17 @@ def _simulate(args: argparse.Namespace) -> int:
                               formulation=args.formulation, tol=args.tol,
                               table_mass=args.table_mass, progress=progress,
                               sleep=SleepSettings() if args.sleep else None,
-                              fallback=args.fallback)
+                              islands=args.islands, fallback=args.fallback)
     except StepFailure as failure:
         print(f"{PROG}: {failure}", file=sys.stderr)
         if args.out and failure.trajectory is not None:
             path = _save(failure.trajectory, args.out)
             print(f"{PROG}: saved the {failure.trajectory.n_steps} steps before it to {path}",
                   file=sys.stderr)
+        if args.animate and failure.trajectory is not None:  # a picture of the run so far
+            written = failure.trajectory.animate(args.animate, fps=args.fps)
+            print(f"{PROG}: animated the {failure.trajectory.n_steps} steps before it in "
+                  f"{written}", file=sys.stderr)
         return 1
     print(trajectory.summary())
     rescued = trajectory.metrics["status"] != trajectory.metrics["primary_status"]
