@@ -27,12 +27,12 @@ from wuerfel_cvx.solve import StepSolution
 #: The step loop's lists that hold the trajectory (local names in ``simulate``).
 TRAJECTORY_LISTS = ("points", "velocities", "times", "rows")
 
-#: Window length (steps) and the surplus (bytes) accepted at its end.  Allocator noise
-#: measured here is a few hundred bytes either way.  The accounting of the stored
-#: trajectory is close but not exact: it counts about 130 B per step more than
-#: tracemalloc sees (Python reuses freed float objects), so the surplus drifts below 0
-#: and a leak smaller than that can hide; one leaked small array per step (about 200 B
-#: with its data and shape) leaves a surplus of about 70 kB after 1000 steps.
+#: Window length (steps) and the surplus (bytes) accepted at its end.  The accounting of
+#: the stored trajectory is close but not exact: it counts about 90 B per step more than
+#: tracemalloc sees (measured surplus -89 kB and -97 kB over the two windows; most likely
+#: Python's reuse of freed float objects, whose memory tracemalloc saw once), so a leak
+#: smaller than that can hide.  One leaked small array per step (about 200 B with its
+#: data and shape) leaves a surplus of about 110 kB after 1000 steps.
 WINDOW = 1000
 SURPLUS_LIMIT = 32 * 1024
 
