@@ -77,7 +77,11 @@ class WindowSampler:
         """Open or close a window (called by ``simulate`` after each step)."""
         if step not in self.starts and (self._open is None or step != self._open[0] + WINDOW):
             return
-        loop = sys._getframe(1).f_locals  # the frame of simulate(), which calls us
+        frame = sys._getframe(1)  # up to the frame of simulate(), which calls the observer
+        while frame is not None and frame.f_code.co_name != "simulate":
+            frame = frame.f_back
+        assert frame is not None, "not called from simulate()"
+        loop = frame.f_locals
         missing = [name for name in TRAJECTORY_LISTS if name not in loop]
         assert not missing, f"simulate() no longer keeps the lists {missing}"
         lists = {name: loop[name] for name in TRAJECTORY_LISTS}
@@ -117,3 +121,17 @@ def test_ten_thousand_steps_of_a_resting_stack() -> None:
     assert max(sampler.surplus.values()) < SURPLUS_LIMIT, sampler.surplus
     # and the accounting itself is sound: its float overcount is under 200 B per step
     assert min(sampler.surplus.values()) > -200 * WINDOW, sampler.surplus
+
+
+def test_a_leak_of_one_small_array_per_step_is_caught() -> None:
+    """The window check can fail: a run that keeps one extra small array per step."""
+    sampler = WindowSampler(starts=(100,))
+    leaked: list[np.ndarray] = []
+
+    def leaking_observer(step: int, qp: StepQP, solution: StepSolution) -> None:
+        leaked.append(np.zeros(8))  # 64 B of data, about 200 B in all
+        sampler(step, qp, solution)
+
+    simulate("stack-3", dt=0.01, steps=100 + WINDOW, observer=leaking_observer)
+    print(f"memory surplus with a leak: {sampler.surplus}")
+    assert sampler.surplus[100] > SURPLUS_LIMIT, sampler.surplus
