@@ -118,18 +118,43 @@ WEDGED_CORNER = {  # run_property_sweep(200, seed=100), scene 186
 }
 
 
-def test_wedged_corner_is_a_known_energy_leak() -> None:
+CORNER_ON_CORNER = [  # hypothesis, deep profile (shrinking stopped early), 7 squares
+    SquareDraw(1.5953237320759266, -2.49632216144726, 2.2304679214229024,
+               (3.0798510680162146, -4.460784092848811), -3.92960581280699,
+               1.4464236836248418e-170, 0.9443712711990879),
+    SquareDraw(0.5, -1.947183271895556, 6.174318031197943,
+               (-3.9859253469829836, 2.501512122574823), 5.0, 1.204550974964782e-231,
+               0.27243844240189846),
+    SquareDraw(0.21906016081822852, -2.8262365108394447, 0.5800526543512254,
+               (-1.401298464324817e-45, -3.645319457046072e-89), 7.2092444615654685,
+               2.556857444117684, 1.3571956115340444e-87),
+    SquareDraw(0.2558948352610064, -2.2003771007231246e-148, 2.001306845030394,
+               (-4.0, 0.008859976834517447), 0.36, 1.7027163541097332, 1.401298464324817e-45),
+    SquareDraw(0.2558948352610064, -2.2003771007231246e-148, 2.001306845030394,
+               (-4.0, 0.008859976834517447), -4.0, 1.7027163541097332, 1.401298464324817e-45),
+    SquareDraw(0.7894069573259845, 1.5, 3.0, (2.6563274054039164e-27, 0.0), 0.0, 3.0,
+               0.9999999999999999),
+    SquareDraw(0.2, 0.0, 0.5800526543512254, (0.0, 0.0), 7.2092444615654685,
+               2.556857444117684, 0.0),
+]
+
+
+@pytest.mark.parametrize("scene", [Scene.from_dict(WEDGED_CORNER),
+                                   scene_from_draws(CORNER_ON_CORNER, "corner-on-corner")],
+                         ids=["wedged-corner", "corner-on-corner"])
+def test_known_energy_leak_at_overlapping_corners(scene: Scene) -> None:
     """Known limitation, pinned: energy rises here beyond the Baumgarte bound.
 
-    A heavy square straddling a corner of a lighter one that rests on the table: the
-    lighter one's corner penetrates the heavy one by 1e-9 to 4e-7 m and can hardly be
-    pushed out without breaking the other contacts (nearly redundant rows).  Baumgarte's
-    push-out then takes impulses of 1e2 to 4e3 N s and injects up to 2e-3 J per step,
-    far more than pushing out that depth can explain.  The run is otherwise sound (no
-    NaN, no drift, penetration within its bound).  A fix of the formulation makes this
-    test fail: then assert ``problems == []`` instead.
+    Corners of two squares overlap by 1e-9 to 4e-7 m and the edge rule matches them
+    to faces whose push-outs nearly contradict each other or the contacts around them
+    (in ``corner-on-corner`` two equal stacked squares: a corner of each inside the
+    other, rows with opposite normals).  Baumgarte's push-out then takes opposing
+    impulses of 3e2 to 4e3 N s and injects 4e-5 to 2e-3 J per step, far more than
+    pushing out that depth can explain.  The runs are otherwise sound (no NaN, no
+    drift, penetration within its bound).  A fix of the formulation or the edge rule
+    makes this test fail: then assert ``problems == []`` instead.
     """
-    problems = check_scene(Scene.from_dict(WEDGED_CORNER), steps=STEPS, dt=DT)
+    problems = check_scene(scene, steps=STEPS, dt=DT)
     assert len(problems) == 1 and problems[0].startswith("energy rose by"), problems
 
 
