@@ -12,16 +12,16 @@ Two digests of a run's corner positions ``points`` ``(steps + 1, 4 n, 2)``:
     ``tests/golden/trajectory_hashes.toml`` pins: a change of the model, the
     formulation, the step or the solver's answer by more than 1e-9 m changes it.
     1e-9 m is far above the round-off that differs between machines (a few ulps of
-    positions of order 1 m, 1e-16 to 1e-15 m, grown to at most about 1e-13 m over the
-    100 steps; see ``tests/test_determinism.py``, which measures that growth) and far
+    positions of order 1 m, 1e-16 to 1e-15 m; a 1e-15 change of the start grows to
+    3e-15 m over the 100 steps, as ``tests/test_determinism.py`` measures) and far
     below any physical change (solver tolerance 1e-7, penetrations of 1e-11 m and up).
     Limitation: rounding cannot make a digest robust to every tiny difference.  A value
     within ``delta`` of a rounding boundary (a multiple of 1e-9 plus 5e-10) flips when
     perturbed by ``delta``, so a round-off difference ``delta`` changes the digest of
-    ``N`` numbers with probability about ``N delta / 1e-9`` (about 1e-3 for 800 numbers
-    and ``delta = 1e-15``).  A golden mismatch therefore calls for a look at the size
-    of the change (:func:`largest_difference` against a run saved before), not for a
-    blind regeneration.
+    ``N`` numbers with probability about ``N delta / 1e-9`` (2e-3 for the 1616 positions
+    of the golden run and ``delta = 1e-15``).  A golden mismatch therefore calls for a
+    look at the size of the change (:func:`largest_difference` against a run saved
+    before), not for a blind regeneration.
 
 ``python -m wuerfel_cvx.robustness.determinism`` prints the golden file's content for
 the installed versions; it never writes the file (regenerate deliberately, by hand).
