@@ -13,12 +13,11 @@ from test_solver_agreement import AGREEMENT
 from wuerfel_cvx import simulate
 from wuerfel_cvx.compiled import CompiledQP, CompiledQPCache
 from wuerfel_cvx.direct import (
+    DIRECT_SOLVERS,
     DirectClarabel,
     DirectOSQP,
     DirectPIQP,
-    direct_clarabel,
-    direct_osqp,
-    direct_piqp,
+    build_direct,
 )
 from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.solve import VERIFY_FACTOR, solve_step_qp
@@ -29,17 +28,15 @@ pytestmark = pytest.mark.filterwarnings(  # cvxpy reading its own sparse paramet
     "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")
 
 
-BUILDERS = {"OSQP": direct_osqp, "PIQP": direct_piqp, "CLARABEL": direct_clarabel}
 
-
-@pytest.mark.parametrize("solver", list(BUILDERS))
+@pytest.mark.parametrize("solver", list(DIRECT_SOLVERS))
 def test_direct_path_matches_problem_solve_on_every_bank_qp(solver: str) -> None:
     options = SOLVERS[solver].options(HIGH)
     for entry in qp_bank():
         qp = entry.build()
         compiled = CompiledQP.of(qp)
         declared = compiled.load(qp)
-        direct = BUILDERS[solver](declared.problem, compiled.parameter_names(), qp, options)
+        direct = build_direct(solver, declared.problem, compiled.parameter_names(), qp, options)
         assert direct is not None, entry.label
         fresh = solve_step_qp(entry.build(), solver, "high")
         result = direct.solve(qp, options)
@@ -58,7 +55,7 @@ def test_direct_path_matches_problem_solve_on_every_bank_qp(solver: str) -> None
                                        rtol=0, atol=1e-4 * (1 + np.abs(result.eq_dual).max()))
 
 
-@pytest.mark.parametrize("solver", list(BUILDERS))
+@pytest.mark.parametrize("solver", list(DIRECT_SOLVERS))
 def test_direct_solutions_pass_the_residual_check(solver: str) -> None:
     cache = CompiledQPCache(compile_after=1)
     for entry in qp_bank():
@@ -70,15 +67,15 @@ def test_direct_solutions_pass_the_residual_check(solver: str) -> None:
         assert solution.residuals.worst() <= VERIFY_FACTOR * HIGH
 
 
-@pytest.mark.parametrize("solver", list(BUILDERS))
+@pytest.mark.parametrize("solver", list(DIRECT_SOLVERS))
 def test_unknown_parameters_fall_back_to_problem_solve(solver: str) -> None:
     qp = qp_bank()[0].build()
     compiled = CompiledQP.of(qp)
     declared = compiled.load(qp)
-    assert BUILDERS[solver](declared.problem, {}, qp, SOLVERS[solver].options(HIGH)) is None
+    assert build_direct(solver, declared.problem, {}, qp, SOLVERS[solver].options(HIGH)) is None
 
 
-@pytest.mark.parametrize("solver", list(BUILDERS))
+@pytest.mark.parametrize("solver", list(DIRECT_SOLVERS))
 def test_simulation_on_the_direct_path_equals_the_fresh_one(solver: str) -> None:
     steps = 100
     direct = simulate("tilted-drop", steps=steps, solver=solver, tol="high")
@@ -133,7 +130,8 @@ def test_piqp_direct_results_are_not_overwritten_by_the_next_solve() -> None:
     options = SOLVERS["PIQP"].options(HIGH)
     qp = next(e.build() for e in qp_bank() if e.build().n_inequalities)
     compiled = CompiledQP.of(qp)
-    direct = direct_piqp(compiled.load(qp).problem, compiled.parameter_names(), qp, options)
+    direct = build_direct("PIQP", compiled.load(qp).problem, compiled.parameter_names(), qp,
+                          options)
     assert direct is not None
     first = direct.solve(qp, options)
     kept = (first.x.copy(), first.eq_dual.copy(), first.ineq_dual.copy())

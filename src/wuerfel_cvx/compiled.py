@@ -36,7 +36,7 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
-from .direct import DirectSolver, direct_clarabel, direct_osqp, direct_piqp
+from .direct import DIRECT_SOLVERS, DirectSolver, build_direct
 from .formulations.qp import DeclaredQP, StepQP
 
 StructureKey = tuple[int, bytes, tuple[int, int], bytes, bytes, tuple[int, int], bytes, bytes]
@@ -159,16 +159,15 @@ class CompiledQPCache:
         ``None`` means: solve through cvxpy (not compiled yet, another solver, or the path
         does not apply).  A structure's path is set up with the options of its first use.
         """
-        builders = {"OSQP": direct_osqp, "PIQP": direct_piqp, "CLARABEL": direct_clarabel}
         key = structure_key(qp)
         compiled = self._problems.get(key)
-        if compiled is None or solver not in builders:
+        if compiled is None or solver not in DIRECT_SOLVERS:
             return None
         self._problems.move_to_end(key)
         if solver not in compiled.direct:
             compiled.load(qp)
-            compiled.direct[solver] = builders[solver](
-                compiled.declared.problem, compiled.parameter_names(), qp, options)
+            compiled.direct[solver] = build_direct(
+                solver, compiled.declared.problem, compiled.parameter_names(), qp, options)
         direct = compiled.direct[solver]
         if direct is not None:
             self.reused += 1

@@ -20,8 +20,8 @@ The duals of our rows ``E x = e`` and ``G x >= h`` are read from the solver's by
 and coefficient each right-hand side takes in the conic data (:class:`ParameterMap`), so
 every step is checked by the same independent KKT residuals as any other solve.  The map
 uses cvxpy internals (the cached ``ParamConeProg`` and its reduced tensor);
-:func:`direct_osqp`, :func:`direct_piqp` and :func:`direct_clarabel` return ``None`` when
-they do not look as expected, and the caller falls back to ``Problem.solve()``.  PROXQP
+:func:`build_direct` returns ``None`` when they do not look as expected, and the caller
+falls back to ``Problem.solve()``.  PROXQP
 and SCS always go through ``Problem.solve()``.
 
 The solver time reported is the one cvxpy reports for the same solver: OSQP's and PIQP's
@@ -322,34 +322,17 @@ DirectSolver = DirectOSQP | DirectPIQP | DirectClarabel
 """A structure's direct path for one solver."""
 
 
-def direct_osqp(problem: cp.Problem, names: dict[int, str], qp: StepQP,
-                options: dict[str, Any]) -> DirectOSQP | None:
-    """Set up the direct OSQP path for a compiled ``problem`` whose parameters hold ``qp``.
+def build_direct(solver: str, problem: cp.Problem, names: dict[int, str], qp: StepQP,
+                 options: dict[str, Any]) -> DirectSolver | None:
+    """Set up ``solver``'s direct path for a compiled ``problem`` whose parameters hold ``qp``.
 
-    ``names`` maps our parameter ids to ``weighted_target``, ``eq_values``, ``eq_rhs``,
-    ``ineq_values``, ``ineq_rhs``.  Returns ``None`` if cvxpy's internals are not as
-    expected (the caller then keeps using ``Problem.solve()``).
+    ``solver`` is one of :data:`DIRECT_SOLVERS` (OSQP, PIQP with its sparse backend,
+    CLARABEL).  ``names`` maps our parameter ids to ``weighted_target``, ``eq_values``,
+    ``eq_rhs``, ``ineq_values``, ``ineq_rhs``.  Returns ``None`` if cvxpy's internals are
+    not as expected (the caller then keeps using ``Problem.solve()``).
     """
     try:
-        return _build_osqp(problem, names, qp, options)
-    except Exception:  # any surprise in cvxpy's internals: use the public path instead
-        return None
-
-
-def direct_clarabel(problem: cp.Problem, names: dict[int, str], qp: StepQP,
-                    options: dict[str, Any]) -> DirectClarabel | None:
-    """As :func:`direct_osqp`, for Clarabel; ``None`` if the path does not apply."""
-    try:
-        return _build_clarabel(problem, names, qp, options)
-    except Exception:  # any surprise in cvxpy's internals: use the public path instead
-        return None
-
-
-def direct_piqp(problem: cp.Problem, names: dict[int, str], qp: StepQP,
-                options: dict[str, Any]) -> DirectPIQP | None:
-    """As :func:`direct_osqp`, for PIQP's sparse backend; ``None`` if the path does not apply."""
-    try:
-        return _build_piqp(problem, names, qp, options)
+        return _BUILDERS[solver](problem, names, qp, options)
     except Exception:  # any surprise in cvxpy's internals: use the public path instead
         return None
 
@@ -507,3 +490,8 @@ def _rhs_rows(reduced_map: sp.csr_array, indices: np.ndarray, offset_entries: tu
         rows[j] = indices[entries[0]]
         coefficients[j] = columns.data[columns.indptr[j]]
     return rows, coefficients
+
+
+_BUILDERS = {"OSQP": _build_osqp, "PIQP": _build_piqp, "CLARABEL": _build_clarabel}
+DIRECT_SOLVERS = tuple(_BUILDERS)
+"""Solvers with a direct path."""
