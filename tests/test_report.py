@@ -350,3 +350,18 @@ def test_step_over_solver_ratio_is_reported_per_solver(readme: str) -> None:
     for cells in table:
         expected = 1.0 / shares[cells[1]]
         assert float(cells[-1]) == pytest.approx(expected, abs=0.006)
+
+
+def test_each_completed_grid_point_has_its_own_timing_row(readme: str) -> None:
+    done = [row for row in fixture_rows()
+            if row["status"] == "ok" and row["wall_time_per_step_median"]]
+    assert 0 < len(done) <= 60  # the fixture is a small suite: the table is shown
+    table = table_after(readme, "### Each grid point")
+    assert len(table) == len(done)
+    shown = {(cells[0], cells[1], cells[2], cells[3], cells[4]): cells for cells in table}
+    for row in done:
+        cells = shown[(row["scene"], row["formulation"], row["solver"], row["tol"],
+                       f"{float(row['dt']):.3g}")]
+        assert cells[6] == f"{1e3 * float(row['wall_time_per_step_median']):.3g}"
+        if row["step_over_solver_median"]:
+            assert cells[8] == f"{float(row['step_over_solver_median']):.2f}"

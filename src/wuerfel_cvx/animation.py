@@ -175,7 +175,8 @@ def draw_frame(trajectory: Trajectory, index: int, ax: Axes | None = None, *,
     contacts = ax.scatter(np.zeros(0), np.zeros(0), s=14, color="#d62728", zorder=3,
                           label=f"contact (< {1e3 * margin:g} mm)")
     label = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", ha="left",
-                    family="monospace", fontsize=9)
+                    family="monospace", fontsize=9, zorder=5,  # readable over squares
+                    bbox={"facecolor": "white", "alpha": 0.7, "edgecolor": "none"})
     ax.set_xlim(*xlim)
     ax.set_ylim(*ylim)
     ax.set_aspect("equal")

@@ -320,6 +320,7 @@ def speed_section(results: pd.DataFrame, images: dict[str, list[Path]],
         parts.append(_time_table(rows, _ENGINE_KEY,
                                  "### Against the peer engines (velocity, tol default)",
                                  "scene and dt"))
+    parts.append(point_time_table(results))
     image = _image(images, "timing-breakdown", out_dir, "modelling and solver time per step")
     if image:
         parts += ["### Where the time goes", image,
@@ -327,6 +328,35 @@ def speed_section(results: pd.DataFrame, images: dict[str, list[Path]],
                   "ones); an engine that reports no solver time of its own gets one hatched "
                   "bar for the whole step."]
     return "\n\n".join(parts)
+
+
+POINT_TABLE_LIMIT = 60
+"""Suites with at most this many completed grid points get a timing row per point."""
+
+
+def point_time_table(results: pd.DataFrame) -> str:
+    """Median step and solver time and their ratio for each completed grid point.
+
+    Only for small suites (at most :data:`POINT_TABLE_LIMIT` completed points, such as
+    ``perf``), where the per-scene ratios are what the suite measures; '' otherwise.
+    """
+    rows = _completed(results)
+    if rows.empty or len(rows) > POINT_TABLE_LIMIT:
+        return ""
+    rows = rows.sort_values(["scene", "formulation", "solver", "tol", "dt", "sleep"],
+                            kind="stable")
+    table = markdown_table(
+        ["scene", "formulation", "solver", "tol", "dt (s)", "sleep", "wall (ms)",
+         "solver (ms)", "step / solver"],
+        ([row.scene, row.formulation, row.solver, row.tol, format_number(row.dt),
+          "yes" if bool(row.sleep) else "no", format_ms(row.wall_time_per_step_median),
+          format_ms(row.solver_time_per_step_median),
+          format_ratio(plots.as_float(row.step_over_solver_median))]
+         for row in rows.itertuples()),
+        align="lllllrrrr")
+    return ("### Each grid point\n\nMedian whole-step and solver time per step of every "
+            "completed grid point, and the median of their per-step ratio (*step / solver*).  "
+            "Peer engines' *solver* is their own stepping function.\n\n" + table)
 
 
 def _formulations(results: pd.DataFrame) -> list[str]:
