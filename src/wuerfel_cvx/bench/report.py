@@ -320,7 +320,9 @@ def speed_section(results: pd.DataFrame, images: dict[str, list[Path]],
         parts.append(_time_table(rows, _ENGINE_KEY,
                                  "### Against the peer engines (velocity, tol default)",
                                  "scene and dt"))
-    parts.append(point_time_table(results))
+    per_point = point_time_table(results)
+    if per_point:
+        parts.append(per_point)
     image = _image(images, "timing-breakdown", out_dir, "modelling and solver time per step")
     if image:
         parts += ["### Where the time goes", image,
