@@ -204,3 +204,22 @@ def test_simulate_with_sleep_saves_asleep_steps(tmp_path: Path) -> None:
     statuses = Trajectory.load(out.with_suffix(".npz")).metrics["status"]
     # At rest from the start: awake for the first 0.5 s, asleep after.
     assert (statuses.iloc[:50] == "optimal").all() and (statuses.iloc[50:] == "asleep").all()
+
+
+@pytest.mark.parametrize(("flags", "islands"), [([], False), (["--islands"], True)])
+def test_islands_flag_reaches_simulate(flags: list[str], islands: bool,
+                                       monkeypatch: pytest.MonkeyPatch,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    import wuerfel_cvx.cli as cli
+    from wuerfel_cvx.simulate import simulate
+
+    seen: dict[str, object] = {}
+
+    def recording(*args: object, **kwargs: object) -> Trajectory:
+        seen.update(kwargs)
+        return simulate(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(cli, "simulate", recording)
+    assert main(["simulate", "stack-3", "--steps", "3", *flags]) == 0
+    assert seen["islands"] is islands
+    assert "verified steps       3/3" in capsys.readouterr().out

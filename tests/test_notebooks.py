@@ -10,10 +10,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import nbclient  # in the test extra: a missing install fails here, not as a silent skip
+import nbformat
 import pytest
-
-nbformat = pytest.importorskip("nbformat")
-nbclient = pytest.importorskip("nbclient")
 
 NOTEBOOKS = sorted((Path(__file__).resolve().parents[1] / "notebooks").glob("*.ipynb"))
 
