@@ -365,3 +365,25 @@ def test_each_completed_grid_point_has_its_own_timing_row(readme: str) -> None:
         assert cells[6] == f"{1e3 * float(row['wall_time_per_step_median']):.3g}"
         if row["step_over_solver_median"]:
             assert cells[8] == f"{float(row['step_over_solver_median']):.2f}"
+
+
+def test_solver_time_above_the_step_time_gives_no_modelling_mean(tmp_path: Path) -> None:
+    # A solver whose own report exceeds the whole step (Clarabel's clock did, in a busy
+    # benchmark worker) leaves a negative modelling time: no mean of it, and the reason.
+    rows = fixture_rows()
+    target = next(row for row in rows if row["formulation"] == "velocity"
+                  and row["solver"] == "OSQP" and row["status"] == "ok")
+    wall = float(target["wall_time_per_step_median"])
+    target["solver_time_per_step_median"] = repr(2.0 * wall)
+    target["modelling_time_per_step_median"] = repr(-wall)
+    target["step_over_solver_median"] = "0.5"
+    results = tmp_path / "results.csv"
+    with results.open("w", encoding="utf-8", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    text = write_report(results, tmp_path / "reports").read_text(encoding="utf-8")
+    section = text.split("### Formulation `velocity`", 1)[1].split("###", 1)[0]
+    assert "No modelling time for OSQP: on some grid point the solver reported more" in section
+    table = {cells[1]: cells for cells in table_after(text, "### Formulation `velocity`")}
+    assert table["OSQP"][6] == "–" and table["CLARABEL"][6] != "–"

@@ -271,8 +271,10 @@ def time_means(rows: pd.DataFrame, key: Sequence[str]) -> tuple[pd.DataFrame, in
         record: dict[str, object] = {"formulation": str(formulation), "solver": str(solver)}
         for name, column in _TIME_COLUMNS:
             values = group[column].dropna().to_numpy(dtype=float)
-            record[name] = (shifted_geometric_mean(values) if len(values) == len(group)
-                            else math.nan)
+            # A solver that reports more time than the whole step took leaves a negative
+            # modelling time: no mean of it is shown (the table says why).
+            usable = len(values) == len(group) and bool(np.all(values + DEFAULT_TIME_SHIFT > 0))
+            record[name] = shifted_geometric_mean(values) if usable else math.nan
         ratios = group["step_over_solver_median"].dropna().to_numpy(dtype=float)
         record["step_over_solver"] = (float(np.median(ratios)) if len(ratios) == len(group)
                                       else math.nan)
@@ -372,12 +374,17 @@ def _time_table(rows: pd.DataFrame, key: Sequence[str], title: str, same: str) -
     left_out = [name for name in all_solvers if name not in solvers]
     note = (f" Left out (completed no grid point): {', '.join(left_out)}." if left_out
             else "")
+
     if not common:
         return (f"{title}\n\nNo grid point was completed by every solver compared "
                 f"({', '.join(solvers) or 'none'}), so there is no fair time comparison."
                 + note)
     means, count = time_means(rows, key)
     means = _solver_rows(means)
+    over = means[means["modelling"].isna() & means["solver_time"].notna()]["solver"]
+    if len(over):
+        note += (f" No modelling time for {', '.join(map(str, over))}: on some grid point the "
+                 "solver reported more time than the whole step took.")
     fastest = {name: means[name].min() for name, _ in _TIME_COLUMNS}
     table = markdown_table(
         ["formulation", "solver", "wall (ms)", "×fastest", "solver (ms)", "×fastest",
