@@ -32,3 +32,21 @@ def kinetic_energy(model: Model, state: State) -> float:
 def potential_energy(model: Model, state: State) -> float:
     """``-sum_i m_i g . p_i`` (J), zero at the origin."""
     return float(-np.sum(model.point_masses * (state.points @ model.gravity)))
+
+
+def total_energy(model: Model, state: State) -> float:
+    """Kinetic plus potential energy (J)."""
+    return kinetic_energy(model, state) + potential_energy(model, state)
+
+
+def largest_corner_distance(points: FloatArray, reference: FloatArray) -> float:
+    """Largest corner distance (m) between two runs ``(T, 4 n, 2)`` over the instants both have.
+
+    A single reference state ``(1, 4 n, 2)`` is broadcast (the exact solution at rest).
+    """
+    if reference.shape[0] == 1:
+        difference = points - reference
+    else:
+        common = min(points.shape[0], reference.shape[0])
+        difference = points[:common] - reference[:common]
+    return float(np.max(np.linalg.norm(difference, axis=-1)))

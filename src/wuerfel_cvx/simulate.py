@@ -248,12 +248,13 @@ def simulate(
         points.append(state.points)
         velocities.append(state.velocities)
         qps = [qp for _, qp, _, _ in solved]
+        combined = _combined(solutions)
         rows.append(_metrics_row(model, state, sum(qp.n_variables for qp in qps),
                                  sum(qp.n_equalities for qp in qps),
                                  sum(qp.n_inequalities for qp in qps),
                                  sum(len(qp.contacts) for qp in qps), step, float(dt),
-                                 build_time, step_time, _combined(solutions),
-                                 _combined_primary_status(solutions, primary_statuses)))
+                                 build_time, step_time, combined,
+                                 _primary_status(combined, solutions, primary_statuses)))
         if observer is not None:
             try:
                 for qp, solution in zip(qps, solutions, strict=True):
@@ -345,16 +346,15 @@ def _combined(solutions: list[StepSolution]) -> StepSolution:
         iterations=max(solution.iterations for solution in solutions))
 
 
-def _combined_primary_status(solutions: list[StepSolution], primary_statuses: list[str]) -> str:
+def _primary_status(combined: StepSolution, solutions: list[StepSolution],
+                    primary_statuses: list[str]) -> str:
     """The step's ``primary_status``.
 
-    The run's own solver's first failed status on any island QP, else the combined status
-    (see :func:`_combined`).
+    The run's own solver's first failed status on any island QP (where a fallback took
+    over), else the ``combined`` solution's status.
     """
-    for solution, primary in zip(solutions, primary_statuses, strict=True):
-        if primary != solution.status:  # a fallback solver took over this island
-            return primary
-    return _combined(solutions).status
+    return next((primary for solution, primary in zip(solutions, primary_statuses, strict=True)
+                 if primary != solution.status), combined.status)
 
 
 def _asleep_row(model: Model, state: State, step: int, dt: float,

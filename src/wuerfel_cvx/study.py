@@ -22,7 +22,7 @@ import pandas as pd
 
 from .errors import InputError, StepFailure
 from .formulations import StepQP
-from .metrics import kinetic_energy, potential_energy
+from .metrics import largest_corner_distance, total_energy
 from .model import Model, State
 from .scene import Scene
 from .simulate import resolve_scene, simulate
@@ -94,7 +94,7 @@ def run_variant(scene: Scene | str | Path, variant: Variant, dt: float,
     scene = resolve_scene(scene)
     model = Model.from_scene(scene)
     state = State.initial(scene)
-    initial_energy = kinetic_energy(model, state) + potential_energy(model, state)
+    initial_energy = total_energy(model, state)
     started = time.perf_counter()
     failure: StepFailure | None = None
     try:
@@ -140,11 +140,9 @@ def trajectory_distance(points: np.ndarray, reference: np.ndarray) -> float:
 
     NaN when they share no step beyond the initial state.
     """
-    common = min(points.shape[0], reference.shape[0])
-    if common <= 1:  # no step in common: the initial states agree by construction
+    if min(points.shape[0], reference.shape[0]) <= 1:  # the initial states agree by construction
         return float("nan")
-    gap = np.linalg.norm(points[:common] - reference[:common], axis=-1)
-    return float(np.max(gap))
+    return largest_corner_distance(points, reference)
 
 
 def _step_table(run: VariantRun) -> pd.DataFrame:

@@ -23,7 +23,7 @@ import pandas as pd
 from ..errors import StepFailure
 from ..formulations import StepQP
 from ..geometry import FloatArray
-from ..metrics import kinetic_energy, potential_energy
+from ..metrics import largest_corner_distance, total_energy
 from ..model import Model, State
 from ..peers import peer_version, simulate_peer
 from ..simulate import ASLEEP, resolve_scene, simulate
@@ -219,29 +219,16 @@ def _accuracy(trajectory: Trajectory, point: GridPoint,
             "max_step_energy_rise": float(np.max(np.diff(with_start))),
         }
     if point.reference == "rest":
-        accuracy["trajectory_error"] = _largest_distance(trajectory.points,
-                                                          trajectory.points[:1])
+        accuracy["trajectory_error"] = largest_corner_distance(trajectory.points,
+                                                                trajectory.points[:1])
     elif point.reference == "dt/8" and reference is not None:
         if reference.complete:
-            accuracy["trajectory_error"] = _largest_distance(trajectory.points,
-                                                              reference.points)
+            accuracy["trajectory_error"] = largest_corner_distance(trajectory.points,
+                                                                    reference.points)
         else:
             detail = " ".join(reference.detail.split())[:160]
             accuracy["reference_kind"] = f"dt/8 (reference failed: {detail})"
     return accuracy
-
-
-def _largest_distance(points: FloatArray, reference: FloatArray) -> float:
-    """Largest corner distance (m) over the instants both have.
-
-    A single reference state is broadcast: the exact solution at rest.
-    """
-    if reference.shape[0] == 1:
-        difference = points - reference
-    else:
-        common = min(points.shape[0], reference.shape[0])
-        difference = points[:common] - reference[:common]
-    return float(np.max(np.linalg.norm(difference, axis=-1)))
 
 
 def _initial_energy(trajectory: Trajectory) -> float:
@@ -249,7 +236,7 @@ def _initial_energy(trajectory: Trajectory) -> float:
     model = Model.from_scene(scene, table_mass=trajectory.info.get("table_mass"),
                              extra_rod=bool(trajectory.info.get("extra_rod", False)))
     state = State(trajectory.points[0], trajectory.velocities[0])
-    return kinetic_energy(model, state) + potential_energy(model, state)
+    return total_energy(model, state)
 
 
 def _write_series(trajectory: Trajectory, path: Path) -> None:

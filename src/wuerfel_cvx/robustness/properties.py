@@ -97,9 +97,10 @@ import numpy as np
 
 from ..errors import StepFailure
 from ..formulations import VelocityFormulation
+from ..formulations.rigid import body_velocities
 from ..library import FLOOR
-from ..metrics import deepest_penetration
-from ..model import Model
+from ..metrics import deepest_penetration, total_energy
+from ..model import Model, State
 from ..scene import Scene, Square
 from ..simulate import simulate
 from ..trajectory import Trajectory
@@ -209,14 +210,13 @@ class RunBounds:
 
 def _spins_and_speeds(trajectory: Trajectory, n_squares: int) -> tuple[np.ndarray, np.ndarray]:
     """Largest spin (rad/s) and corner speed (m/s) per state, ``(steps + 1,)`` each."""
-    points = trajectory.points.reshape(-1, n_squares, 4, 2)
-    velocities = trajectory.velocities.reshape(-1, n_squares, 4, 2)
-    offsets = points - points.mean(axis=2, keepdims=True)
-    relative = velocities - velocities.mean(axis=2, keepdims=True)
-    spin = (np.sum(offsets[..., 0] * relative[..., 1] - offsets[..., 1] * relative[..., 0],
-                   axis=2) / np.sum(offsets**2, axis=(2, 3)))
-    speed = np.linalg.norm(velocities, axis=3)
-    return np.abs(spin).max(axis=1), speed.max(axis=(1, 2))
+    states = trajectory.points.shape[0]
+    # every state's squares at once: the fit is per square (equal corner masses)
+    _, spin = body_velocities(trajectory.points.reshape(-1, 2),
+                              trajectory.velocities.reshape(-1, 2),
+                              np.ones((states * n_squares, 4)))
+    speed = np.linalg.norm(trajectory.velocities, axis=2)
+    return np.abs(spin).reshape(states, n_squares).max(axis=1), speed.max(axis=1)
 
 
 def run_bounds(trajectory: Trajectory, scene: Scene,
@@ -324,11 +324,8 @@ def check_run(trajectory: Trajectory, scene: Scene,
 
 def _initial_energy(trajectory: Trajectory, scene: Scene) -> float:
     """Kinetic plus potential energy (J) of the first state."""
-    masses = np.repeat([s.mass / 4.0 for s in scene.squares], 4)
-    points, velocities = trajectory.points[0], trajectory.velocities[0]
-    kinetic = 0.5 * float(np.sum(masses * np.sum(velocities**2, axis=1)))
-    potential = -float(np.sum(masses * (points @ np.asarray(scene.gravity))))
-    return kinetic + potential
+    return total_energy(Model.from_scene(scene),
+                        State(trajectory.points[0], trajectory.velocities[0]))
 
 
 # ---------------------------------------------------------------------- sweeps
