@@ -99,8 +99,8 @@ def test_model_rebuilt_from_a_trajectory_has_its_bodies() -> None:
     scene = Scene("two", (Square(center=(0.0, 0.5), size=0.5, angle=0.3),
                           Square(center=(2.0, 2.0))), Scene.named("single-drop").tables)
     model = trajectory_model(simulate(scene, steps=1))
-    assert model.n_squares == 2 and model.n_tables == 1
-    np.testing.assert_allclose(model.square_sizes, [0.5, 1.0], rtol=1e-12)
+    assert model.n_boxes == 2 and model.n_tables == 1
+    np.testing.assert_allclose(model.box_sizes, [[0.5, 0.5], [1.0, 1.0]], rtol=1e-12)
     np.testing.assert_allclose(model.table_points, scene.table_points(), atol=1e-12)
 
 

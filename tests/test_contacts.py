@@ -62,7 +62,7 @@ def all_pairs_contacts(model: Model, points: np.ndarray, margin: float) -> set[t
     found = set()
     for w in range(model.n_bodies):
         for b in range(model.n_bodies):
-            if w == b or (w >= model.n_squares and b >= model.n_squares):
+            if w == b or (w >= model.n_boxes and b >= model.n_boxes):
                 continue
             polygon, foreign = all_points[4 * w: 4 * w + 4], all_points[4 * b: 4 * b + 4]
             distances = edge_distances(foreign, polygon)
@@ -94,16 +94,16 @@ def test_tables_are_constants_not_variables() -> None:
     scene = Scene.named("stack-3")
     model = Model.from_scene(scene)
     qp = get_formulation("velocity").build(model, State.initial(scene), 0.01)
-    assert qp.n_variables == 2 * 4 * scene.n_squares
-    assert qp.n_equalities == 5 * scene.n_squares
+    assert qp.n_variables == 2 * 4 * scene.n_boxes
+    assert qp.n_equalities == 5 * scene.n_boxes
 
 
 def test_heavy_table_variant_holds_the_table_and_matches_the_fixed_one() -> None:
     scene = Scene.named("tilted-drop")
     heavy = Model.from_scene(scene, table_mass=1e6)
     qp = get_formulation("velocity").build(heavy, State.initial(scene), 0.01)
-    assert qp.n_variables == 2 * 4 * (scene.n_squares + len(scene.tables))
-    assert qp.n_equalities == 5 * scene.n_squares + 2 * 4 * len(scene.tables)
+    assert qp.n_variables == 2 * 4 * (scene.n_boxes + len(scene.tables))
+    assert qp.n_equalities == 5 * scene.n_boxes + 2 * 4 * len(scene.tables)
     fixed = simulate(scene, dt=0.01, steps=120, tol="high")
     errors = []
     for table_mass in (1e2, 1e6):

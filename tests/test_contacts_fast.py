@@ -48,7 +48,7 @@ def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntAr
     ``reach`` ``(n_bodies,)`` (m) is how far beyond its circumcircle each body must be
     looked for.  Table-table pairs are never returned.
     """
-    n, t = model.n_squares, model.n_tables
+    n, t = model.n_boxes, model.n_tables
     corners = all_points.reshape(-1, 4, 2)
     centers = corners.mean(axis=1)
     radii = np.linalg.norm(corners - centers[:, None, :], axis=2).max(axis=1)

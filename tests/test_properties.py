@@ -163,7 +163,7 @@ def test_random_scenes_are_valid_and_reproducible() -> None:
     first = [random_scene(np.random.default_rng(seed)) for seed in range(20)]
     again = [random_scene(np.random.default_rng(seed)) for seed in range(20)]
     assert [s.to_dict() for s in first] == [s.to_dict() for s in again]
-    counts = {scene.n_squares for scene in first}
+    counts = {scene.n_boxes for scene in first}
     assert counts <= set(range(1, MAX_SQUARES + 1)) and len(counts) > 3
     for scene in first:  # the constructor already refused overlaps; check the ranges
         masses = [s.mass for s in scene.squares]
@@ -307,4 +307,4 @@ def test_sweep_counts_scenes_and_names_failures() -> None:
     assert {f.index: list(f.problems) for f in result.failures} == {
         index: problems for index, problems in expected.items() if problems}
     for failure in result.failures:
-        assert Scene.from_dict(failure.scene).n_squares >= 1
+        assert Scene.from_dict(failure.scene).n_boxes >= 1

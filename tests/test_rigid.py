@@ -117,7 +117,7 @@ def test_body_rows_and_velocities_equal_the_corner_map_products(scene: str) -> N
         np.testing.assert_array_equal(ours.indices, product.indices)
         np.testing.assert_array_equal(ours.data, product.data)
         seen_rows += ours.shape[0]
-        body = rng.normal(size=3 * model.n_squares)
+        body = rng.normal(size=3 * model.n_boxes)
         np.testing.assert_array_equal(
             RigidFormulation().new_velocities(state, body, 0.01),
             (corner_velocity_map(state.points) @ body).reshape(-1, 2))

@@ -56,7 +56,7 @@ def test_example_file_loads_with_the_values_it_states() -> None:
         Square(center=(0.0, 2.0), size=1.0, angle=0.3, mass=1.0, velocity=(0.0, 0.0),
                angular_velocity=0.0),
     )
-    assert scene.n_squares == 1
+    assert scene.n_boxes == 1
 
 
 def test_example_file_states_every_key_of_the_schema() -> None:
@@ -142,7 +142,7 @@ def _three_squares() -> Scene:
 def test_initial_points_are_counter_clockwise_corners_of_each_square() -> None:
     scene = _three_squares()
     points = scene.initial_points()
-    assert points.shape == (4 * scene.n_squares, 2)
+    assert points.shape == (4 * scene.n_boxes, 2)
     for i, square in enumerate(scene.squares):
         corners = points[4 * i:4 * i + 4]
         assert shoelace_area(corners) == pytest.approx(square.size**2, rel=1e-12)
@@ -175,7 +175,7 @@ def test_table_points_are_counter_clockwise_with_area_width_times_height() -> No
 def test_initial_velocities_are_v_plus_omega_cross_r() -> None:
     scene = _three_squares()
     velocities = scene.initial_velocities()
-    assert velocities.shape == (4 * scene.n_squares, 2)
+    assert velocities.shape == (4 * scene.n_boxes, 2)
     h = 1e-6
     for i, s in enumerate(scene.squares):
         # Central difference of the corners along the rigid motion.
@@ -300,7 +300,7 @@ def test_allow_overlap_accepts_overlapping_squares(tmp_path: Path) -> None:
     text = "allow_overlap = true\n" + _SQ + "[[squares]]\ncenter = [0.5, 2.5]\n"
     scene = Scene.from_toml(write_scene(tmp_path, text))
     assert scene.allow_overlap is True
-    assert scene.n_squares == 2
+    assert scene.n_boxes == 2
     depth = polygon_overlap_depth(scene.squares[0].corners(), scene.squares[1].corners())
     assert depth == pytest.approx(0.5)
 
@@ -316,7 +316,7 @@ def test_touching_squares_are_not_an_overlap(tmp_path: Path) -> None:
     text = _TB + "[[squares]]\ncenter = [0.0, 0.5]\n[[squares]]\ncenter = [0.3, 1.5]\n" \
         "[[squares]]\ncenter = [1.3, 1.5]\n"
     scene = Scene.from_toml(write_scene(tmp_path, text))
-    assert scene.n_squares == 3
+    assert scene.n_boxes == 3
 
 
 def test_overlap_just_above_tolerance_is_rejected() -> None:
@@ -362,9 +362,9 @@ def test_every_library_scene_builds_under_its_name(name: str) -> None:
     scene = Scene.named(name)
     assert isinstance(scene, Scene)
     assert scene.name == name
-    assert scene.n_squares >= 1
-    assert scene.initial_points().shape == (4 * scene.n_squares, 2)
-    assert scene.initial_velocities().shape == (4 * scene.n_squares, 2)
+    assert scene.n_boxes >= 1
+    assert scene.initial_points().shape == (4 * scene.n_boxes, 2)
+    assert scene.initial_velocities().shape == (4 * scene.n_boxes, 2)
     assert Scene.from_dict(scene.to_dict()) == scene
 
 
@@ -403,7 +403,7 @@ def test_only_overlap_recovery_allows_overlap_and_needs_it() -> None:
 @pytest.mark.parametrize("count", [1, SMALL_N, 10])
 def test_stack_squares_touch_exactly(count: int) -> None:
     scene = Scene.named(f"stack-{count}")
-    assert scene.n_squares == count
+    assert scene.n_boxes == count
     assert scene.tables == (FLOOR,)
     assert float(np.max(FLOOR.corners()[:, 1])) == 0.0
     centers = np.array([s.center for s in scene.squares])
@@ -420,9 +420,9 @@ def test_stack_squares_touch_exactly(count: int) -> None:
 
 
 def test_family_names_without_number_use_the_default() -> None:
-    assert Scene.named("stack").n_squares == 10
-    assert Scene.named("pyramid").n_squares == 4 + 3 + 2 + 1
-    assert Scene.named("rain").n_squares == 20
+    assert Scene.named("stack").n_boxes == 10
+    assert Scene.named("pyramid").n_boxes == 4 + 3 + 2 + 1
+    assert Scene.named("rain").n_boxes == 20
     heavy = Scene.named("heavy-on-light")
     assert heavy.name == "heavy-on-light"
     assert [s.mass for s in heavy.squares] == [1.0, 1.0, 100.0]

@@ -32,7 +32,7 @@ def test_islands_are_the_connected_stacks() -> None:
     model, state = Model.from_scene(scene), State.initial(scene)
     contacts = find_contacts(model, state.points, get_formulation("velocity").body_reach(
         model, state, DT))
-    labels = island_labels(model.n_squares, contacts)
+    labels = island_labels(model.n_boxes, contacts)
     assert len(set(labels[:3])) == 1 and len(set(labels[3:6])) == 1
     assert len({labels[0], labels[3], labels[6]}) == 3  # the floor does not connect
 

@@ -39,7 +39,7 @@ def traj() -> Trajectory:
 
 
 def test_array_shapes_and_times(traj: Trajectory) -> None:
-    n_points = 4 * SCENE.n_squares
+    n_points = 4 * SCENE.n_boxes
     assert traj.n_steps == STEPS
     assert traj.times.shape == (STEPS + 1,)
     assert traj.points.shape == (STEPS + 1, n_points, 2)
@@ -86,7 +86,7 @@ def test_metrics_columns_and_one_row_per_step(traj: Trajectory) -> None:
 
 def test_qp_sizes_of_the_velocity_formulation(traj: Trajectory) -> None:
     m = traj.metrics
-    n = SCENE.n_squares
+    n = SCENE.n_boxes
     # 4 corners x 2 velocity components per square; the fixed table has no unknowns
     assert set(m["n_variables"]) == {8 * n}
     # 5 rods per square

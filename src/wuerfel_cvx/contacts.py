@@ -80,7 +80,7 @@ def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntAr
     looked for.  Table-table pairs are never returned.  Order: the square pairs kept
     from the tree query, then the square-table pairs, then all of them reversed.
     """
-    n, t = model.n_squares, model.n_tables
+    n, t = model.n_boxes, model.n_tables
     corners = all_points.reshape(-1, 4, 2)
     centers = corners.mean(axis=1)
     radii = _lengths(corners - centers[:, None, :]).max(axis=1)

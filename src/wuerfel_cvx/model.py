@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError
-from .geometry import FloatArray, square_corners
+from .geometry import FloatArray, rectangle_corners
 from .scene import Scene
 
 IntArray = NDArray[np.int64]
@@ -30,10 +30,10 @@ class Model:
     """Arrays derived once from a :class:`~wuerfel_cvx.scene.Scene`."""
 
     scene: Scene
-    n_squares: int
+    n_boxes: int
     n_tables: int
-    square_sizes: FloatArray
-    """Side length of each square (m), shape ``(n,)``."""
+    box_sizes: FloatArray
+    """Width and height of each box (m), shape ``(n, 2)``."""
     point_masses: FloatArray
     """Mass of each square corner (kg), shape ``(4 n,)``."""
     rods: IntArray
@@ -57,17 +57,17 @@ class Model:
         if table_mass is not None and not (np.isfinite(table_mass) and table_mass > 0):
             raise InputError(f"table_mass must be a positive finite number, got {table_mass}",
                              field="table_mass")
-        n = scene.n_squares
-        sizes = np.array([s.size for s in scene.squares])
+        n = scene.n_boxes
+        sizes = np.array([[s.size, s.size] for s in scene.squares], dtype=np.float64).reshape(-1, 2)
         masses = np.repeat(np.array([s.mass for s in scene.squares]) / 4.0, 4)
         pairs = SQUARE_RODS + (((1, 3),) if extra_rod else ())
         rods = np.array([[4 * b + i, 4 * b + j] for b in range(n) for i, j in pairs],
                         dtype=np.int64)
-        reference = np.stack([square_corners((0.0, 0.0), s, 0.0) for s in sizes])
+        reference = np.stack([rectangle_corners((0.0, 0.0), w, h, 0.0) for w, h in sizes])
         flat_reference = reference.reshape(-1, 2)
         lengths = np.linalg.norm(flat_reference[rods[:, 0]] - flat_reference[rods[:, 1]], axis=1)
         return cls(
-            scene=scene, n_squares=n, n_tables=len(scene.tables), square_sizes=sizes,
+            scene=scene, n_boxes=n, n_tables=len(scene.tables), box_sizes=sizes,
             point_masses=masses, rods=rods, rod_lengths=lengths,
             table_points=scene.table_points(), reference_corners=reference,
             gravity=np.asarray(scene.gravity, dtype=np.float64), table_mass=table_mass,
@@ -79,26 +79,26 @@ class Model:
         Square ``squares[k]`` becomes square ``k``; rods and corner masses follow it.
         """
         squares = np.asarray(squares, dtype=np.int64)
-        rods_per_square = self.rods.shape[0] // max(self.n_squares, 1)
-        blocks = self.rods.reshape(self.n_squares, rods_per_square, 2)[squares]
+        rods_per_square = self.rods.shape[0] // max(self.n_boxes, 1)
+        blocks = self.rods.reshape(self.n_boxes, rods_per_square, 2)[squares]
         shift = 4 * (np.arange(squares.size) - squares)[:, None, None]
         corners = (4 * squares[:, None] + np.arange(4)).ravel()
         return replace(
-            self, n_squares=int(squares.size), square_sizes=self.square_sizes[squares],
+            self, n_boxes=int(squares.size), box_sizes=self.box_sizes[squares],
             point_masses=self.point_masses[corners], rods=(blocks + shift).reshape(-1, 2),
-            rod_lengths=self.rod_lengths.reshape(self.n_squares, -1)[squares].ravel(),
+            rod_lengths=self.rod_lengths.reshape(self.n_boxes, -1)[squares].ravel(),
             reference_corners=self.reference_corners[squares],
         )
 
     @property
     def n_points(self) -> int:
         """Number of square corners (the moving points)."""
-        return 4 * self.n_squares
+        return 4 * self.n_boxes
 
     @property
     def n_bodies(self) -> int:
         """Squares plus tables."""
-        return self.n_squares + self.n_tables
+        return self.n_boxes + self.n_tables
 
     def all_points(self, points: FloatArray) -> FloatArray:
         """Square corners followed by table corners, ``(4 (n + t), 2)`` (m)."""

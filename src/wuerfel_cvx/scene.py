@@ -206,8 +206,8 @@ class Scene:
 
     # ------------------------------------------------------------------ arrays
     @property
-    def n_squares(self) -> int:
-        """Number of squares."""
+    def n_boxes(self) -> int:
+        """Number of moving bodies (squares and boxes)."""
         return len(self.squares)
 
     def initial_points(self) -> FloatArray:
@@ -402,7 +402,7 @@ def _check_no_overlap(scene: Scene) -> None:
     table keep only pairs whose bounding circles meet, so a scene of thousands of
     squares loads in well under a second instead of testing every pair.
     """
-    names = ([f"squares[{i}]" for i in range(scene.n_squares)]
+    names = ([f"squares[{i}]" for i in range(scene.n_boxes)]
              + [f"tables[{j}]" for j in range(len(scene.tables))])
     polygons = [s.corners() for s in scene.squares] + [t.corners() for t in scene.tables]
     for a, b in _candidate_pairs(scene):
@@ -420,7 +420,7 @@ def _candidate_pairs(scene: Scene) -> list[tuple[int, int]]:
 
     Bodies are numbered squares first, then tables; pairs come sorted.
     """
-    n = scene.n_squares
+    n = scene.n_boxes
     centers = np.array([s.center for s in scene.squares], dtype=np.float64)
     radii = np.array([s.size for s in scene.squares]) / math.sqrt(2)
     found = cKDTree(centers).query_pairs(2.0 * float(radii.max()), output_type="ndarray")

@@ -186,7 +186,7 @@ def simulate(
                           velocities=np.array(velocities), metrics=metrics,
                           table_points=model.table_points.copy(), info=info)
 
-    tracker = SleepTracker(model.n_squares, sleep) if sleep is not None else None
+    tracker = SleepTracker(model.n_boxes, sleep) if sleep is not None else None
     all_asleep = False
     for step in tqdm(range(1, int(steps) + 1), disable=not progress, unit="step",
                      desc=scene.name):
@@ -195,12 +195,12 @@ def simulate(
         if tracker is not None or islands:
             # When everything slept in the last step nothing moved: it all sleeps still.
             if all_asleep:
-                asleep = np.ones(model.n_squares, dtype=bool)
+                asleep = np.ones(model.n_boxes, dtype=bool)
             else:
-                labels = island_labels(model.n_squares, find_contacts(
+                labels = island_labels(model.n_boxes, find_contacts(
                     model, state.points, _island_reach(scheme, model, state, float(dt))))
                 asleep = (tracker.asleep_islands(labels) if tracker is not None
-                          else np.zeros(model.n_squares, dtype=bool))
+                          else np.zeros(model.n_boxes, dtype=bool))
             all_asleep = tracker is not None and bool(asleep.all())
             if all_asleep:
                 state = State(state.points, np.zeros_like(state.velocities))

@@ -87,13 +87,13 @@ def island_members(labels: IntArray, awake: np.ndarray | None = None) -> list[In
 class SleepTracker:
     """Per-square stillness over time, and which squares sleep at a step."""
 
-    n_squares: int
+    n_boxes: int
     settings: SleepSettings = field(default_factory=SleepSettings)
     still_for: FloatArray = field(init=False)
     """Seconds each square has been still (s)."""
 
     def __post_init__(self) -> None:
-        self.still_for = np.zeros(self.n_squares)
+        self.still_for = np.zeros(self.n_boxes)
 
     def asleep(self, contacts: Contacts) -> np.ndarray:
         """Boolean ``(n,)``: squares in islands whose every member has been still long enough.
@@ -101,7 +101,7 @@ class SleepTracker:
         ``contacts`` are the step's contacts (with the step's reach), so an awake square
         near a sleeping island joins it and wakes it.
         """
-        return self.asleep_islands(island_labels(self.n_squares, contacts))
+        return self.asleep_islands(island_labels(self.n_boxes, contacts))
 
     def asleep_islands(self, labels: IntArray) -> np.ndarray:
         """As :meth:`asleep`, from the island index of each square ``(n,)``."""

@@ -22,7 +22,7 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from ..errors import InputError, StepFailure
-from ..geometry import FloatArray, rot90, square_corners
+from ..geometry import FloatArray, rectangle_corners, rot90
 from ..metrics import deepest_penetration, kinetic_energy, potential_energy, rod_length_drift
 from ..model import Model, State
 from ..scene import Scene
@@ -71,17 +71,17 @@ def initial_poses(scene: Scene) -> FloatArray:
 def corners_from_poses(sizes: FloatArray, poses: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Corner positions and velocities ``(4 n, 2)`` (m, m/s) of rigid squares.
 
-    ``sizes`` are the side lengths ``(n,)`` (m) and ``poses`` the poses ``(n, 6)``.  The
-    corners of square ``i`` are ``square_corners((x, y), size, theta)`` at rows
+    ``sizes`` are the widths and heights ``(n, 2)`` (m) and ``poses`` the poses ``(n, 6)``.
+    The corners of box ``i`` are ``rectangle_corners((x, y), w, h, theta)`` at rows
     ``4i..4i+3``; their velocities are ``v + omega x r = v + omega rot90(r)`` with ``r``
     the corner's offset from the centre.
     """
     poses = np.asarray(poses, dtype=np.float64)
     points = np.empty((4 * len(sizes), 2))
     velocities = np.empty_like(points)
-    for i, (size, pose) in enumerate(zip(sizes, poses, strict=True)):
+    for i, ((width, height), pose) in enumerate(zip(sizes, poses, strict=True)):
         center = pose[0:2]
-        corners = square_corners(center, float(size), float(pose[2]))
+        corners = rectangle_corners(center, float(width), float(height), float(pose[2]))
         points[4 * i:4 * i + 4] = corners
         velocities[4 * i:4 * i + 4] = pose[3:5] + pose[5] * rot90(corners - center)
     return points, velocities
@@ -163,7 +163,7 @@ def run_peer(engine: str, package: str, scene: Scene, world: PeerWorld, dt: floa
             failure = StepFailure(step, engine, "peer", "non-finite state")
             failure.trajectory = trajectory()
             raise failure
-        state = State(*corners_from_poses(model.square_sizes, poses))
+        state = State(*corners_from_poses(model.box_sizes, poses))
         times.append(step * float(dt))
         points.append(state.points)
         velocities.append(state.velocities)
@@ -179,7 +179,7 @@ def _metrics_row(model: Model, state: State, engine: str, step: int, dt: float,
     potential = potential_energy(model, state)
     return {
         "step": step, "time_s": step * dt, "solver": engine, "status": "peer",
-        "primary_status": "peer", "verified": pd.NA, "n_variables": 3 * model.n_squares,
+        "primary_status": "peer", "verified": pd.NA, "n_variables": 3 * model.n_boxes,
         "n_equalities": 0,
         "n_inequalities": pd.NA, "n_contacts": pd.NA if n_contacts is None else n_contacts,
         "build_time_s": step_time - solver_time, "solve_time_s": solver_time,

@@ -118,8 +118,8 @@ class MujocoWorld:
         self.xml = scene_mjcf(scene, dt)
         self.model: Any = mujoco.MjModel.from_xml_string(self.xml)
         self.data: Any = mujoco.MjData(self.model)
-        self.n_squares = scene.n_squares
-        if self.model.nq != 3 * self.n_squares or self.model.nv != 3 * self.n_squares:
+        self.n_boxes = scene.n_boxes
+        if self.model.nq != 3 * self.n_boxes or self.model.nv != 3 * self.n_boxes:
             raise RuntimeError(f"expected 3 degrees of freedom per square, got nq = "
                                f"{self.model.nq}, nv = {self.model.nv}")
         poses = initial_poses(scene)
@@ -134,8 +134,8 @@ class MujocoWorld:
 
     def poses(self) -> FloatArray:
         """Poses ``(n, 6)``: centre (m), angle (rad), velocity (m/s), spin (rad/s)."""
-        q = np.asarray(self.data.qpos, dtype=np.float64).reshape(self.n_squares, 3)
-        v = np.asarray(self.data.qvel, dtype=np.float64).reshape(self.n_squares, 3)
+        q = np.asarray(self.data.qpos, dtype=np.float64).reshape(self.n_boxes, 3)
+        v = np.asarray(self.data.qvel, dtype=np.float64).reshape(self.n_boxes, 3)
         return np.concatenate([q, v], axis=1)
 
     def n_contacts(self) -> int:

@@ -146,7 +146,7 @@ def check_input(path: Path, *, step: bool = True,
     except BaseException as exc:  # noqa: BLE001 - any other exception is the finding
         return "crash", _describe(exc)
     if not step:
-        return "accepted", f"{scene.n_squares} squares (not stepped)"
+        return "accepted", f"{scene.n_boxes} squares (not stepped)"
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error", RuntimeWarning)  # overflow in the geometry
@@ -164,7 +164,7 @@ def check_input(path: Path, *, step: bool = True,
     if not (np.all(np.isfinite(trajectory.points)) and
             np.all(np.isfinite(trajectory.velocities))):
         return "crash", "a loaded scene stepped to a non-finite state"
-    return "accepted", f"{scene.n_squares} squares"
+    return "accepted", f"{scene.n_boxes} squares"
 
 
 def _judge_input_error(error: InputError, source: str) -> tuple[Outcome, str]:

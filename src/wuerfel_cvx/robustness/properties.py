@@ -226,7 +226,7 @@ def run_bounds(trajectory: Trajectory, scene: Scene,
     dt = float(trajectory.info["dt"])
     beta = scheme.beta
     steps = trajectory.n_steps
-    n = scene.n_squares
+    n = scene.n_boxes
     gravity = float(np.hypot(*scene.gravity))
     masses = np.array([s.mass for s in scene.squares])
     total_mass = float(masses.sum())
