@@ -62,3 +62,23 @@ class StepFailure(WuerfelError, RuntimeError):
         self.trajectory: Any = None
         text = f"step {step}: solver {solver} failed with status '{status}'"
         super().__init__(f"{text} ({detail})" if detail else text)
+
+
+class Interrupted(WuerfelError, KeyboardInterrupt):
+    """A run stopped by the user (Ctrl-C); it keeps what was computed before.
+
+    A :class:`KeyboardInterrupt`, so code that does not know it stops as before.
+
+    Attributes
+    ----------
+    step:
+        The 1-based index of the step that was interrupted (not part of ``trajectory``).
+    trajectory:
+        The trajectory up to the last completed step.
+
+    """
+
+    def __init__(self, step: int):
+        self.step = step
+        self.trajectory: Any = None
+        super().__init__(f"interrupted during step {step}")

@@ -15,6 +15,9 @@ from .geometry import FloatArray
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
+    from .model import Model
+    from .scene import Scene
+
 
 @dataclass
 class Trajectory:
@@ -32,7 +35,33 @@ class Trajectory:
     table_points: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     """Fixed table corners ``(4 t, 2)`` (m)."""
     info: dict[str, Any] = field(default_factory=dict)
-    """Run settings: scene, formulation, solver, tolerance, dt, package versions."""
+    """Run settings: scene name, formulation, solver, tolerance, dt, package versions, and
+    the scene itself (``scene_data``, the TOML schema of :meth:`Scene.to_dict`) with the
+    model options (``table_mass``, ``extra_rod``)."""
+
+    @property
+    def scene(self) -> Scene | None:
+        """The simulated scene, rebuilt from ``info["scene_data"]``; ``None`` if not recorded.
+
+        It is the very scene that was run: :meth:`Scene.from_dict` of its
+        :meth:`Scene.to_dict`, which survives :meth:`save` and :meth:`load`.
+        """
+        data = self.info.get("scene_data")
+        if data is None:
+            return None
+        from .scene import Scene
+
+        return Scene.from_dict(data, source=str(self.info.get("scene", "<trajectory>")))
+
+    def model(self) -> Model | None:
+        """The run's model: :attr:`scene` with the recorded model options (or ``None``)."""
+        scene = self.scene
+        if scene is None:
+            return None
+        from .model import Model
+
+        return Model.from_scene(scene, table_mass=self.info.get("table_mass"),
+                                extra_rod=bool(self.info.get("extra_rod", False)))
 
     @property
     def n_steps(self) -> int:
