@@ -170,7 +170,8 @@ def simulate(
     velocities = [state.velocities]
     rows: list[dict[str, Any]] = []
     info = {
-        "scene": scene.name, "scene_data": scene.to_dict(), "formulation": scheme.name, "solver": spec.name, "tol": str(tol),
+        "scene": scene.name, "scene_data": scene.to_dict(), "formulation": scheme.name,
+        "solver": spec.name, "tol": str(tol),
         "dt": float(dt), "steps": int(steps), "table_mass": table_mass, "extra_rod": extra_rod,
         "fallback": solver_chain[1:],
         "versions": _versions(spec.cvxpy_name),
