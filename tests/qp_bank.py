@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from functools import cache
 
 from wuerfel_cvx import Scene, simulate
-from wuerfel_cvx.formulations import StepQP, get_formulation
+from wuerfel_cvx.formulations import StepQP, get_formulation, step_qp
 from wuerfel_cvx.model import Model, State
 
 DT = 0.01
@@ -43,7 +43,7 @@ class BankEntry:
 
     def build(self) -> StepQP:
         """A fresh cvxpy problem for this step (each solve gets its own)."""
-        return get_formulation(self.formulation).build(self.model, self.state, DT)
+        return step_qp(get_formulation(self.formulation), self.model, self.state, DT)
 
 
 @cache

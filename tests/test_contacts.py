@@ -9,7 +9,7 @@ import pytest
 
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.contacts import Contacts, find_contacts
-from wuerfel_cvx.formulations import get_formulation
+from wuerfel_cvx.formulations import get_formulation, step_qp
 from wuerfel_cvx.geometry import edge_distances, square_corners
 from wuerfel_cvx.model import Model, State
 
@@ -93,7 +93,7 @@ def test_broad_phase_finds_what_all_pairs_finds(step: int) -> None:
 def test_tables_are_constants_not_variables() -> None:
     scene = Scene.named("stack-3")
     model = Model.from_scene(scene)
-    qp = get_formulation("velocity").build(model, State.initial(scene), 0.01)
+    qp = step_qp(get_formulation("velocity"), model, State.initial(scene), 0.01)
     assert qp.n_variables == 2 * 4 * scene.n_boxes
     assert qp.n_equalities == 5 * scene.n_boxes
 
@@ -101,7 +101,7 @@ def test_tables_are_constants_not_variables() -> None:
 def test_heavy_table_variant_holds_the_table_and_matches_the_fixed_one() -> None:
     scene = Scene.named("tilted-drop")
     heavy = Model.from_scene(scene, table_mass=1e6)
-    qp = get_formulation("velocity").build(heavy, State.initial(scene), 0.01)
+    qp = step_qp(get_formulation("velocity"), heavy, State.initial(scene), 0.01)
     assert qp.n_variables == 2 * 4 * (scene.n_boxes + len(scene.tables))
     assert qp.n_equalities == 5 * scene.n_boxes + 2 * 4 * len(scene.tables)
     fixed = simulate(scene, dt=0.01, steps=120, tol="high")
@@ -114,35 +114,3 @@ def test_heavy_table_variant_holds_the_table_and_matches_the_fixed_one() -> None
     # the solver's error grows with it: the seed's "largest mass" is a numerical hazard.
     assert errors[0] < 1e-7  # m, a light table: as good as a fixed one
     assert errors[1] > 100 * errors[0]
-
-
-def test_a_repeated_search_with_the_same_inputs_is_answered_once(
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx import contacts as module
-
-    searches = []
-    real_search = module._search
-
-    def counting(model: Model, points: np.ndarray, reach: np.ndarray) -> Contacts:
-        searches.append(1)
-        return real_search(model, points, reach)
-
-    monkeypatch.setattr(module, "_search", counting)
-    model, state = Model.from_scene(Scene.named("pyramid-4")), State.initial(
-        Scene.named("pyramid-4"))
-    first = find_contacts(model, state.points, 0.01)
-    again = find_contacts(model, state.points.copy(), np.full(model.n_bodies, 0.01))
-    assert again is first and len(searches) == 1  # equal bits: no second search
-    wider = find_contacts(model, state.points, 0.02)
-    assert len(searches) == 2 and len(wider) >= len(first)
-    moved = state.points.copy()
-    moved[0, 0] += 1e-3
-    shifted = find_contacts(model, moved, 0.02)
-    assert len(searches) == 3
-    assert np.array_equal(shifted.distance, real_search(model, moved, np.full(
-        model.n_bodies, 0.02)).distance)
-    other = Model.from_scene(Scene.named("pyramid-4"))  # another model object: searched
-    find_contacts(other, moved, 0.02)
-    assert len(searches) == 4
-    with pytest.raises(ValueError):
-        first.distance[0] = 1.0  # results are shared, so read-only

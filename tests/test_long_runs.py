@@ -1,9 +1,10 @@
 """Long runs: a resting stack over 10 000 steps keeps its rods and uses constant memory.
 
-Memory is traced with :mod:`tracemalloc` over windows of the run, opened and closed by
-an observer: what was allocated in a window and is still held at its end must be what
-the trajectory stored in that window (a positions and a velocities array, a time and a
-metrics row per step), measured from the step loop's own lists.  Anything else (caches,
+Memory is traced with :mod:`tracemalloc` over windows of the run, opened and closed
+between steps of a :class:`~wuerfel_cvx.simulation.Simulation`: what was allocated in a
+window and is still held at its end must be what the trajectory stored in that window (a
+positions and a velocities array, a time and a metrics row per step), measured from the
+recorder's own lists.  Anything else (caches,
 compiled problems, solver workspaces) growing with the steps shows as a surplus.  Tracing
 only windows keeps the test cheap: tracemalloc makes a step about five times slower.
 """
@@ -19,12 +20,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from wuerfel_cvx import simulate
-from wuerfel_cvx.formulations import StepQP
+from wuerfel_cvx import Scene
+from wuerfel_cvx.recorder import TrajectoryRecorder
 from wuerfel_cvx.robustness.properties import ROD_DRIFT_LIMIT
-from wuerfel_cvx.solve import StepSolution
+from wuerfel_cvx.simulation import Simulation
+from wuerfel_cvx.trajectory import Trajectory
 
-#: The step loop's lists that hold the trajectory (local names in ``simulate``).
+#: The recorder's lists that hold the trajectory.
 TRAJECTORY_LISTS = ("points", "velocities", "times", "rows")
 
 #: Window length (steps) and the surplus (bytes) accepted at its end.  The accounting of
@@ -73,18 +75,12 @@ class WindowSampler:
     surplus: dict[int, int] = field(default_factory=dict)
     _open: tuple[int, dict[str, int], set[int]] | None = None
 
-    def __call__(self, step: int, qp: StepQP, solution: StepSolution) -> None:
-        """Open or close a window (called by ``simulate`` after each step)."""
+    def __call__(self, step: int, recorder: TrajectoryRecorder) -> None:
+        """Open or close a window (called after each step with the run's recorder)."""
         if step not in self.starts and (self._open is None or step != self._open[0] + WINDOW):
             return
-        frame = sys._getframe(1)  # up to the frame of simulate(), which calls the observer
-        while frame is not None and frame.f_code.co_name != "simulate":
-            frame = frame.f_back
-        assert frame is not None, "not called from simulate()"
-        loop = frame.f_locals
-        missing = [name for name in TRAJECTORY_LISTS if name not in loop]
-        assert not missing, f"simulate() no longer keeps the lists {missing}"
-        lists = {name: loop[name] for name in TRAJECTORY_LISTS}
+        lists: dict[str, list[Any]] = {name: getattr(recorder, name)
+                                       for name in TRAJECTORY_LISTS}
         gc.collect()  # garbage awaiting the collector is not held by the run
         if self._open is None:
             held_before = {id(item) for items in lists.values() for item in items}
@@ -106,6 +102,21 @@ class WindowSampler:
         self.surplus[start] = traced - stored
 
 
+def run_sampled(scene: str, steps: int, sampler: WindowSampler,
+                leaked: list[np.ndarray] | None = None) -> Trajectory:
+    """Step ``scene`` (dt 0.01 s), calling ``sampler`` after each step.
+
+    With ``leaked``, one small extra array per step is kept in it: a leak to be found.
+    """
+    simulation = Simulation(Scene.named(scene), dt=0.01)
+    for _ in range(steps):
+        record = simulation.step()
+        if leaked is not None:
+            leaked.append(np.zeros(8))  # 64 B of data, about 200 B in all
+        sampler(record.step, simulation.recorder)
+    return simulation.trajectory()
+
+
 @pytest.mark.slow
 def test_ten_thousand_steps_of_a_resting_stack() -> None:
     """stack-5 for 10 000 steps (100 s): rods exact, memory constant.
@@ -113,7 +124,7 @@ def test_ten_thousand_steps_of_a_resting_stack() -> None:
     Traced over steps 1000-2000 and 9000-10000: about 30 s of computing in all.
     """
     sampler = WindowSampler(starts=(1000, 9000))
-    trajectory = simulate("stack-5", dt=0.01, steps=10_000, observer=sampler)
+    trajectory = run_sampled("stack-5", 10_000, sampler)
     assert (trajectory.metrics["status"] == "optimal").all()
     assert trajectory.metrics["rod_drift"].max() < ROD_DRIFT_LIMIT  # rigid update: round-off
     print(f"memory surplus by window start: {sampler.surplus}")
@@ -127,11 +138,6 @@ def test_a_leak_of_one_small_array_per_step_is_caught() -> None:
     """The window check can fail: a run that keeps one extra small array per step."""
     sampler = WindowSampler(starts=(100,))
     leaked: list[np.ndarray] = []
-
-    def leaking_observer(step: int, qp: StepQP, solution: StepSolution) -> None:
-        leaked.append(np.zeros(8))  # 64 B of data, about 200 B in all
-        sampler(step, qp, solution)
-
-    simulate("stack-3", dt=0.01, steps=100 + WINDOW, observer=leaking_observer)
+    run_sampled("stack-3", 100 + WINDOW, sampler, leaked)
     print(f"memory surplus with a leak: {sampler.surplus}")
     assert sampler.surplus[100] > SURPLUS_LIMIT, sampler.surplus

@@ -23,7 +23,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from wuerfel_cvx import Scene, simulate
-from wuerfel_cvx.formulations import VelocityFormulation
+from wuerfel_cvx.formulations import VelocityFormulation, step_qp
 from wuerfel_cvx.geometry import rotation, square_corners
 from wuerfel_cvx.metrics import kinetic_energy, potential_energy
 from wuerfel_cvx.model import Model, State
@@ -189,7 +189,7 @@ def test_energy_identity_holds_with_the_qp_duals() -> None:
     checked = 0
     for step in (60, 100, 143):  # sliding, resting and wedged contacts
         state = State(trajectory.points[step - 1], trajectory.velocities[step - 1])
-        qp = scheme.build(model, state, DT)
+        qp = step_qp(scheme, model, state, DT)
         declared = qp.declared()
         declared.problem.solve(solver="CLARABEL", tol_gap_abs=1e-12, tol_gap_rel=1e-12,
                                tol_feas=1e-12)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx import Scene, simulate
-from wuerfel_cvx.formulations import get_formulation
+from wuerfel_cvx.formulations import get_formulation, step_qp
 from wuerfel_cvx.geometry import side_acceleration, side_value
 from wuerfel_cvx.model import Model, State
 
@@ -27,7 +27,7 @@ def contact_state(name: str, steps: int) -> tuple[Model, State]:
 @pytest.mark.parametrize(("name", "steps"), [("pyramid-3", 3), ("rain-8", 120), ("stack-3", 0)])
 def test_velocity_rows_are_time_derivatives_of_gaps_and_rods(name: str, steps: int) -> None:
     model, state = contact_state(name, steps)
-    qp = get_formulation("velocity").build(model, state, 0.01)
+    qp = step_qp(get_formulation("velocity"), model, state, 0.01)
     contacts = qp.contacts
     assert len(contacts) > 0
     rng = np.random.default_rng(3)
@@ -59,7 +59,7 @@ def test_seed_rows_are_second_derivatives_at_collinear_contacts() -> None:
     model = Model.from_scene(scene)
     rng = np.random.default_rng(5)
     state = State(scene.initial_points(), 0.1 * rng.normal(size=(8, 2)))
-    qp = get_formulation("seed").build(model, state, 0.01)
+    qp = step_qp(get_formulation("seed"), model, state, 0.01)
     contacts = qp.contacts
     assert len(contacts) >= 2  # the seed's activation rule kept some (A = 0, dA/dt <= 0)
     acceleration = rng.normal(size=state.points.shape)

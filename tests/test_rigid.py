@@ -9,7 +9,7 @@ from qp_bank import qp_bank
 from test_solver_agreement import AGREEMENT
 from wuerfel_cvx import simulate
 from wuerfel_cvx.errors import InputError
-from wuerfel_cvx.formulations import RigidFormulation, get_formulation
+from wuerfel_cvx.formulations import RigidFormulation, get_formulation, step_qp
 from wuerfel_cvx.formulations.rigid import body_velocities, corner_velocity_map
 from wuerfel_cvx.model import Model
 from wuerfel_cvx.solve import solve_step_qp
@@ -42,9 +42,9 @@ def test_rigid_and_velocity_qps_give_the_same_corner_velocities() -> None:
     for entry in qp_bank():
         if entry.formulation != "velocity" or entry.model.table_mass is not None:
             continue
-        full = solve_step_qp(get_formulation("velocity").build(entry.model, entry.state, 0.01),
+        full = solve_step_qp(step_qp(get_formulation("velocity"), entry.model, entry.state, 0.01),
                              "CLARABEL", "high")
-        reduced = solve_step_qp(rigid.build(entry.model, entry.state, 0.01), "CLARABEL",
+        reduced = solve_step_qp(step_qp(rigid, entry.model, entry.state, 0.01), "CLARABEL",
                                 "high")
         assert reduced.verified
         corner = rigid.new_velocities(entry.state, reduced.x, 0.01).ravel()
@@ -75,7 +75,7 @@ def test_rigid_formulation_refuses_the_heavy_table() -> None:
     scene = Scene.named("tilted-drop")
     model = Model.from_scene(scene, table_mass=1e6)
     with pytest.raises(InputError, match="fixed tables"):
-        RigidFormulation().build(model, State.initial(scene), 0.01)
+        step_qp(RigidFormulation(), model, State.initial(scene), 0.01)
 
 
 def test_structural_product_keeps_cancelled_entries() -> None:

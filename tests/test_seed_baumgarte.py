@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx import Scene, simulate
-from wuerfel_cvx.formulations import SEED_BAUMGARTE_RATE, SeedFormulation, get_formulation
+from wuerfel_cvx.formulations import SEED_BAUMGARTE_RATE, SeedFormulation, get_formulation, step_qp
 from wuerfel_cvx.geometry import side_value
 from wuerfel_cvx.model import Model, State
 
@@ -42,7 +42,7 @@ def test_registry_has_seed_baumgarte_with_its_rate() -> None:
 
 def test_side_rows_add_the_feedback_of_a_and_its_rate() -> None:
     model, state = penetrating_stack()
-    qp = SeedFormulation(baumgarte_rate=RATE).build(model, state, 0.01)
+    qp = step_qp(SeedFormulation(baumgarte_rate=RATE), model, state, 0.01)
     contacts = qp.contacts
     p = model.all_points(state.points)
     assert len(contacts) >= 2
@@ -62,7 +62,7 @@ def test_side_rows_add_the_feedback_of_a_and_its_rate() -> None:
 
     # The acceleration part is the seed's own row.  The plain seed keeps only the
     # approaching contacts (dA/dt <= 0); the feedback variant keeps the leaving ones too.
-    plain = SeedFormulation().build(model, state, 0.01)
+    plain = step_qp(SeedFormulation(), model, state, 0.01)
     approaching = np.flatnonzero(rate <= 0)
     assert 0 < len(approaching) < len(contacts)
     assert len(plain.contacts) == len(approaching)
@@ -73,7 +73,7 @@ def test_side_rows_add_the_feedback_of_a_and_its_rate() -> None:
 
 def test_rod_rows_are_the_damped_second_derivative_of_the_rod_error() -> None:
     model, state = penetrating_stack()
-    qp = SeedFormulation(baumgarte_rate=RATE).build(model, state, 0.01)
+    qp = step_qp(SeedFormulation(baumgarte_rate=RATE), model, state, 0.01)
     rng = np.random.default_rng(2)
     acceleration = rng.normal(size=state.points.shape)
 

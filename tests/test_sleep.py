@@ -7,7 +7,7 @@ import numpy as np
 from test_solver_agreement import AGREEMENT
 from wuerfel_cvx import Scene, Square, simulate
 from wuerfel_cvx.contacts import find_contacts
-from wuerfel_cvx.formulations import get_formulation
+from wuerfel_cvx.formulations import get_formulation, step_qp
 from wuerfel_cvx.library import FLOOR
 from wuerfel_cvx.model import Model, State
 from wuerfel_cvx.simulate import ASLEEP
@@ -41,12 +41,12 @@ def test_separate_islands_solve_to_the_joint_qps_answer() -> None:
     scene = two_stacks_and_a_faller()
     model, state = Model.from_scene(scene), State.initial(scene)
     velocity = get_formulation("velocity")
-    joint = solve_step_qp(velocity.build(model, state, DT), "CLARABEL", "high")
+    joint = solve_step_qp(step_qp(velocity, model, state, DT), "CLARABEL", "high")
     assert joint.verified
     for squares in (np.arange(0, 3), np.arange(3, 6), np.arange(6, 7)):
         corners = (4 * squares[:, None] + np.arange(4)).ravel()
         part = State(state.points[corners], state.velocities[corners])
-        alone = solve_step_qp(velocity.build(model.subset(squares), part, DT), "CLARABEL",
+        alone = solve_step_qp(step_qp(velocity, model.subset(squares), part, DT), "CLARABEL",
                               "high")
         assert alone.verified
         joint_part = joint.x.reshape(-1, 2)[corners].ravel()

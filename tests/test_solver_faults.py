@@ -24,7 +24,7 @@ import wuerfel_cvx.solve as solve_module
 from wuerfel_cvx import Scene, simulate, solvers
 from wuerfel_cvx.cli import main
 from wuerfel_cvx.errors import InputError, StepFailure
-from wuerfel_cvx.formulations import StepQP
+from wuerfel_cvx.formulations import StepQP, step_qp
 from wuerfel_cvx.formulations.velocity import VelocityFormulation
 from wuerfel_cvx.model import Model, State
 from wuerfel_cvx.robustness.faults import SQUEEZED_SCENE, NaNInQP
@@ -124,7 +124,7 @@ def test_unknown_fallback_solver_is_an_input_error() -> None:
 # ------------------------------------------------------------------ infeasible step
 def squeezed_qp(beta: float) -> StepQP:
     model = Model.from_scene(SQUEEZED)
-    return VelocityFormulation(beta=beta).build(model, State.initial(SQUEEZED), 0.01)
+    return step_qp(VelocityFormulation(beta=beta), model, State.initial(SQUEEZED), 0.01)
 
 
 def test_overlap_without_stabilisation_is_not_infeasible() -> None:
@@ -135,7 +135,7 @@ def test_overlap_without_stabilisation_is_not_infeasible() -> None:
     """
     for scene in (SQUEEZED, Scene.named("overlap-recovery")):
         model = Model.from_scene(scene)
-        qp = VelocityFormulation(beta=0.0).build(model, State.initial(scene), 0.01)
+        qp = step_qp(VelocityFormulation(beta=0.0), model, State.initial(scene), 0.01)
         assert np.all(qp.eq_rhs == 0.0) and np.all(qp.ineq_rhs <= 0.0)
         assert np.any(qp.ineq_rhs == 0.0)  # there are penetrating corners
         traj = simulate(scene, dt=0.01, steps=3, formulation=VelocityFormulation(beta=0.0))
@@ -245,7 +245,7 @@ def test_nan_residual_is_never_below_a_bound() -> None:
 def test_nan_multipliers_make_a_step_unverified(monkeypatch: pytest.MonkeyPatch) -> None:
     """Before, ``max(primal, nan, nan)`` was ``primal``: a NaN dual passed the check."""
     model = Model.from_scene(Scene.named(SCENE))
-    qp = VelocityFormulation().build(model, State.initial(Scene.named(SCENE)), 0.01)
+    qp = step_qp(VelocityFormulation(), model, State.initial(Scene.named(SCENE)), 0.01)
     assert solve_step_qp(qp, "CLARABEL").verified
     monkeypatch.setattr(solve_module, "_dual", lambda constraint, size: np.full(size, np.nan))
     solution = solve_step_qp(qp, "CLARABEL")  # no cache: through cvxpy and _dual

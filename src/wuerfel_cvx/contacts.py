@@ -62,6 +62,37 @@ class Contacts:
         none = np.zeros(0, dtype=np.int64)
         return cls(none, none, none, none, none, np.zeros(0))
 
+    def deepest_penetration(self) -> float:
+        """Depth (m) of the deepest point inside a foreign body; 0 if none is inside.
+
+        The same for any search margin >= 0: a point inside (distance < 0) is within every
+        such margin, with the same chosen edge and distance.
+        """
+        if len(self) == 0:
+            return 0.0
+        return float(max(0.0, -np.min(self.distance)))
+
+    def restricted(self, boxes: IntArray, n_boxes: int, n_tables: int) -> Contacts:
+        """The contacts among ``boxes`` (ascending) and the tables, renumbered for them.
+
+        The numbering is that of :meth:`Model.subset` of a model with ``n_boxes`` boxes and
+        ``n_tables`` tables: box ``boxes[k]`` becomes box ``k``, the tables follow the kept
+        boxes.  Contacts with a box not in ``boxes`` are dropped; the others keep their order.
+        """
+        new_body = np.full(n_boxes + n_tables, -1, dtype=np.int64)
+        new_body[boxes] = np.arange(boxes.size)
+        new_body[n_boxes:] = boxes.size + np.arange(n_tables)
+        keep = (new_body[self.point_body] >= 0) & (new_body[self.edge_body] >= 0)
+
+        def renumbered(points: IntArray) -> IntArray:
+            return 4 * new_body[points // 4] + points % 4
+
+        return Contacts(point=renumbered(self.point[keep]), edge_i=renumbered(self.edge_i[keep]),
+                        edge_j=renumbered(self.edge_j[keep]),
+                        point_body=new_body[self.point_body[keep]],
+                        edge_body=new_body[self.edge_body[keep]],
+                        distance=self.distance[keep])
+
 
 def _lengths(vectors: FloatArray) -> FloatArray:
     """Euclidean lengths (m) over the last axis (size 2), as ``np.linalg.norm`` computes them.
@@ -141,12 +172,6 @@ def choose_edges(distances: FloatArray) -> IntArray:
     return np.asarray(np.argmax(score, axis=1), dtype=np.int64)
 
 
-_last_search: tuple[Model, bytes, bytes, Contacts] | None = None
-"""The last search's model, points and reach (as bytes) and contacts: a step that searches
-twice with the same inputs (islands for sleep, then the QP's rows) searches once.  One
-tuple, replaced whole, so that a reader never sees a mix of two searches."""
-
-
 def find_contacts(
     model: Model, points: FloatArray, margin: FloatArray | float
 ) -> Contacts:
@@ -155,23 +180,11 @@ def find_contacts(
     ``margin`` is a scalar or one value per body ``(n_bodies,)``; a pair uses the sum
     of its two bodies' values.  Returns one row per point that is within reach of a
     foreign body, with the edge chosen by the rule in the module docstring; rows are
-    ordered by pair (as from :func:`body_pairs`), then by corner.  A call with the same
-    model object and bit-identical points and margin as the last one returns its result
-    (the search is a pure function of them).
+    ordered by pair (as from :func:`body_pairs`), then by corner.  A pure function of its
+    arguments: the simulation loop calls it once per state and hands the result on.
     """
     reach = np.broadcast_to(np.asarray(margin, dtype=np.float64), (model.n_bodies,))
-    global _last_search
-    key_points = np.ascontiguousarray(points, dtype=np.float64).tobytes()
-    key_reach = np.ascontiguousarray(reach).tobytes()
-    last = _last_search
-    if (last is not None and last[0] is model and last[1] == key_points
-            and last[2] == key_reach):
-        return last[3]
-    contacts = _search(model, points, reach)
-    for name in ("point", "edge_i", "edge_j", "point_body", "edge_body", "distance"):
-        getattr(contacts, name).flags.writeable = False  # shared with the next caller
-    _last_search = (model, key_points, key_reach, contacts)
-    return contacts
+    return _search(model, points, reach)
 
 
 def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:

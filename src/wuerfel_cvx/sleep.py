@@ -43,7 +43,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .contacts import Contacts
 from .geometry import FloatArray
-from .model import IntArray
+from .model import IntArray, Model, State
 
 
 @dataclass(frozen=True)
@@ -56,12 +56,12 @@ class SleepSettings:
     """An island sleeps once all its squares have been still this long (s)."""
 
 
-def island_labels(n_squares: int, contacts: Contacts) -> IntArray:
+def island_labels(n_boxes: int, contacts: Contacts) -> IntArray:
     """Island index of each square ``(n,)``: components of the square-square contacts."""
-    between_squares = (contacts.point_body < n_squares) & (contacts.edge_body < n_squares)
+    between_squares = (contacts.point_body < n_boxes) & (contacts.edge_body < n_boxes)
     a = contacts.point_body[between_squares]
     b = contacts.edge_body[between_squares]
-    graph = sp.coo_array((np.ones(a.size), (a, b)), shape=(n_squares, n_squares))
+    graph = sp.coo_array((np.ones(a.size), (a, b)), shape=(n_boxes, n_boxes))
     _, labels = connected_components(graph, directed=False)
     return np.asarray(labels, dtype=np.int64)
 
@@ -113,3 +113,84 @@ class SleepTracker:
         """Update stillness after a step from the corner velocities ``(4 n, 2)`` (m/s)."""
         fastest = np.linalg.norm(velocities, axis=1).reshape(-1, 4).max(axis=1)
         self.still_for = np.where(fastest < self.settings.speed, self.still_for + dt, 0.0)
+
+
+@dataclass(frozen=True)
+class StepPlan:
+    """Which boxes each QP of one step takes."""
+
+    groups: tuple[IntArray | None, ...]
+    """Boxes (ascending indices) of each QP; ``None``: every box, in one QP of the model."""
+    all_asleep: bool = False
+    """Every island sleeps: no QP at all, nothing moves."""
+
+
+class IslandPlanner:
+    """Plans each step's QPs from the state's contacts: sleep and islands.
+
+    Without sleep settings and islands every step is one QP over every box.  With sleep,
+    islands whose every box has been still long enough are left out; with ``islands``,
+    each awake island is its own QP.  The contacts are the step's own (searched with the
+    formulation's reach), so no QP row joins two islands.
+    """
+
+    def __init__(self, n_boxes: int, sleep: SleepSettings | None, islands: bool):
+        self.n_boxes = n_boxes
+        self.tracker = SleepTracker(n_boxes, sleep) if sleep is not None else None
+        self.islands = islands
+        self._all_asleep = False
+
+    def plan(self, contacts: Contacts) -> StepPlan:
+        """The QPs of the step whose state has ``contacts``."""
+        if self.tracker is None and not self.islands:
+            return StepPlan((None,))
+        if self._all_asleep:  # nothing moved in the last step: it all sleeps still
+            return StepPlan((), all_asleep=True)
+        labels = island_labels(self.n_boxes, contacts)
+        asleep = (self.tracker.asleep_islands(labels) if self.tracker is not None
+                  else np.zeros(self.n_boxes, dtype=bool))
+        if self.tracker is not None and bool(asleep.all()):
+            self._all_asleep = True
+            return StepPlan((), all_asleep=True)
+        if self.islands:
+            return StepPlan(tuple(island_members(labels, ~asleep)) or (None,))
+        if asleep.any():
+            return StepPlan((np.flatnonzero(~asleep),))
+        return StepPlan((None,))
+
+    def record(self, velocities: FloatArray, dt: float) -> None:
+        """Update stillness after a step (corner velocities ``(4 n, 2)``, m/s; ``dt`` s)."""
+        if self.tracker is not None:
+            self.tracker.record(velocities, dt)
+
+
+def restrict(model: Model, state: State, contacts: Contacts,
+             boxes: IntArray | None) -> tuple[Model, State, Contacts]:
+    """The model, state and contacts of the QP over ``boxes`` (``None``: all of them)."""
+    if boxes is None:
+        return model, state, contacts
+    corners = _corner_rows(boxes)
+    return (model.subset(boxes), State(state.points[corners], state.velocities[corners]),
+            contacts.restricted(boxes, model.n_boxes, model.n_tables))
+
+
+def merge(state: State, parts: list[tuple[IntArray | None, State]]) -> State:
+    """The state after a step from each QP's moved boxes; boxes in no part stay frozen.
+
+    A frozen (sleeping) box keeps its position with zero velocity.
+    """
+    if len(parts) == 1 and parts[0][0] is None:
+        return parts[0][1]
+    points = state.points.copy()
+    velocities = np.zeros_like(state.velocities)
+    for boxes, moved in parts:
+        assert boxes is not None, "a QP over every box is the step's only QP"
+        corners = _corner_rows(boxes)
+        points[corners] = moved.points
+        velocities[corners] = moved.velocities
+    return State(points, velocities)
+
+
+def _corner_rows(boxes: IntArray) -> IntArray:
+    """Rows of the corners of ``boxes`` in the points array, box by box."""
+    return np.asarray((4 * boxes[:, None] + np.arange(4)).ravel(), dtype=np.int64)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import cvxpy as cp
@@ -69,6 +70,8 @@ class StepSolution:
     iterations: int
     ineq_dual: FloatArray = field(default_factory=lambda: np.zeros(0))
     """Multipliers z >= 0 of ``G x >= h`` (cvxpy's sign): ``2 W (x - t) = G^T z - E^T y``."""
+    path: str = ""
+    """How the QP reached the solver: ``direct``, ``compiled`` or ``declared``."""
 
 
 def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
@@ -211,3 +214,68 @@ def _non_finite_data(qp: StepQP) -> str:
 
 def _inf(values: FloatArray) -> float:
     return float(np.max(np.abs(values))) if np.size(values) else 0.0
+
+
+def solve_with_fallback(qp: StepQP, solvers: Sequence[str], tol: str | float, step: int,
+                        cache: CompiledQPCache | None) -> tuple[StepSolution, str]:
+    """Solve with ``solvers[0]``, on failure with the next; the solution and first status.
+
+    The first status is that of ``solvers[0]`` (the solution's own when it succeeded).
+    Raises the first solver's :class:`StepFailure`, its detail extended by what each
+    fallback gave, when every solver fails; a QP with non-finite data fails at once.
+    """
+    failures: list[StepFailure] = []
+    for name in solvers:
+        try:
+            solution = solve_step_qp(qp, name, tol, step=step, cache=cache)
+        except StepFailure as failure:
+            if failure.status == INVALID_DATA:  # the same data would fail every solver
+                raise
+            failures.append(failure)
+            continue
+        return solution, failures[0].status if failures else solution.status
+    first = failures[0]
+    if len(failures) == 1:
+        raise first
+    then = [f"then {f.solver} failed with '{f.status}'" + (f" ({f.detail})" if f.detail else "")
+            for f in failures[1:]]
+    raise StepFailure(step, first.solver, first.status,
+                      "; ".join(([first.detail] if first.detail else []) + then)) from first
+
+
+def combine_solutions(solutions: Sequence[StepSolution]) -> StepSolution:
+    """One step's solutions (one per island QP) as one solution.
+
+    The worst residuals and status (an inaccurate optimum if any), summed times, the most
+    iterations any island took, the unknowns one after another, and the solvers and paths
+    that produced them (``"OSQP+CLARABEL"`` when a fallback solved some islands).
+    """
+    if len(solutions) == 1:
+        return solutions[0]
+    statuses = [solution.status for solution in solutions]
+
+    def joined(names: Sequence[str]) -> str:
+        return "+".join(dict.fromkeys(names))
+
+    return StepSolution(
+        x=np.concatenate([solution.x for solution in solutions]),
+        solver=joined([solution.solver for solution in solutions]),
+        status=SOLVED[1] if SOLVED[1] in statuses else statuses[0],
+        residuals=Residuals(*(max(getattr(solution.residuals, name) for solution in solutions)
+                              for name in ("primal", "dual", "complementarity"))),
+        verified=all(solution.verified for solution in solutions),
+        solve_wall_time=sum(solution.solve_wall_time for solution in solutions),
+        solver_time=float(sum(solution.solver_time for solution in solutions)),
+        iterations=max(solution.iterations for solution in solutions),
+        path=joined([solution.path for solution in solutions]))
+
+
+def first_failed_status(solutions: Sequence[StepSolution], primary_statuses: Sequence[str],
+                        combined: StepSolution) -> str:
+    """A step's ``primary_status``.
+
+    The run's own solver's first failed status on any of the step's QPs (where a fallback
+    took over), else the ``combined`` solution's status.
+    """
+    return next((primary for solution, primary in zip(solutions, primary_statuses, strict=True)
+                 if primary != solution.status), combined.status)

@@ -24,7 +24,7 @@ from ..errors import StepFailure
 from ..formulations import StepQP
 from ..geometry import FloatArray
 from ..metrics import largest_corner_distance, total_energy
-from ..model import Model, State
+from ..model import State
 from ..peers import peer_version, simulate_peer
 from ..simulate import ASLEEP, resolve_scene, simulate
 from ..sleep import SleepSettings
@@ -54,7 +54,8 @@ def reference_file_name(key: tuple[str, str, float, float]) -> str:
     """File name under ``<out>/references/`` for a reference key."""
     scene, formulation, dt, duration = key
     digest = hashlib.sha1(repr(key).encode("utf-8")).hexdigest()[:10]
-    return f"{scene}-{formulation}-dt{dt:g}-T{duration:g}-{digest}.npz"
+    name = Path(scene).stem if scene.endswith(".toml") else scene  # a scene file by path
+    return f"{name}-{formulation}-dt{dt:g}-T{duration:g}-{digest}.npz"
 
 
 def compute_reference(key: tuple[str, str, float, float], path: Path) -> Path:
@@ -101,8 +102,7 @@ def run_point(point: GridPoint, reference: Reference | None,
     """Run one grid point and return its results row (never raises for a bad config)."""
     base = _configuration(point)
     try:
-        n_squares = _n_squares(point.scene)
-        base["n_squares"] = n_squares
+        base["n_squares"] = _n_boxes(point.scene)
         trajectory, failure, disagreement = _simulate(point)
     except Exception as exc:  # any configuration error becomes an error row
         return schema.new_row(**base, status="error", error=_message(exc), success=False,
@@ -232,11 +232,9 @@ def _accuracy(trajectory: Trajectory, point: GridPoint,
 
 
 def _initial_energy(trajectory: Trajectory) -> float:
-    scene = resolve_scene(str(trajectory.info["scene"]))
-    model = Model.from_scene(scene, table_mass=trajectory.info.get("table_mass"),
-                             extra_rod=bool(trajectory.info.get("extra_rod", False)))
-    state = State(trajectory.points[0], trajectory.velocities[0])
-    return total_energy(model, state)
+    model = trajectory.model()
+    assert model is not None, "every run records its scene"
+    return total_energy(model, State(trajectory.points[0], trajectory.velocities[0]))
 
 
 def _write_series(trajectory: Trajectory, path: Path) -> None:
@@ -244,8 +242,8 @@ def _write_series(trajectory: Trajectory, path: Path) -> None:
     trajectory.metrics.reindex(columns=list(schema.SERIES_COLUMNS)).to_csv(path, index=False)
 
 
-def _n_squares(scene: str) -> int:
-    return len(resolve_scene(scene).squares)
+def _n_boxes(scene: str) -> int:
+    return resolve_scene(scene).n_boxes
 
 
 def _nan_median(values: FloatArray) -> float | None:

@@ -5,7 +5,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from functools import partial
 
+from ..contacts import find_contacts
 from ..errors import InputError
+from ..model import Model, State
 from .base import Formulation
 from .qp import StepQP, declare_qp
 from .rigid import RigidFormulation
@@ -37,7 +39,17 @@ def get_formulation(name: str | Formulation) -> Formulation:
     return FORMULATIONS[key]()
 
 
+def step_qp(formulation: Formulation, model: Model, state: State, dt: float) -> StepQP:
+    """The QP of one step from ``state`` over ``dt`` (s): contacts searched, then built.
+
+    For a single QP outside the simulation loop; the loop searches each state's contacts
+    once and passes them to :meth:`Formulation.build` itself.
+    """
+    contacts = find_contacts(model, state.points, formulation.body_reach(model, state, dt))
+    return formulation.build(model, state, contacts, dt)
+
+
 __all__ = ["FORMULATIONS", "SEED_BAUMGARTE_RATE", "Formulation", "RigidFormulation",
            "SeedFormulation", "StepQP",
            "VelocityFormulation",
-           "declare_qp", "get_formulation", "rigid_step"]
+           "declare_qp", "get_formulation", "rigid_step", "step_qp"]

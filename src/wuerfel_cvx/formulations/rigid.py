@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..contacts import find_contacts
+from ..contacts import Contacts
 from ..errors import InputError
 from ..geometry import FloatArray, cross, rot90
 from ..model import Model, State
@@ -46,13 +46,15 @@ class RigidFormulation:
         velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin)
         return velocity.body_reach(model, state, dt)
 
-    def build(self, model: Model, state: State, dt: float) -> StepQP:
-        """The step QP in the squares' new centre and angular velocities."""
+    def build(self, model: Model, state: State, contacts: Contacts, dt: float) -> StepQP:
+        """The step QP in the boxes' new centre and angular velocities.
+
+        ``contacts``: ``state``'s contacts within :meth:`body_reach`.
+        """
         if model.table_mass is not None:
             raise InputError("the rigid formulation has fixed tables only", field="table_mass")
         velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin)
         points = state.points
-        contacts = find_contacts(model, points, velocity.body_reach(model, state, dt))
         corner_rows, rhs = velocity.contact_rows(model, model.all_points(points), contacts, dt)
         masses = model.point_masses.reshape(-1, 4)
         # from the exact squares, not the current corners: constant weights keep the

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..contacts import Contacts, find_contacts
+from ..contacts import Contacts
 from ..geometry import FloatArray, side_rate, side_value, side_velocity_product
 from ..model import Model, State
 from .qp import StepQP, declare_qp, point_rows
@@ -48,12 +48,20 @@ class SeedFormulation:
     baumgarte_rate: float = 0.0
     """Baumgarte feedback rate alpha (1/s) on rods and sides; 0 is the paper's model."""
 
-    def build(self, model: Model, state: State, dt: float) -> StepQP:
-        """The step QP in the corner accelerations (pure function of its arguments)."""
+    def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
+        """Zero (m) for every body: the seed constrains only points on or behind an edge."""
+        return np.zeros(model.n_bodies)
+
+    def build(self, model: Model, state: State, contacts: Contacts, dt: float) -> StepQP:
+        """The step QP in the corner accelerations (pure function of its arguments).
+
+        ``contacts``: ``state``'s contacts within :meth:`body_reach` (touching or inside);
+        the side rows are those of the active ones (section 2.2).
+        """
         points, velocities = state.points, state.velocities
         all_points = model.all_points(points)
         all_velocities = np.concatenate([velocities, np.zeros_like(model.table_points)])
-        contacts = _active(find_contacts(model, points, 0.0), all_points, all_velocities,
+        contacts = _active(contacts, all_points, all_velocities,
                            require_approach=self.baumgarte_rate == 0.0)
         rate = self.baumgarte_rate
         n_unknown = n_unknown_points(model)

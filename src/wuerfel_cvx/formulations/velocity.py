@@ -32,7 +32,7 @@ from typing import Literal
 import numpy as np
 import scipy.sparse as sp
 
-from ..contacts import Contacts, find_contacts
+from ..contacts import Contacts
 from ..geometry import FloatArray, rot90
 from ..model import Model, State
 from .qp import StepQP, declare_qp, point_rows
@@ -64,11 +64,13 @@ class VelocityFormulation:
             model.gravity))
         return np.concatenate([reach_squares, np.full(model.n_tables, 0.5 * self.contact_margin)])
 
-    def build(self, model: Model, state: State, dt: float) -> StepQP:
-        """The step QP in the new velocities (pure function of its arguments)."""
+    def build(self, model: Model, state: State, contacts: Contacts, dt: float) -> StepQP:
+        """The step QP in the new velocities (pure function of its arguments).
+
+        ``contacts``: ``state``'s contacts within :meth:`body_reach`.
+        """
         points, velocities = state.points, state.velocities
         all_points = model.all_points(points)
-        contacts = find_contacts(model, points, self.body_reach(model, state, dt))
         n_unknown = n_unknown_points(model)
 
         weights = unknown_masses(model)

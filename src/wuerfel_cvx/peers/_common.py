@@ -23,10 +23,10 @@ from tqdm.auto import tqdm
 
 from ..errors import InputError, StepFailure
 from ..geometry import FloatArray, rectangle_corners, rot90
-from ..metrics import deepest_penetration, kinetic_energy, potential_energy, rod_length_drift
+from ..metrics import deepest_penetration
 from ..model import Model, State
+from ..recorder import TrajectoryRecorder, physical_metrics, run_info
 from ..scene import Scene
-from ..simulate import METRIC_COLUMNS
 from ..trajectory import Trajectory
 
 POSE_COLUMNS = ("x", "y", "theta", "vx", "vy", "omega")
@@ -132,26 +132,9 @@ def run_peer(engine: str, package: str, scene: Scene, world: PeerWorld, dt: floa
 
     """
     model = Model.from_scene(scene)
-    state = State.initial(scene)
-    times = [0.0]
-    points = [state.points]
-    velocities = [state.velocities]
-    rows: list[dict[str, Any]] = []
-    info: dict[str, Any] = {
-        "scene": scene.name, "formulation": "peer", "solver": engine, "tol": "native",
-        "dt": float(dt), "steps": int(steps), "table_mass": None, "extra_rod": False,
-        "fallback": [],
-        "versions": {"wuerfel_cvx": package_version("wuerfel_cvx"),
-                     package: package_version(package)},
-        "compiled_structures": None, "steps_reusing_a_compiled_structure": None,
-    }
-
-    def trajectory() -> Trajectory:
-        metrics = pd.DataFrame(rows, columns=list(METRIC_COLUMNS)).astype(_METRIC_DTYPES)
-        return Trajectory(times=np.array(times), points=np.array(points),
-                          velocities=np.array(velocities), metrics=metrics,
-                          table_points=model.table_points.copy(), info=info)
-
+    info = run_info(scene, formulation="peer", solver=engine, tol="native", dt=dt,
+                    steps=steps, packages={package: package})
+    recorder = TrajectoryRecorder.start(model, info, State.initial(scene), _METRIC_DTYPES)
     for step in tqdm(range(1, int(steps) + 1), disable=not progress, unit="step",
                      desc=f"{scene.name} ({engine})"):
         started = time.perf_counter()
@@ -161,33 +144,26 @@ def run_peer(engine: str, package: str, scene: Scene, world: PeerWorld, dt: floa
         finished = time.perf_counter()
         if not np.all(np.isfinite(poses)):
             failure = StepFailure(step, engine, "peer", "non-finite state")
-            failure.trajectory = trajectory()
+            failure.trajectory = recorder.trajectory()
             raise failure
         state = State(*corners_from_poses(model.box_sizes, poses))
-        times.append(step * float(dt))
-        points.append(state.points)
-        velocities.append(state.velocities)
-        rows.append(_metrics_row(model, state, engine, step, float(dt), world.n_contacts(),
-                                 stepped - started, finished - started))
-    return trajectory()
+        row = {"step": step, "time_s": step * float(dt),
+               **_engine_row(model, engine, world.n_contacts(), stepped - started,
+                             finished - started),
+               **physical_metrics(model, state, deepest_penetration(model, state.points))}
+        recorder.record(step * float(dt), state, row)
+    return recorder.trajectory()
 
 
-def _metrics_row(model: Model, state: State, engine: str, step: int, dt: float,
-                 n_contacts: int | None, solver_time: float,
-                 step_time: float) -> dict[str, Any]:
-    kinetic = kinetic_energy(model, state)
-    potential = potential_energy(model, state)
+def _engine_row(model: Model, engine: str, n_contacts: int | None, solver_time: float,
+                step_time: float) -> dict[str, Any]:
+    """The solver and timing columns of a peer's step: what an engine can tell."""
     return {
-        "step": step, "time_s": step * dt, "solver": engine, "status": "peer",
-        "primary_status": "peer", "verified": pd.NA, "n_variables": 3 * model.n_boxes,
-        "n_equalities": 0,
-        "n_inequalities": pd.NA, "n_contacts": pd.NA if n_contacts is None else n_contacts,
+        "solver": engine, "status": "peer", "primary_status": "peer", "verified": pd.NA,
+        "n_variables": 3 * model.n_boxes, "n_equalities": 0, "n_inequalities": pd.NA,
+        "n_contacts": pd.NA if n_contacts is None else n_contacts,
         "build_time_s": step_time - solver_time, "solve_time_s": solver_time,
-        "solver_time_s": solver_time, "step_time_s": step_time,
-        "iterations": pd.NA, "primal_residual": pd.NA, "dual_residual": pd.NA,
-        "complementarity": pd.NA,
-        "rod_drift": rod_length_drift(model, state.points),
-        "penetration_m": deepest_penetration(model, state.points),
-        "kinetic_energy_J": kinetic, "potential_energy_J": potential,
-        "total_energy_J": kinetic + potential,
+        "solver_time_s": solver_time, "step_time_s": step_time, "iterations": pd.NA,
+        "primal_residual": pd.NA, "dual_residual": pd.NA, "complementarity": pd.NA,
+        "path": "peer",
     }

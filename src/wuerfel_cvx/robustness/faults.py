@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from .. import solvers
+from ..contacts import Contacts
 from ..errors import StepFailure
 from ..formulations import StepQP, VelocityFormulation
 from ..model import Model, State
@@ -53,9 +54,9 @@ class NaNInQP(VelocityFormulation):
     """Which array of the :class:`StepQP` is poisoned (``target``, ``eq_rhs``...)."""
     built: list[int] = dataclasses.field(default_factory=lambda: [0])
 
-    def build(self, model: Model, state: State, dt: float) -> StepQP:
+    def build(self, model: Model, state: State, contacts: Contacts, dt: float) -> StepQP:
         """The step QP, poisoned in step ``bad_step``."""
-        qp = super().build(model, state, dt)
+        qp = super().build(model, state, contacts, dt)
         self.built[0] += 1
         if self.built[0] == self.bad_step:
             getattr(qp, self.array)[0] = np.nan

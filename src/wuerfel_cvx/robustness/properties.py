@@ -219,9 +219,13 @@ def _spins_and_speeds(trajectory: Trajectory, n_squares: int) -> tuple[np.ndarra
     return np.abs(spin).reshape(states, n_squares).max(axis=1), speed.max(axis=1)
 
 
-def run_bounds(trajectory: Trajectory, scene: Scene,
+def run_bounds(trajectory: Trajectory, scene: Scene | None = None,
                formulation: VelocityFormulation | None = None) -> RunBounds:
-    """The penetration and energy-rise bounds of each step of ``trajectory``."""
+    """The penetration and energy-rise bounds of each step of ``trajectory``.
+
+    ``scene``: the run's scene, by default the one the trajectory records.
+    """
+    scene = _scene_of(trajectory, scene)
     scheme = formulation if formulation is not None else VelocityFormulation()
     dt = float(trajectory.info["dt"])
     beta = scheme.beta
@@ -268,14 +272,16 @@ def run_bounds(trajectory: Trajectory, scene: Scene,
     return RunBounds(penetration=penetration, energy_rise=energy_rise)
 
 
-def check_run(trajectory: Trajectory, scene: Scene,
+def check_run(trajectory: Trajectory, scene: Scene | None = None,
               formulation: VelocityFormulation | None = None) -> list[str]:
     """The invariants ``trajectory`` (a run of ``scene``) breaks, one readable line each.
 
     Empty when the run keeps them all.  Each line names the invariant, the first
-    offending step, the value and the bound.  ``formulation`` must be the one the run
-    used (default: the default ``velocity`` formulation).
+    offending step, the value and the bound.  ``scene`` is by default the one the
+    trajectory records; ``formulation`` must be the one the run used (default: the
+    default ``velocity`` formulation).
     """
+    scene = _scene_of(trajectory, scene)
     violations: list[str] = []
     metrics = trajectory.metrics
     steps = trajectory.n_steps
@@ -320,6 +326,14 @@ def check_run(trajectory: Trajectory, scene: Scene,
         violations.append(f"step {k + 1} failed the residual check "
                           f"({unverified.size} steps unverified)")
     return violations
+
+
+def _scene_of(trajectory: Trajectory, scene: Scene | None) -> Scene:
+    """``scene``, or the trajectory's own; :class:`ValueError` if neither is known."""
+    scene = trajectory.scene if scene is None else scene
+    if scene is None:
+        raise ValueError("the trajectory records no scene: pass it")
+    return scene
 
 
 def _initial_energy(trajectory: Trajectory, scene: Scene) -> float:
@@ -370,11 +384,11 @@ def check_scene(scene: Scene, steps: int = 200, dt: float = 0.01, solver: str = 
     except StepFailure as failure:
         problems = [f"step failure: {failure}"]
         if failure.trajectory is not None and failure.trajectory.n_steps:
-            problems += check_run(failure.trajectory, scene)
+            problems += check_run(failure.trajectory)
         return problems
     except Exception as exc:  # any other exception is a finding, reported with its type
         return [f"exception {type(exc).__name__}: {exc}"]
-    return check_run(trajectory, scene)
+    return check_run(trajectory)
 
 
 def run_property_sweep(n_scenes: int, seed: int, steps: int = 200,

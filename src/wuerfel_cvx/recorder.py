@@ -1,0 +1,131 @@
+"""Recording a run: states, one metrics row per step, and the run's settings.
+
+Shared by the package's own simulation loop (:mod:`wuerfel_cvx.simulation`) and the peer
+engines (:mod:`wuerfel_cvx.peers`), so that both write the same columns, computed by the
+same functions of :mod:`wuerfel_cvx.metrics`, and the same ``info``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .geometry import FloatArray
+from .metrics import kinetic_energy, potential_energy, rod_length_drift
+from .model import Model, State
+from .scene import Scene
+from .trajectory import Trajectory
+
+METRIC_COLUMNS = (
+    "step", "time_s", "solver", "status", "primary_status", "verified", "n_variables",
+    "n_equalities",
+    "n_inequalities", "n_contacts", "build_time_s", "solve_time_s", "solver_time_s",
+    "step_time_s",
+    "iterations", "primal_residual", "dual_residual", "complementarity", "rod_drift",
+    "penetration_m", "kinetic_energy_J", "potential_energy_J", "total_energy_J", "path",
+)
+"""Columns of :attr:`Trajectory.metrics`, one row per step (state after the step).
+
+``build_time_s`` is the step's contact search and QP construction, ``solve_time_s`` the
+wall time of the solve call (cvxpy's compilation included), ``solver_time_s`` the solver's
+own reported time, and ``step_time_s`` the whole step: contact search, islands and sleep if
+on, build, solve, check and advance (all in s).  A state's contacts are searched once, when
+the state is reached, and that search is counted in the step that starts from the state.
+The row's own diagnostics (rod drift, penetration, energies) are measured outside
+``step_time_s``.  ``solver`` and ``status`` are those of the solver that produced the
+step; ``primary_status`` is the run's own solver's status on it, which differs only when
+that solver failed and a ``fallback`` solver took over.  ``path`` is how the step's QPs
+reached the solver: ``direct``, ``compiled`` or ``declared`` (joined by ``+`` when a
+step's island QPs went different ways; empty when no QP was solved).
+"""
+
+
+def physical_metrics(model: Model, state: State, penetration: float) -> dict[str, float]:
+    """The physical diagnostics of a state: rod drift (1), penetration (m), energies (J).
+
+    ``penetration`` is the state's deepest penetration (m), from its contact search.
+    """
+    kinetic = kinetic_energy(model, state)
+    potential = potential_energy(model, state)
+    return {"rod_drift": rod_length_drift(model, state.points), "penetration_m": penetration,
+            "kinetic_energy_J": kinetic, "potential_energy_J": potential,
+            "total_energy_J": kinetic + potential}
+
+
+def run_info(scene: Scene, *, formulation: str, solver: str, tol: str, dt: float,
+             steps: int, table_mass: float | None = None, extra_rod: bool = False,
+             fallback: Sequence[str] = (),
+             packages: dict[str, str] | None = None) -> dict[str, Any]:
+    """A run's ``info``: its scene (name and data), model options, settings and versions.
+
+    ``packages`` maps a key of ``info["versions"]`` to a distribution whose version it
+    records (``wuerfel_cvx`` is always recorded).
+    """
+    return {
+        "scene": scene.name, "scene_data": scene.to_dict(), "formulation": formulation,
+        "solver": solver, "tol": tol, "dt": float(dt), "steps": int(steps),
+        "table_mass": table_mass, "extra_rod": extra_rod, "fallback": list(fallback),
+        "versions": installed_versions({"wuerfel_cvx": "wuerfel_cvx", **(packages or {})}),
+        "compiled_structures": None, "steps_reusing_a_compiled_structure": None,
+    }
+
+
+def installed_versions(packages: dict[str, str]) -> dict[str, str]:
+    """The installed version of each distribution, by key; ``unknown`` where metadata lacks."""
+    found = {}
+    for key, package in packages.items():
+        try:
+            found[key] = version(package)
+        except PackageNotFoundError:  # report it rather than fail the run
+            found[key] = "unknown"
+    return found
+
+
+@dataclass
+class TrajectoryRecorder:
+    """States and metrics rows of a run as it goes; :meth:`trajectory` at any point."""
+
+    model: Model
+    info: dict[str, Any]
+    column_dtypes: dict[str, str] = field(default_factory=dict)
+    """Dtypes for columns a recorder's rows may leave empty (``pd.NA``), e.g. a peer's."""
+    times: list[float] = field(default_factory=list)
+    points: list[FloatArray] = field(default_factory=list)
+    velocities: list[FloatArray] = field(default_factory=list)
+    rows: list[dict[str, Any]] = field(default_factory=list)
+
+    @classmethod
+    def start(cls, model: Model, info: dict[str, Any], state: State,
+              column_dtypes: dict[str, str] | None = None) -> TrajectoryRecorder:
+        """A recorder holding the initial ``state`` at time 0."""
+        recorder = cls(model, info, dict(column_dtypes or {}))
+        recorder.times.append(0.0)
+        recorder.points.append(state.points)
+        recorder.velocities.append(state.velocities)
+        return recorder
+
+    def record(self, time: float, state: State, row: dict[str, Any]) -> None:
+        """Append the state at ``time`` (s) after a step, and that step's metrics ``row``."""
+        self.times.append(time)
+        self.points.append(state.points)
+        self.velocities.append(state.velocities)
+        self.rows.append(row)
+
+    @property
+    def n_steps(self) -> int:
+        """Steps recorded so far."""
+        return len(self.rows)
+
+    def trajectory(self) -> Trajectory:
+        """The trajectory recorded so far (a copy of the lists' current contents)."""
+        metrics = pd.DataFrame(self.rows, columns=list(METRIC_COLUMNS))
+        if self.column_dtypes:
+            metrics = metrics.astype(self.column_dtypes)
+        return Trajectory(times=np.array(self.times), points=np.array(self.points),
+                          velocities=np.array(self.velocities), metrics=metrics,
+                          table_points=self.model.table_points.copy(), info=dict(self.info))

@@ -1,0 +1,214 @@
+"""The time-stepping object: one state, its contacts, and :meth:`Simulation.step`.
+
+A step is a pipeline over one contact set, found once when the state is reached::
+
+    contacts (of the state, with the formulation's reach)
+      -> plan (sleep, islands: which boxes each QP takes)       wuerfel_cvx.sleep
+      -> build each QP from the contacts                         wuerfel_cvx.formulations
+      -> solve and check it, falling back to other solvers       wuerfel_cvx.solve
+      -> advance, merge the islands' states
+      -> contacts of the new state (the next step's, and this row's penetration)
+      -> record the state and the metrics row                    wuerfel_cvx.recorder
+
+Nothing is kept between calls but the object's own state: no module-level memo.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .compiled import CompiledQPCache
+from .contacts import Contacts, find_contacts
+from .errors import InputError, StepFailure
+from .formulations import Formulation, StepQP, get_formulation
+from .model import Model, State
+from .recorder import TrajectoryRecorder, physical_metrics, run_info
+from .scene import Scene
+from .sleep import IslandPlanner, SleepSettings, merge, restrict
+from .solve import (
+    Residuals,
+    StepSolution,
+    combine_solutions,
+    first_failed_status,
+    solve_with_fallback,
+)
+from .solvers import get_solver, tolerance_value
+from .trajectory import Trajectory
+
+DT_RANGE = (1e-6, 100.0)
+"""Accepted time steps (s).  Baumgarte's ``beta / dt`` turns round-off in rod lengths
+into speed, so a tiny step turns round-off into energy; a huge one overflows the contact
+reach."""
+
+ASLEEP = "asleep"
+"""Status of a step in which every island slept: no QP was solved, nothing moved.  Its
+``verified`` is vacuously true and its residuals are 0; summaries count such steps apart."""
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """What one step solved: its QPs (one per island QP) and their solutions."""
+
+    step: int
+    qps: tuple[StepQP, ...]
+    solutions: tuple[StepSolution, ...]
+
+
+class Simulation:
+    """A scene being stepped: ``Simulation(scene, dt, ...)``, then :meth:`step` repeatedly.
+
+    The arguments are those of :func:`wuerfel_cvx.simulate` (which is a loop over this
+    object): ``dt`` (s), a solver registry name, a formulation name or object, a tolerance
+    preset or number; ``table_mass`` (kg per corner, the seed's heavy table) and
+    ``extra_rod`` choose the model; ``compiled``, ``sleep``, ``islands`` and ``fallback``
+    how each step is solved.  Raises :class:`InputError` for a bad argument.
+    """
+
+    def __init__(self, scene: Scene, dt: float = 0.01, solver: str = "CLARABEL",
+                 formulation: str | Formulation = "velocity", tol: str | float = "default",
+                 *, table_mass: float | None = None, extra_rod: bool = False,
+                 compiled: bool = True, sleep: SleepSettings | None = None,
+                 islands: bool = False, fallback: Sequence[str] = ()):
+        self.dt = _checked_dt(dt)
+        self.solvers = [get_solver(name).name for name in (solver, *fallback)]
+        tolerance_value(tol)
+        self.tol = tol
+        self.formulation = get_formulation(formulation)
+        self.model = Model.from_scene(scene, table_mass=table_mass, extra_rod=extra_rod)
+        self.cache = CompiledQPCache() if compiled else None
+        self.planner = IslandPlanner(self.model.n_boxes, sleep, islands)
+        self.state = State.initial(scene)
+        self.step_index = 0
+        self.contact_searches = 0
+        """Contact searches so far: one per state reached (the initial one included)."""
+        self.contacts, self._search_time = self._search(self.state)
+        self.recorder = TrajectoryRecorder.start(self.model, run_info(
+            scene, formulation=self.formulation.name, solver=self.solvers[0], tol=str(tol),
+            dt=self.dt, steps=0, table_mass=table_mass, extra_rod=extra_rod,
+            fallback=self.solvers[1:], packages=_packages(self.solvers[0])), self.state)
+
+    def step(self) -> StepRecord:
+        """Advance by one step of ``dt``; the QPs solved and their solutions.
+
+        Raises :class:`StepFailure` when no solver solves a QP of the step, or the new
+        state is not finite; the object then still holds the state before the step.
+        """
+        step = self.step_index + 1
+        started = time.perf_counter()
+        plan = self.planner.plan(self.contacts)
+        if plan.all_asleep:
+            return self._sleep(step, started)
+        qps, solutions, primary_statuses, parts = [], [], [], []
+        build_time, mark = self._search_time, started
+        for boxes in plan.groups:
+            model, state, contacts = restrict(self.model, self.state, self.contacts, boxes)
+            qp = self.formulation.build(model, state, contacts, self.dt)
+            build_time += time.perf_counter() - mark
+            solution, primary = solve_with_fallback(qp, self.solvers, self.tol, step,
+                                                    self.cache)
+            parts.append((boxes, self.formulation.advance(model, state, solution.x, self.dt)))
+            qps.append(qp)
+            solutions.append(solution)
+            primary_statuses.append(primary)
+            mark = time.perf_counter()
+        state = merge(self.state, parts)
+        if not (np.all(np.isfinite(state.points)) and np.all(np.isfinite(state.velocities))):
+            raise StepFailure(step, self.solvers[0], solutions[-1].status, "non-finite state")
+        self.planner.record(state.velocities, self.dt)
+        step_time = self._search_time + time.perf_counter() - started
+        combined = combine_solutions(solutions)
+        primary_status = first_failed_status(solutions, primary_statuses, combined)
+        self._advance_to(step, state, _solved_row(qps, combined, primary_status, build_time,
+                                                  step_time))
+        return StepRecord(step, tuple(qps), tuple(solutions))
+
+    def trajectory(self) -> Trajectory:
+        """The trajectory so far: every completed step, with the run's settings."""
+        info = self.recorder.info
+        info["steps"] = self.step_index
+        if self.cache is not None:
+            info["compiled_structures"] = self.cache.compiled
+            info["steps_reusing_a_compiled_structure"] = self.cache.reused
+        return self.recorder.trajectory()
+
+    # ------------------------------------------------------------------ parts of a step
+    def _search(self, state: State) -> tuple[Contacts, float]:
+        """``state``'s contacts within the formulation's reach, and the search's time (s)."""
+        started = time.perf_counter()
+        contacts = find_contacts(self.model, state.points,
+                                 self.formulation.body_reach(self.model, state, self.dt))
+        self.contact_searches += 1
+        return contacts, time.perf_counter() - started
+
+    def _advance_to(self, step: int, state: State, timing_row: dict[str, Any]) -> None:
+        """Take ``state`` as the state after ``step``: search its contacts, record the row."""
+        self.state = state
+        self.step_index = step
+        self.contacts, self._search_time = self._search(state)
+        row = {"step": step, "time_s": step * self.dt, **timing_row,
+               **physical_metrics(self.model, state, self.contacts.deepest_penetration())}
+        self.recorder.record(step * self.dt, state, row)
+
+    def _sleep(self, step: int, started: float) -> StepRecord:
+        """A step in which every island sleeps: nothing moves, no QP, no contact search."""
+        state = State(self.state.points, np.zeros_like(self.state.velocities))
+        self.planner.record(state.velocities, self.dt)
+        step_time = time.perf_counter() - started
+        self.state, self.step_index = state, step
+        self._search_time = 0.0  # the points did not move: the contacts are still valid
+        row = {"step": step, "time_s": step * self.dt, **_asleep_row(step_time),
+               **physical_metrics(self.model, state, self.contacts.deepest_penetration())}
+        self.recorder.record(step * self.dt, state, row)
+        return StepRecord(step, (), ())
+
+
+def _solved_row(qps: list[StepQP], solution: StepSolution, primary_status: str,
+                build_time: float, step_time: float) -> dict[str, Any]:
+    """The solver and timing columns of a step's metrics row (its QPs summed)."""
+    return {
+        "solver": solution.solver, "status": solution.status,
+        "primary_status": primary_status, "verified": solution.verified,
+        "n_variables": sum(qp.n_variables for qp in qps),
+        "n_equalities": sum(qp.n_equalities for qp in qps),
+        "n_inequalities": sum(qp.n_inequalities for qp in qps),
+        "n_contacts": sum(len(qp.contacts) for qp in qps), "build_time_s": build_time,
+        "solve_time_s": solution.solve_wall_time, "solver_time_s": solution.solver_time,
+        "step_time_s": step_time, "iterations": solution.iterations,
+        "primal_residual": solution.residuals.primal, "dual_residual": solution.residuals.dual,
+        "complementarity": solution.residuals.complementarity, "path": solution.path,
+    }
+
+
+def _asleep_row(step_time: float) -> dict[str, Any]:
+    """The solver and timing columns of a step in which every island slept."""
+    nothing_solved = StepSolution(
+        x=np.zeros(0), solver="", status=ASLEEP, residuals=Residuals(0.0, 0.0, 0.0),
+        verified=True, solve_wall_time=0.0, solver_time=np.nan, iterations=0)
+    return _solved_row([], nothing_solved, ASLEEP, step_time, step_time)
+
+
+def _checked_dt(dt: float) -> float:
+    """``dt`` (s) as a float, or :class:`InputError` if it is not within :data:`DT_RANGE`."""
+    if isinstance(dt, bool) or not (isinstance(dt, int | float) and math.isfinite(dt)
+                                    and dt > 0):
+        raise InputError(f"must be a positive finite number of seconds, got {dt}", field="dt")
+    if not DT_RANGE[0] <= dt <= DT_RANGE[1]:
+        raise InputError(f"must be between {DT_RANGE[0]:g} and {DT_RANGE[1]:g} s, got {dt:g}",
+                         field="dt")
+    return float(dt)
+
+
+def _packages(solver: str) -> dict[str, str]:
+    """The distributions whose versions a run records: cvxpy, numpy and the solver's."""
+    solver_package = {"CLARABEL": "clarabel", "OSQP": "osqp", "PIQP": "piqp",
+                      "PROXQP": "proxsuite", "SCS": "scs"}.get(solver)
+    packages = {"cvxpy": "cvxpy", "numpy": "numpy"}
+    if solver_package:
+        packages[solver.lower()] = solver_package
+    return packages
