@@ -18,6 +18,8 @@ from scipy.spatial import cKDTree
 
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx import contacts as new_contacts
+from wuerfel_cvx import formulations as formulations_package
+from wuerfel_cvx import simulation as simulation_module
 from wuerfel_cvx.contacts import TIE_TOLERANCE, Contacts
 from wuerfel_cvx.formulations import get_formulation, step_qp
 from wuerfel_cvx.formulations import qp as new_qp
@@ -350,9 +352,10 @@ def test_point_rows_with_fixed_points_duplicates_and_no_rows() -> None:
 
 
 def old_functions(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Make the formulations build with the oracles."""
+    """Make the simulation search and the formulations build with the oracles."""
+    for searching in (formulations_package, simulation_module):
+        monkeypatch.setattr(searching, "find_contacts", find_contacts)
     for module in (velocity_module, seed_module):
-        monkeypatch.setattr(module, "find_contacts", find_contacts)
         monkeypatch.setattr(module, "point_rows", point_rows)
     monkeypatch.setattr(velocity_module, "side_blocks", side_blocks)
 

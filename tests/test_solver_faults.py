@@ -34,7 +34,7 @@ from wuerfel_cvx.solvers import available_solvers
 from wuerfel_cvx.trajectory import Trajectory
 
 # the package exports the function simulate, which shadows the module's attribute name
-simulate_module = importlib.import_module("wuerfel_cvx.simulate")
+simulation_module = importlib.import_module("wuerfel_cvx.simulation")
 
 SCENE = "stack-3"  # every square touches its neighbour or the floor from step 1
 
@@ -291,7 +291,7 @@ def test_fallback_takes_over_from_a_raising_solver(monkeypatch: pytest.MonkeyPat
 
 # ------------------------------------------------------------------ command line
 def _inject_nan(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(simulate_module, "get_formulation", lambda name: NaNInQP())
+    monkeypatch.setattr(simulation_module, "get_formulation", lambda name: NaNInQP())
 
 
 def _inject_exception(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -41,7 +41,8 @@ The row's own diagnostics (rod drift, penetration, energies) are measured outsid
 step; ``primary_status`` is the run's own solver's status on it, which differs only when
 that solver failed and a ``fallback`` solver took over.  ``path`` is how the step's QPs
 reached the solver: ``direct``, ``compiled`` or ``declared`` (joined by ``+`` when a
-step's island QPs went different ways; empty when no QP was solved).
+step's island QPs went different ways; ``none`` when no QP was solved, ``peer`` for a
+peer engine).
 """
 
 

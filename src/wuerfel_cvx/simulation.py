@@ -189,7 +189,7 @@ def _asleep_row(step_time: float) -> dict[str, Any]:
     """The solver and timing columns of a step in which every island slept."""
     nothing_solved = StepSolution(
         x=np.zeros(0), solver="", status=ASLEEP, residuals=Residuals(0.0, 0.0, 0.0),
-        verified=True, solve_wall_time=0.0, solver_time=np.nan, iterations=0)
+        verified=True, solve_wall_time=0.0, solver_time=np.nan, iterations=0, path="none")
     return _solved_row([], nothing_solved, ASLEEP, step_time, step_time)
 
 
