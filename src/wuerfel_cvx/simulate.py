@@ -56,54 +56,25 @@ def simulate(
     islands: bool = False,
     fallback: Sequence[str] = (),
 ) -> Trajectory:
-    """Simulate ``steps`` steps of ``dt`` seconds, one QP per step.
+    """Simulate ``steps`` steps of ``dt`` seconds, one QP per step; the trajectory.
+
+    A loop over :meth:`Simulation.step <wuerfel_cvx.simulation.Simulation.step>`, whose
+    class documents the scene, step and solver arguments (``scene`` may also be a library
+    name such as ``"stack-10"`` or a TOML path here).
 
     Parameters
     ----------
-    scene:
-        A :class:`Scene`, a library name such as ``"stack-10"``, or a TOML path.
-    dt:
-        Time step (s), positive.
+    scene, dt, solver, formulation, tol, table_mass, extra_rod, compiled, sleep, islands, fallback
+        As for :class:`~wuerfel_cvx.simulation.Simulation`; ``scene`` may be a name or path.
     steps:
         Number of steps, non-negative.
-    solver:
-        Solver registry name, case-insensitive (see :func:`available_solvers`).
-    formulation:
-        ``"velocity"`` (default) or ``"seed"``, or a formulation object.
-    tol:
-        Tolerance preset (``low``, ``default``, ``high``) or a number.
-    table_mass:
-        ``None``: tables are fixed constants.  A mass (kg per corner): the seed's
-        heavy table, whose corners are variables held still by equalities.
-    extra_rod:
-        Add the redundant second diagonal (a 6th rod) to every square.
     progress:
         Show a progress bar.
     observer:
-        Optional callback ``observer(step, qp, solution)`` after each solved step, e.g. to
-        re-solve the same QP with another solver; its time is not in the step's timings.
-        It may end the run by raising :class:`StepFailure`, which then carries the
-        trajectory up to and including this step.
-    compiled:
-        Re-solve repeated QP structures through a compiled, parametrised problem
-        (:class:`~wuerfel_cvx.compiled.CompiledQPCache`) instead of declaring each step's
-        problem afresh.  Same model and answers (to solver tolerance); less cvxpy time.
-    sleep:
-        ``None`` (default): every square takes part in every step.  Settings: islands of
-        squares that have been still long enough sleep (frozen, left out of the QP) until
-        an awake square touches them (:mod:`wuerfel_cvx.sleep`).  A step in which every
-        island sleeps has status ``"asleep"`` and no QP.
-    islands:
-        Solve each island (squares connected by contacts) as its own QP, each cached by its
-        own structure, instead of all awake squares in one QP (see :mod:`wuerfel_cvx.sleep`
-        for the trade-off).  Same model; answers agree to solver tolerance.  A step's
-        metrics row then sums sizes and times over the islands and takes the worst
-        residuals and status; ``observer`` is called once per island QP.
-    fallback:
-        Solvers to try, in order, on a step that ``solver`` fails (a status other than
-        optimal, non-finite or unusable data, an exception).  The step's metrics row then
-        names the solver that succeeded in ``solver`` and keeps the failed status in
-        ``primary_status``.  Only when every solver fails does the run stop.
+        Optional callback ``observer(step, qp, solution)`` after each solved step (once per
+        island QP), e.g. to re-solve the same QP with another solver; its time is not in
+        the step's timings.  It may end the run by raising :class:`StepFailure`, which
+        then carries the trajectory up to and including this step.
 
     Raises
     ------

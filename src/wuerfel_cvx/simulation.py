@@ -63,11 +63,51 @@ class StepRecord:
 class Simulation:
     """A scene being stepped: ``Simulation(scene, dt, ...)``, then :meth:`step` repeatedly.
 
-    The arguments are those of :func:`wuerfel_cvx.simulate` (which is a loop over this
-    object): ``dt`` (s), a solver registry name, a formulation name or object, a tolerance
-    preset or number; ``table_mass`` (kg per corner, the seed's heavy table) and
-    ``extra_rod`` choose the model; ``compiled``, ``sleep``, ``islands`` and ``fallback``
-    how each step is solved.  Raises :class:`InputError` for a bad argument.
+    :func:`wuerfel_cvx.simulate` is a loop over this object.
+
+    Parameters
+    ----------
+    scene:
+        The :class:`Scene` to simulate.
+    dt:
+        Time step (s), positive.
+    solver:
+        Solver registry name, case-insensitive (see :func:`available_solvers`).
+    formulation:
+        ``"velocity"`` (default) or ``"seed"``, or a formulation object.
+    tol:
+        Tolerance preset (``low``, ``default``, ``high``) or a number.
+    table_mass:
+        ``None``: tables are fixed constants.  A mass (kg per corner): the seed's
+        heavy table, whose corners are variables held still by equalities.
+    extra_rod:
+        Add the redundant second diagonal (a 6th rod) to every square.
+    compiled:
+        Re-solve repeated QP structures through a compiled, parametrised problem
+        (:class:`~wuerfel_cvx.compiled.CompiledQPCache`) instead of declaring each step's
+        problem afresh.  Same model and answers (to solver tolerance); less cvxpy time.
+    sleep:
+        ``None`` (default): every square takes part in every step.  Settings: islands of
+        squares that have been still long enough sleep (frozen, left out of the QP) until
+        an awake square touches them (:mod:`wuerfel_cvx.sleep`).  A step in which every
+        island sleeps has status ``"asleep"`` and no QP.
+    islands:
+        Solve each island (squares connected by contacts) as its own QP, each cached by its
+        own structure, instead of all awake squares in one QP (see :mod:`wuerfel_cvx.sleep`
+        for the trade-off).  Same model; answers agree to solver tolerance.  A step's
+        metrics row then sums sizes and times over the islands and takes the worst
+        residuals and status; ``observer`` is called once per island QP.
+    fallback:
+        Solvers to try, in order, on a step that ``solver`` fails (a status other than
+        optimal, non-finite or unusable data, an exception).  The step's metrics row then
+        names the solver that succeeded in ``solver`` and keeps the failed status in
+        ``primary_status``.  Only when every solver fails does the run stop.
+
+    Raises
+    ------
+    InputError
+        For a bad argument.
+
     """
 
     def __init__(self, scene: Scene, dt: float = 0.01, solver: str = "CLARABEL",

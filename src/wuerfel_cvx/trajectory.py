@@ -124,7 +124,7 @@ class Trajectory:
         """A few lines on the run: duration, extremes of the metrics, timing."""
         m = self.metrics
         lines = [
-            f"scene {self.info.get('scene', '?')}: {self.points.shape[1] // 4} squares, "
+            f"scene {self.info.get('scene', '?')}: {self.points.shape[1] // 4} boxes, "
             f"{self.n_steps} steps of {self.info.get('dt', float('nan')):g} s "
             f"({self.times[-1]:g} s simulated)",
             f"formulation {self.info.get('formulation')}, solver {self.info.get('solver')}, "
