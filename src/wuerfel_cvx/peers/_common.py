@@ -27,7 +27,7 @@ from ..model import Model, State
 from ..scene import Scene
 from ..simulate import METRIC_COLUMNS
 from ..trajectory import Trajectory
-from ..versions import package_version
+from ..versions import package_version as package_version  # re-exported by peers
 
 POSE_COLUMNS = ("x", "y", "theta", "vx", "vy", "omega")
 """Columns of a pose array ``(n, 6)``: m, m, rad, m/s, m/s, rad/s."""
