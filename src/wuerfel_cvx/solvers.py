@@ -120,7 +120,7 @@ SOLVERS: dict[str, SolverSpec] = {
 
 @cache
 def _installed_in_cvxpy() -> frozenset[str]:
-    """Solvers cvxpy reports installed; asked once, as it costs about 1 ms a call."""
+    """Solvers cvxpy reports installed; asked once, as cvxpy probes every solver each call."""
     return frozenset(cp.installed_solvers())
 
 
