@@ -218,7 +218,7 @@ class _TimedNativeCalls:
 def test_direct_solver_time_is_at_most_the_wall_time_of_the_native_calls(solver: str) -> None:
     # The native time is the wall time of the native calls (one clock, nested intervals:
     # inside the direct solve, around the calls themselves), and the solver time is at most
-    # that.  Clarabel's own solve_time alone broke this here (10-16 % above the calls).
+    # that.  Clarabel's own solve_time alone broke this (it read above the calls).
     options = SOLVERS[solver].options(HIGH)
     for entry in qp_bank():
         qp = entry.build()

@@ -223,3 +223,13 @@ def test_paths_on_a_repeated_structure() -> None:
         assert paths == ["declared", "compiled", third]
     assert set(SOLVE_PATHS) == {"declared", "compiled", "direct"}
     assert solve_step_qp(wide_qp(), "OSQP", "high").path == "declared"  # no cache
+
+
+def test_mismatched_shapes_are_rejected() -> None:
+    qp = wide_qp()
+    with pytest.raises(ValueError, match="ineq_upper"):
+        declare_qp(qp.weights, qp.target, qp.eq_matrix, qp.eq_rhs, qp.ineq_matrix,
+                   qp.ineq_rhs, qp.contacts, ineq_upper=np.ones(2))
+    with pytest.raises(ValueError, match="cost_factor"):
+        declare_qp(qp.weights, qp.target, qp.eq_matrix, qp.eq_rhs, qp.ineq_matrix,
+                   qp.ineq_rhs, qp.contacts, cost_factor=sp.csr_array(np.ones((1, 3))))

@@ -216,8 +216,15 @@ def declare_qp(
     ``ineq_rhs`` is ``h``; ``ineq_upper`` (``u``, ``+inf`` entries for one-sided rows) and
     ``cost_factor`` (``F``) are optional.  It is declared in cvxpy lazily.  ``E``, ``G`` and
     ``F`` are stored in canonical CSR form (sorted indices, no duplicates), so equal
-    sparsity patterns have equal index arrays.
+    sparsity patterns have equal index arrays.  Raises ``ValueError`` if ``ineq_upper`` does
+    not have one entry per row of ``G`` or ``F`` not one column per unknown.
     """
+    if ineq_upper is not None and np.shape(ineq_upper) != np.shape(ineq_rhs):
+        raise ValueError(f"ineq_upper has shape {np.shape(ineq_upper)}, the rows of G "
+                         f"{np.shape(ineq_rhs)}")
+    if cost_factor is not None and cost_factor.shape[1] != np.shape(weights)[0]:
+        raise ValueError(f"cost_factor has {cost_factor.shape[1]} columns for "
+                         f"{np.shape(weights)[0]} unknowns")
     return StepQP(weights=weights, target=target, eq_matrix=_canonical(eq_matrix),
                   eq_rhs=eq_rhs, ineq_matrix=_canonical(ineq_matrix), ineq_rhs=ineq_rhs,
                   contacts=contacts,
