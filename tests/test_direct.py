@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from typing import Any
 
 import numpy as np
@@ -12,22 +13,35 @@ import pytest
 from qp_bank import qp_bank
 from test_solver_agreement import AGREEMENT
 from wuerfel_cvx import simulate
+from wuerfel_cvx.backends import DirectPathWarning, DirectSolver, _cvxpy, build_direct
+from wuerfel_cvx.backends.clarabel import DirectClarabel
+from wuerfel_cvx.backends.osqp import DirectOSQP
+from wuerfel_cvx.backends.piqp import DirectPIQP
 from wuerfel_cvx.compiled import CompiledQP, CompiledQPCache
-from wuerfel_cvx.direct import (
-    DIRECT_SOLVERS,
-    DirectClarabel,
-    DirectOSQP,
-    DirectPIQP,
-    build_direct,
-)
 from wuerfel_cvx.errors import StepFailure
+from wuerfel_cvx.formulations.qp import StepQP
 from wuerfel_cvx.solve import VERIFY_FACTOR, solve_step_qp
 from wuerfel_cvx.solvers import SOLVERS, TOLERANCE_PRESETS
 
 HIGH = TOLERANCE_PRESETS["high"]
+DIRECT_SOLVERS = [name for name, spec in SOLVERS.items() if spec.backend is not None]
 pytestmark = pytest.mark.filterwarnings(  # cvxpy reading its own sparse parameters
     "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")
 
+
+def direct_for(solver: str, qp: StepQP, options: dict[str, Any],
+               names: dict[int, str] | None = None) -> DirectSolver | None:
+    """``solver``'s direct path for ``qp``'s freshly compiled structure."""
+    compiled = CompiledQP.of(qp)
+    declared = compiled.load(qp)
+    backend = SOLVERS[solver].backend
+    assert backend is not None
+    return build_direct(solver, backend, declared.problem,
+                        compiled.parameter_names() if names is None else names, qp, options)
+
+
+def test_the_solvers_with_a_direct_backend() -> None:
+    assert DIRECT_SOLVERS == ["CLARABEL", "OSQP", "PIQP"]
 
 
 @pytest.mark.parametrize("solver", list(DIRECT_SOLVERS))
@@ -37,7 +51,10 @@ def test_direct_path_matches_problem_solve_on_every_bank_qp(solver: str) -> None
         qp = entry.build()
         compiled = CompiledQP.of(qp)
         declared = compiled.load(qp)
-        direct = build_direct(solver, declared.problem, compiled.parameter_names(), qp, options)
+        backend = SOLVERS[solver].backend
+        assert backend is not None
+        direct = build_direct(solver, backend, declared.problem, compiled.parameter_names(), qp,
+                              options)
         assert direct is not None, entry.label
         fresh = solve_step_qp(entry.build(), solver, "high")
         result = direct.solve(qp, options)
@@ -69,11 +86,46 @@ def test_direct_solutions_pass_the_residual_check(solver: str) -> None:
 
 
 @pytest.mark.parametrize("solver", list(DIRECT_SOLVERS))
-def test_unknown_parameters_fall_back_to_problem_solve(solver: str) -> None:
+def test_unknown_parameters_fall_back_to_problem_solve_with_a_warning(
+        solver: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(_cvxpy, "_warned", set())
     qp = qp_bank()[0].build()
-    compiled = CompiledQP.of(qp)
-    declared = compiled.load(qp)
-    assert build_direct(solver, declared.problem, {}, qp, SOLVERS[solver].options(HIGH)) is None
+    with pytest.warns(DirectPathWarning, match="no step-QP slot"):
+        assert direct_for(solver, qp, SOLVERS[solver].options(HIGH), names={}) is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DirectPathWarning)  # once per solver and reason
+        assert direct_for(solver, qp, SOLVERS[solver].options(HIGH), names={}) is None
+
+
+@pytest.mark.parametrize("solver", list(DIRECT_SOLVERS))
+def test_an_untested_cvxpy_falls_back_to_problem_solve(
+        solver: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(_cvxpy, "_warned", set())
+    monkeypatch.setattr(_cvxpy, "TESTED_CVXPY", ((0, 1), (0, 2)))
+    cache = CompiledQPCache(compile_after=1)
+    qp = qp_bank()[0].build()
+    solve_step_qp(qp, solver, "high", cache=cache)  # compiles
+    with pytest.warns(DirectPathWarning, match="outside the tested"):
+        solution = solve_step_qp(qp_bank()[0].build(), solver, "high", cache=cache)
+    assert solution.path == "compiled" and solution.verified
+
+
+def test_the_installed_cvxpy_is_one_the_adapter_was_checked_against() -> None:
+    _cvxpy.check_version()  # raises Unavailable otherwise
+
+
+@pytest.mark.parametrize("solver", list(DIRECT_SOLVERS))
+def test_internals_not_as_expected_fall_back_with_a_warning(
+        solver: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(_cvxpy, "_warned", set())
+
+    def changed(*args: Any, **kwargs: Any) -> Any:
+        raise AttributeError("'Problem' object has no attribute '_cache'")
+
+    monkeypatch.setattr(_cvxpy, "_parameter_map", changed)
+    qp = qp_bank()[0].build()
+    with pytest.warns(DirectPathWarning, match="AttributeError"):
+        assert direct_for(solver, qp, SOLVERS[solver].options(HIGH)) is None
 
 
 @pytest.mark.parametrize("solver", list(DIRECT_SOLVERS))
@@ -130,9 +182,7 @@ def test_piqp_direct_results_are_not_overwritten_by_the_next_solve() -> None:
     # PIQP's result arrays are views of the solver's memory, which its next solve reuses.
     options = SOLVERS["PIQP"].options(HIGH)
     qp = next(e.build() for e in qp_bank() if e.build().n_inequalities)
-    compiled = CompiledQP.of(qp)
-    direct = build_direct("PIQP", compiled.load(qp).problem, compiled.parameter_names(), qp,
-                          options)
+    direct = direct_for("PIQP", qp, options)
     assert direct is not None
     first = direct.solve(qp, options)
     kept = (first.x.copy(), first.eq_dual.copy(), first.ineq_dual.copy())
@@ -168,13 +218,11 @@ class _TimedNativeCalls:
 def test_direct_solver_time_is_at_most_the_wall_time_of_the_native_calls(solver: str) -> None:
     # The native time is the wall time of the native calls (one clock, nested intervals:
     # inside the direct solve, around the calls themselves), and the solver time is at most
-    # that.  Clarabel's own solve_time alone broke this here (10-16 % above the calls).
+    # that.  Clarabel's own solve_time alone broke this (it read above the calls).
     options = SOLVERS[solver].options(HIGH)
     for entry in qp_bank():
         qp = entry.build()
-        compiled = CompiledQP.of(qp)
-        direct = build_direct(solver, compiled.load(qp).problem, compiled.parameter_names(),
-                              qp, options)
+        direct = direct_for(solver, qp, options)
         assert direct is not None
         native = _TimedNativeCalls(direct.solver)
         direct.solver = native
@@ -182,4 +230,6 @@ def test_direct_solver_time_is_at_most_the_wall_time_of_the_native_calls(solver:
         result = direct.solve(qp, options)
         outer = time.perf_counter() - started
         assert native.seconds <= result.native_time <= outer
-        assert result.solver_time == min(result.native_time, result.reported_time) > 0.0
+        solver_time = SOLVERS[solver].timing.solver_time(result.reported_time,
+                                                         result.native_time)
+        assert solver_time == min(result.native_time, result.reported_time) > 0.0

@@ -149,7 +149,7 @@ def test_solver_raising_becomes_a_step_failure(monkeypatch: pytest.MonkeyPatch) 
 
 
 def test_direct_path_raising_becomes_a_step_failure(monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.direct import DirectClarabel
+    from wuerfel_cvx.backends.clarabel import DirectClarabel
 
     def explode(self: DirectClarabel, *args: Any, **kwargs: Any) -> Any:
         raise RuntimeError("direct solver exploded")

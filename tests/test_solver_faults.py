@@ -276,7 +276,7 @@ def test_exception_while_applying_compiled_parameters_is_a_step_failure(
 
 
 def test_fallback_takes_over_from_a_raising_solver(monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.direct import DirectClarabel
+    from wuerfel_cvx.backends.clarabel import DirectClarabel
 
     def explode(self: DirectClarabel, *args: Any, **kwargs: Any) -> Any:
         raise RuntimeError("direct solver exploded")
@@ -295,7 +295,7 @@ def _inject_nan(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def _inject_exception(monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.direct import DirectClarabel
+    from wuerfel_cvx.backends.clarabel import DirectClarabel
 
     def explode(self: DirectClarabel, *args: Any, **kwargs: Any) -> Any:
         raise RuntimeError("direct solver exploded")
@@ -356,7 +356,7 @@ def test_cli_fallback_completes_the_run_and_says_so(
 
 def test_fallback_takes_over_island_by_island(monkeypatch: pytest.MonkeyPatch) -> None:
     from test_sleep import two_stacks_and_a_faller
-    from wuerfel_cvx.direct import DirectClarabel
+    from wuerfel_cvx.backends.clarabel import DirectClarabel
 
     def explode(self: DirectClarabel, *args: Any, **kwargs: Any) -> Any:
         raise RuntimeError("direct solver exploded")

@@ -1,24 +1,25 @@
 """Compile once per QP structure: parametrised (DPP) step problems, cached by sparsity.
 
 Declaring a step's QP afresh makes cvxpy canonicalise it on every step, which costs
-several times the solver's own time.  Here a step QP's *structure* (number of unknowns,
-weights, and the sparsity patterns of ``E`` and ``G``) is compiled once into a
-disciplined-parametrised problem::
+several times the solver's own time.  Here a step QP's *structure*
+(:meth:`~wuerfel_cvx.formulations.qp.StepQP.structure`: sizes, weights, sparsity
+patterns) is compiled once into a disciplined-parametrised problem::
 
-    minimise    sum (sqrt(w) x - sqrt(w) t)^2
-    subject to  E(p) x == e(p),  G(p) x >= h(p)
+    minimise    sum (sqrt(w) x - sqrt(w) t)^2  +  sum (F(p) x - (F t)(p))^2
+    subject to  E(p) x == e(p),  G(p) x >= h(p),  (G(p) x)[r] <= u(p)
 
-with ``sqrt(w) t``, the nonzeros of ``E`` and ``G`` (sparse parameters), ``e`` and ``h``
-as cvxpy parameters.  The objective has the same form as a fresh declaration, so both
-reach the solver as the same canonical problem.  (``x' W x - 2 (W t)' x`` has the same
-minimiser and fewer variables, but without the constant the solvers' relative stopping
-tests change: in the standard suite it cost CLARABEL and SCS one failed run each.)
-A later step with the same structure only sets parameter values, and
-cvxpy re-solves through its cached parameter map without canonicalising again.  The model
-is the same cvxpy model; only its numbers change.
+with one cvxpy parameter per slot of
+:data:`~wuerfel_cvx.formulations.qp.PARAMETER_SLOTS` the QP fills (the nonzeros of
+``E``, ``G`` and ``F`` as sparse parameters).  The objective has the same form as a fresh
+declaration, so both reach the solver as the same canonical problem.  It keeps the
+objective's constant: ``x' W x - 2 (W t)' x`` has the same minimiser and fewer variables,
+but without the constant the solvers' relative stopping tests see another problem.
+A later step with the same structure only sets parameter values, and cvxpy re-solves
+through its cached parameter map without canonicalising again.  The model is the same
+cvxpy model; only its numbers change.
 
-For OSQP, PIQP and CLARABEL a compiled structure is then solved on the direct path
-(:mod:`wuerfel_cvx.direct`): cvxpy's parameter map applied by hand and a persistent solver.
+A solver with a direct backend (:attr:`~wuerfel_cvx.solvers.SolverSpec.backend`) then
+solves a compiled structure on the direct path (:mod:`wuerfel_cvx.backends`).
 
 A structure is compiled the second time it is seen (``compile_after=2``): a structure that
 occurs once, as in a pile where contacts change every step, costs a plain declaration and
@@ -36,18 +37,19 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
-from .direct import DIRECT_SOLVERS, DirectSolver, build_direct
-from .formulations.qp import DeclaredQP, StepQP
+from .backends import DirectSolver, build_direct
+from .formulations.qp import PARAMETER_SLOTS, DeclaredQP, StepQP
+from .solvers import SOLVERS
 
-StructureKey = tuple[int, bytes, tuple[int, int], bytes, bytes, tuple[int, int], bytes, bytes]
+StructureKey = tuple[object, ...]
+
+DECLARED, COMPILED, DIRECT = "declared", "compiled", "direct"
+"""How a step was solved: declared afresh, through a compiled problem, on the direct path."""
 
 
 def structure_key(qp: StepQP) -> StructureKey:
     """What a compiled problem depends on: sizes, weights and sparsity patterns."""
-    eq, ineq = qp.eq_matrix, qp.ineq_matrix
-    return (qp.n_variables, qp.weights.tobytes(),
-            eq.shape, eq.indptr.tobytes(), eq.indices.tobytes(),
-            ineq.shape, ineq.indptr.tobytes(), ineq.indices.tobytes())
+    return qp.structure()
 
 
 @dataclass
@@ -55,61 +57,57 @@ class CompiledQP:
     """One structure's parametrised problem and its parameters."""
 
     declared: DeclaredQP
-    weighted_target: cp.Parameter
-    """``sqrt(w) t``, one per unknown."""
-    eq_values: cp.Parameter | None
-    eq_rhs: cp.Parameter | None
-    ineq_values: cp.Parameter | None
-    ineq_rhs: cp.Parameter | None
+    parameters: dict[str, cp.Parameter]
+    """One parameter per slot the structure fills, by slot name."""
     direct: dict[str, DirectSolver | None] = field(default_factory=dict)
-    """Per solver, the direct path for this structure once tried (see :mod:`wuerfel_cvx.direct`;
-    ``None``: it does not apply)."""
+    """Per solver, the direct path for this structure once tried (``None``: it does not
+    apply)."""
 
     def parameter_names(self) -> dict[int, str]:
-        """Our parameters' ids and the step-QP numbers each holds."""
-        named = {"weighted_target": self.weighted_target, "eq_values": self.eq_values,
-                 "eq_rhs": self.eq_rhs, "ineq_values": self.ineq_values,
-                 "ineq_rhs": self.ineq_rhs}
-        return {param.id: name for name, param in named.items() if param is not None}
+        """Our parameters' ids and the slot whose numbers each holds."""
+        return {param.id: name for name, param in self.parameters.items()}
 
     @classmethod
     def of(cls, qp: StepQP) -> CompiledQP:
         """Declare the parametrised problem for ``qp``'s structure."""
         x = cp.Variable(qp.n_variables, name="x")
-        weighted_target = cp.Parameter(qp.n_variables, name="weighted_target")
-        objective = cp.Minimize(cp.sum_squares(cp.multiply(np.sqrt(qp.weights), x)
-                                               - weighted_target))
+        p = {name: _parameter(qp, name) for name in qp.slots()}
+        cost = cp.sum_squares(cp.multiply(np.sqrt(qp.weights), x) - p["weighted_target"])
+        if "cost_values" in p:
+            cost = cost + cp.sum_squares(p["cost_values"] @ x - p["cost_target"])
         constraints: list[cp.Constraint] = []
-        eq_values = eq_rhs = ineq_values = ineq_rhs = None
-        eq_constraint = ineq_constraint = None
-        if qp.n_equalities:
-            eq_values = _sparse_parameter(qp.eq_matrix, "eq_values")
-            eq_rhs = cp.Parameter(qp.n_equalities, name="eq_rhs")
-            eq_constraint = eq_values @ x == eq_rhs
+        eq_constraint = ineq_constraint = upper_constraint = None
+        if "eq_values" in p:
+            eq_constraint = p["eq_values"] @ x == p["eq_rhs"]
             constraints.append(eq_constraint)
-        if qp.n_inequalities:
-            ineq_values = _sparse_parameter(qp.ineq_matrix, "ineq_values")
-            ineq_rhs = cp.Parameter(qp.n_inequalities, name="ineq_rhs")
-            ineq_constraint = ineq_values @ x >= ineq_rhs
+        if "ineq_values" in p:
+            ineq_constraint = p["ineq_values"] @ x >= p["ineq_rhs"]
             constraints.append(ineq_constraint)
-        problem = cp.Problem(objective, constraints)
+        if "ineq_upper" in p:
+            upper_constraint = (p["ineq_values"] @ x)[qp.upper_rows] <= p["ineq_upper"]
+            constraints.append(upper_constraint)
+        problem = cp.Problem(cp.Minimize(cost), constraints)
         assert problem.is_dpp(), "the step QP must be DPP to be compiled once"
-        return cls(DeclaredQP(problem, x, eq_constraint, ineq_constraint), weighted_target,
-                   eq_values, eq_rhs, ineq_values, ineq_rhs)
+        return cls(DeclaredQP(problem, x, eq_constraint, ineq_constraint, upper_constraint),
+                   p)
 
     def load(self, qp: StepQP) -> DeclaredQP:
         """Set the parameters to ``qp``'s numbers (same structure) and return the problem."""
-        self.weighted_target.value = np.sqrt(qp.weights) * qp.target
-        if self.eq_values is not None and self.eq_rhs is not None:
-            self.eq_values.value_sparse = sp.coo_array(qp.eq_matrix)
-            self.eq_rhs.value = qp.eq_rhs
-        if self.ineq_values is not None and self.ineq_rhs is not None:
-            self.ineq_values.value_sparse = sp.coo_array(qp.ineq_matrix)
-            self.ineq_rhs.value = qp.ineq_rhs
+        for name, param in self.parameters.items():
+            slot = PARAMETER_SLOTS[name]
+            if slot.matrix is not None:
+                param.value_sparse = sp.coo_array(slot.matrix(qp))
+            else:
+                param.value = slot.values(qp)
         return self.declared
 
 
-def _sparse_parameter(matrix: sp.csr_array, name: str) -> cp.Parameter:
+def _parameter(qp: StepQP, name: str) -> cp.Parameter:
+    """The cvxpy parameter of slot ``name`` for ``qp``'s structure."""
+    slot = PARAMETER_SLOTS[name]
+    if slot.matrix is None:
+        return cp.Parameter(slot.values(qp).shape[0], name=name)
+    matrix = slot.matrix(qp)
     pattern = sp.coo_array(matrix)
     return cp.Parameter(matrix.shape, name=name, sparsity=(pattern.row, pattern.col))
 
@@ -132,42 +130,49 @@ class CompiledQPCache:
 
     def declared_for(self, qp: StepQP) -> DeclaredQP:
         """A cvxpy problem holding ``qp``'s numbers: a compiled one if its structure repeats."""
+        return self.prepare(qp)[0]
+
+    def prepare(self, qp: StepQP) -> tuple[DeclaredQP, str]:
+        """:meth:`declared_for` and how: :data:`COMPILED` or :data:`DECLARED` afresh."""
         key = structure_key(qp)
         compiled = self._problems.get(key)
         if compiled is not None:
             self._problems.move_to_end(key)
             self.reused += 1
-            return compiled.load(qp)
+            return compiled.load(qp), COMPILED
         seen = self._sightings.get(key, 0) + 1
         if seen < self.compile_after:
             self._sightings[key] = seen
             if len(self._sightings) > 16 * self.capacity:  # forget old one-off structures
                 self._sightings.clear()
-            return qp.declared()
+            return qp.declared(), DECLARED
         self._sightings.pop(key, None)
         compiled = CompiledQP.of(qp)
         self._problems[key] = compiled
         if len(self._problems) > self.capacity:
             self._problems.popitem(last=False)
         self.compiled += 1
-        return compiled.load(qp)
+        return compiled.load(qp), COMPILED
 
     def direct_solver(self, qp: StepQP, solver: str,
                       options: dict[str, Any]) -> DirectSolver | None:
-        """The direct path of ``solver`` (OSQP, PIQP or CLARABEL) for ``qp``'s compiled structure.
+        """The direct path of ``solver`` for ``qp``'s compiled structure.
 
-        ``None`` means: solve through cvxpy (not compiled yet, another solver, or the path
-        does not apply).  A structure's path is set up with the options of its first use.
+        ``None`` means: solve through cvxpy (not compiled yet, a solver without a direct
+        backend, or the path does not apply).  A structure's path is set up with the
+        options of its first use.
         """
         key = structure_key(qp)
         compiled = self._problems.get(key)
-        if compiled is None or solver not in DIRECT_SOLVERS:
+        backend = SOLVERS[solver].backend
+        if compiled is None or backend is None:
             return None
         self._problems.move_to_end(key)
         if solver not in compiled.direct:
             compiled.load(qp)
             compiled.direct[solver] = build_direct(
-                solver, compiled.declared.problem, compiled.parameter_names(), qp, options)
+                solver, backend, compiled.declared.problem, compiled.parameter_names(), qp,
+                options)
         direct = compiled.direct[solver]
         if direct is not None:
             self.reused += 1

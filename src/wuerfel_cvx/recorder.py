@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 import numpy as np
@@ -20,6 +19,7 @@ from .metrics import kinetic_energy, potential_energy, rod_length_drift
 from .model import Model, State
 from .scene import Scene
 from .trajectory import Trajectory
+from .versions import package_version
 
 METRIC_COLUMNS = (
     "step", "time_s", "solver", "status", "primary_status", "verified", "n_variables",
@@ -71,20 +71,10 @@ def run_info(scene: Scene, *, formulation: str, solver: str, tol: str, dt: float
         "scene": scene.name, "scene_data": scene.to_dict(), "formulation": formulation,
         "solver": solver, "tol": tol, "dt": float(dt), "steps": int(steps),
         "table_mass": table_mass, "extra_rod": extra_rod, "fallback": list(fallback),
-        "versions": installed_versions({"wuerfel_cvx": "wuerfel_cvx", **(packages or {})}),
+        "versions": {key: package_version(package) for key, package in
+                     {"wuerfel_cvx": "wuerfel_cvx", **(packages or {})}.items()},
         "compiled_structures": None, "steps_reusing_a_compiled_structure": None,
     }
-
-
-def installed_versions(packages: dict[str, str]) -> dict[str, str]:
-    """The installed version of each distribution, by key; ``unknown`` where metadata lacks."""
-    found = {}
-    for key, package in packages.items():
-        try:
-            found[key] = version(package)
-        except PackageNotFoundError:  # report it rather than fail the run
-            found[key] = "unknown"
-    return found
 
 
 @dataclass

@@ -38,7 +38,7 @@ from .solve import (
     first_failed_status,
     solve_with_fallback,
 )
-from .solvers import get_solver, tolerance_value
+from .solvers import SOLVERS, get_solver, tolerance_value
 from .trajectory import Trajectory
 
 DT_RANGE = (1e-6, 100.0)
@@ -246,9 +246,4 @@ def _checked_dt(dt: float) -> float:
 
 def _packages(solver: str) -> dict[str, str]:
     """The distributions whose versions a run records: cvxpy, numpy and the solver's."""
-    solver_package = {"CLARABEL": "clarabel", "OSQP": "osqp", "PIQP": "piqp",
-                      "PROXQP": "proxsuite", "SCS": "scs"}.get(solver)
-    packages = {"cvxpy": "cvxpy", "numpy": "numpy"}
-    if solver_package:
-        packages[solver.lower()] = solver_package
-    return packages
+    return {"cvxpy": "cvxpy", "numpy": "numpy", solver.lower(): SOLVERS[solver].package}

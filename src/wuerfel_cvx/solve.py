@@ -1,12 +1,16 @@
 """Solving a step QP and checking the answer independently of the solver.
 
-:func:`solve_step_qp` calls the solver through cvxpy and then recomputes, from the
-QP's own numeric data, the residuals of the KKT conditions of
+:func:`solve_step_qp` calls the solver (declared afresh, through a compiled problem, or on
+a direct backend: :data:`SOLVE_PATHS`) and then recomputes, from the QP's own numeric
+data, the residuals of the KKT conditions of
 
-    min sum w (x - t)^2   s.t.   E x = e  (multiplier y),   G x >= h  (multiplier z >= 0)
+    min sum w (x - t)^2 + |F (x - t)|^2
+    s.t.  E x = e  (multiplier y),   h <= G x <= u  (multiplier z = z_lower - z_upper)
 
-which are ``2 W (x - t) + E^T y - G^T z = 0`` (cvxpy's sign convention), primal
-feasibility and complementarity ``z_i (G x - h)_i = 0``.  Each residual is made
+which are ``2 W (x - t) + 2 F' F (x - t) + E^T y - G^T z = 0`` (cvxpy's sign convention,
+see :mod:`wuerfel_cvx.formulations.qp`), primal feasibility, dual feasibility
+(``z >= 0`` on rows without an upper bound) and complementarity
+``max(z, 0)_i (G x - h)_i = 0``, ``max(-z, 0)_i (u - G x)_i = 0``.  Each residual is made
 relative to the size of the terms it balances.  A "solved" step counts as *verified*
 when all three are below ``VERIFY_FACTOR * eps``.
 """
@@ -23,11 +27,11 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
-from .compiled import CompiledQPCache
+from .compiled import COMPILED, DECLARED, DIRECT, CompiledQPCache
 from .errors import StepFailure
-from .formulations.qp import StepQP
+from .formulations.qp import DeclaredQP, StepQP
 from .geometry import FloatArray
-from .solvers import get_solver, tolerance_value
+from .solvers import SolverSpec, get_solver, tolerance_value
 
 #: A solution is verified when its relative residuals are below this multiple of ``eps``.
 #: Solvers measure their own stopping criteria in scaled or differently normed units, so
@@ -35,6 +39,11 @@ from .solvers import get_solver, tolerance_value
 VERIFY_FACTOR = 100.0
 
 SOLVED = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+
+SOLVE_PATHS = (DIRECT, COMPILED, DECLARED)
+"""How a step can be solved (:attr:`StepSolution.path`): on a direct backend
+(:mod:`wuerfel_cvx.backends`), through a compiled problem (:mod:`wuerfel_cvx.compiled`), or
+declared afresh in cvxpy."""
 
 INVALID_DATA = "invalid_data"
 """Status of a step whose QP data holds NaN or inf: no solver is called."""
@@ -69,30 +78,43 @@ class StepSolution:
     """Time the solver itself reports (s); NaN if it reports none."""
     iterations: int
     ineq_dual: FloatArray = field(default_factory=lambda: np.zeros(0))
-    """Multipliers z >= 0 of ``G x >= h`` (cvxpy's sign): ``2 W (x - t) = G^T z - E^T y``."""
-    path: str = ""
-    """How the QP reached the solver: ``direct``, ``compiled`` or ``declared``."""
+    """Multipliers ``z = z_lower - z_upper`` of ``h <= G x <= u`` (cvxpy's sign):
+    ``2 W (x - t) + 2 F' F (x - t) = G^T z - E^T y``; ``z >= 0`` on one-sided rows."""
+    path: str = DECLARED
+    """How it was solved: one of :data:`SOLVE_PATHS` (``none``: a step that solved no QP)."""
 
 
 def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
                   ineq_dual: FloatArray) -> Residuals:
     """Relative primal, dual and complementarity residuals of ``(x, y, z)``."""
-    objective_grad = 2.0 * qp.weights * (x - qp.target)
+    objective_grad = qp.objective_gradient(x)
     eq_term = _transposed_product(qp.eq_matrix, eq_dual)
     ineq_term = _transposed_product(qp.ineq_matrix, ineq_dual)
     stationarity = objective_grad + eq_term - ineq_term
     dual_scale = 1.0 + max(_inf(objective_grad), _inf(eq_term), _inf(ineq_term))
-    dual = max(_inf(stationarity), _inf(np.minimum(ineq_dual, 0.0))) / dual_scale
+    upper_rows = qp.upper_rows
+    one_sided = ineq_dual if not upper_rows.size else np.delete(ineq_dual, upper_rows)
+    dual = max(_inf(stationarity), _inf(np.minimum(one_sided, 0.0))) / dual_scale
 
     eq_lhs = qp.eq_matrix @ x
     ineq_lhs = qp.ineq_matrix @ x
     eq_violation = eq_lhs - qp.eq_rhs
     slack = ineq_lhs - qp.ineq_rhs
     primal_scale = 1.0 + max(_inf(qp.eq_rhs), _inf(qp.ineq_rhs), _inf(eq_lhs), _inf(ineq_lhs))
-    primal = max(_inf(eq_violation), _inf(np.minimum(slack, 0.0))) / primal_scale
-
-    complementarity = (_inf(ineq_dual * slack) / (1.0 + _inf(ineq_dual) * primal_scale)
-                       if slack.size else 0.0)
+    if not upper_rows.size:
+        primal = max(_inf(eq_violation), _inf(np.minimum(slack, 0.0))) / primal_scale
+        complementarity = (_inf(ineq_dual * slack) / (1.0 + _inf(ineq_dual) * primal_scale)
+                           if slack.size else 0.0)
+        return Residuals(primal=primal, dual=dual, complementarity=complementarity)
+    assert qp.ineq_upper is not None
+    upper_slack = qp.ineq_upper[upper_rows] - ineq_lhs[upper_rows]
+    primal_scale = max(primal_scale, 1.0 + _inf(qp.ineq_upper[upper_rows]))
+    primal = max(_inf(eq_violation), _inf(np.minimum(slack, 0.0)),
+                 _inf(np.minimum(upper_slack, 0.0))) / primal_scale
+    lower_product = np.maximum(ineq_dual, 0.0) * slack
+    upper_product = np.maximum(-ineq_dual[upper_rows], 0.0) * upper_slack
+    complementarity = (max(_inf(lower_product), _inf(upper_product))
+                       / (1.0 + _inf(ineq_dual) * primal_scale))
     return Residuals(primal=primal, dual=dual, complementarity=complementarity)
 
 
@@ -118,14 +140,7 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     started = time.perf_counter()
     try:
         # inside the try: applying a compiled structure's parameters can raise too
-        direct = cache.direct_solver(qp, spec.name, options) if cache is not None else None
-        if direct is not None:  # OSQP warm-starts from the structure's last solution
-            raw = direct.solve(qp, options)
-            answer = _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.solver_time,
-                             raw.iterations)
-        else:
-            answer = _solve_with_cvxpy(qp, spec.cvxpy_name, {"warm_start": False, **options},
-                                       cache)
+        answer = _solve(qp, spec, options, cache)
     except cp.error.SolverError as exc:
         raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
     except Exception as exc:  # a solver library raising anything is a failed step
@@ -142,13 +157,26 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     if status == cp.OPTIMAL_INACCURATE and not verified:
         raise StepFailure(step, spec.name, status,
                           f"residuals {residuals.worst():.2e} above {VERIFY_FACTOR * eps:.1e}")
-    solver_time = answer.solver_time
-    if not solver_time > 0.0:  # cvxpy reports 0.0 for PROXQP (its timings are off): unknown
-        solver_time = np.nan
     return StepSolution(x=x, solver=spec.name, status=status, residuals=residuals,
-                        verified=verified, solve_wall_time=wall, solver_time=float(solver_time),
+                        verified=verified, solve_wall_time=wall,
+                        solver_time=spec.timing.solver_time(answer.reported_time,
+                                                            answer.native_time),
                         iterations=int(answer.iterations),
-                        ineq_dual=np.asarray(answer.ineq_dual, dtype=np.float64))
+                        ineq_dual=np.asarray(answer.ineq_dual, dtype=np.float64),
+                        path=answer.path)
+
+
+def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
+           cache: CompiledQPCache | None) -> _Answer:
+    """Solve on the direct path if the cache has one for ``qp``, else through cvxpy."""
+    direct = cache.direct_solver(qp, spec.name, options) if cache is not None else None
+    if direct is not None:  # OSQP warm-starts from the structure's last solution
+        raw = direct.solve(qp, options)
+        return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
+                       raw.iterations, DIRECT, raw.native_time)
+    declared, path = cache.prepare(qp) if cache is not None else (qp.declared(), DECLARED)
+    return _solve_with_cvxpy(qp, declared, spec.cvxpy_name, {"warm_start": False, **options},
+                             path)
 
 
 @dataclass(frozen=True)
@@ -159,13 +187,16 @@ class _Answer:
     x: FloatArray | None
     eq_dual: FloatArray
     ineq_dual: FloatArray
-    solver_time: float
+    reported_time: float
+    """The solver's own report (s); NaN if none."""
     iterations: int
+    path: str
+    native_time: float | None = None
+    """On the direct path, wall time (s) of the native update and solve calls."""
 
 
-def _solve_with_cvxpy(qp: StepQP, solver: str, options: dict[str, object],
-                      cache: CompiledQPCache | None) -> _Answer:
-    declared = cache.declared_for(qp) if cache is not None else qp.declared()
+def _solve_with_cvxpy(qp: StepQP, declared: DeclaredQP, solver: str,
+                      options: dict[str, object], path: str) -> _Answer:
     with warnings.catch_warnings():
         # cvxpy reads its own sparse parameters densely while applying them
         warnings.filterwarnings("ignore", "Reading from a sparse CVXPY expression",
@@ -177,14 +208,19 @@ def _solve_with_cvxpy(qp: StepQP, solver: str, options: dict[str, object],
         declared.problem.solve(solver=solver, **options)
     stats = declared.problem.solver_stats
     value = declared.variable.value
+    ineq_dual = _dual(declared.ineq_constraint, qp.n_inequalities)
+    if declared.upper_constraint is not None:  # z = z_lower - z_upper
+        ineq_dual = ineq_dual.copy()
+        ineq_dual[qp.upper_rows] -= _dual(declared.upper_constraint, qp.upper_rows.size)
     return _Answer(
         status=str(declared.problem.status),
         x=None if value is None else np.asarray(value, dtype=np.float64),
         eq_dual=_dual(declared.eq_constraint, qp.n_equalities),
-        ineq_dual=_dual(declared.ineq_constraint, qp.n_inequalities),
-        solver_time=(stats.solve_time if stats is not None and stats.solve_time is not None
-                     else np.nan),
+        ineq_dual=ineq_dual,
+        reported_time=(stats.solve_time if stats is not None and stats.solve_time is not None
+                       else np.nan),
         iterations=stats.num_iters if stats is not None and stats.num_iters is not None else -1,
+        path=path,
     )
 
 
@@ -208,8 +244,13 @@ def _non_finite_data(qp: StepQP) -> str:
     """Names of the QP's arrays holding NaN or inf ('' if all are finite)."""
     arrays = {"weights": qp.weights, "target": qp.target, "eq_matrix": qp.eq_matrix.data,
               "eq_rhs": qp.eq_rhs, "ineq_matrix": qp.ineq_matrix.data, "ineq_rhs": qp.ineq_rhs}
-    return ", ".join(name for name, values in arrays.items()
-                     if not np.all(np.isfinite(values)))
+    if qp.cost_factor is not None:
+        arrays["cost_factor"] = qp.cost_factor.data
+    bad = [name for name, values in arrays.items() if not np.all(np.isfinite(values))]
+    if qp.ineq_upper is not None and not np.all(np.isfinite(qp.ineq_upper)
+                                                | (qp.ineq_upper == np.inf)):
+        bad.append("ineq_upper")  # +inf is a one-sided row; NaN and -inf are not data
+    return ", ".join(bad)
 
 
 def _inf(values: FloatArray) -> float:

@@ -1,5 +1,9 @@
 """The solver registry and the one place where tolerances become solver options.
 
+Each :class:`SolverSpec` is everything the package knows about one solver: its name in
+cvxpy, its options, the distribution it comes from (and so its version), its colour and
+marker in plots, its timing quirks and its direct backend (:mod:`wuerfel_cvx.backends`).
+
 A tolerance is a preset name (``low``, ``default``, ``high``) or a number ``eps``;
 :func:`solver_options` maps it to each solver's own option names.  ``high`` is the
 tight setting used by the tests and as the reference.
@@ -7,15 +11,16 @@ tight setting used by the tests and as the reference.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache
-from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 import cvxpy as cp
 
 from .errors import InputError
+from .versions import package_version
 
 TOLERANCE_PRESETS: dict[str, float] = {"low": 1e-4, "default": 1e-7, "high": 1e-9}
 """Solver tolerance ``eps`` per preset (absolute and relative, in the QP's scaled units)."""
@@ -25,15 +30,42 @@ TOLERANCE_PRESETS: dict[str, float] = {"low": 1e-4, "default": 1e-7, "high": 1e-
 def _osqp_polish_option() -> str:
     """OSQP 1.0 renamed ``polish`` to ``polishing``."""
     try:
-        major = int(version("osqp").split(".")[0])
-    except PackageNotFoundError:
+        major = int(package_version("osqp").split(".")[0])
+    except ValueError:  # not installed, or no version: the current name
         return "polishing"
     return "polishing" if major >= 1 else "polish"
 
 
 @dataclass(frozen=True)
+class Timing:
+    """How a solver's own time per solve (s) is read from what it reports."""
+
+    capped_by_native_wall: bool = True
+    """On the direct path, take the smaller of the report and the wall time of the native
+    update and solve calls (one clock with the whole step's; Clarabel's own clock reads
+    above the wall time of the very call it times)."""
+    zero_is_unknown: bool = True
+    """A report of zero or less means "not measured" (cvxpy reports 0.0 for PROXQP)."""
+    note: str = ""
+    """What is known about this solver's clock, for reports."""
+
+    def solver_time(self, reported: float, native_wall: float | None = None) -> float:
+        """The solver's own time (s); NaN when unknown.
+
+        From its ``reported`` time and, on the direct path, the ``native_wall`` time of its
+        native calls.
+        """
+        seconds = reported
+        if native_wall is not None and self.capped_by_native_wall:
+            seconds = min(native_wall, reported)
+        if self.zero_is_unknown and not seconds > 0.0:
+            return math.nan
+        return float(seconds)
+
+
+@dataclass(frozen=True)
 class SolverSpec:
-    """How to call one solver through cvxpy."""
+    """Everything about one solver: how to call it, where it comes from, how to show it."""
 
     name: str
     """Registry name (upper case)."""
@@ -43,6 +75,18 @@ class SolverSpec:
     """Solver options for tolerance ``eps``."""
     kind: str
     """``"interior-point"``, ``"ADMM"``, ``"proximal"``... for reports."""
+    package: str
+    """The distribution that installs it (its version is the solver's)."""
+    style: tuple[str, str]
+    """Colour (hex) and matplotlib marker, the same in every plot."""
+    backend: str | None = None
+    """Module of :mod:`wuerfel_cvx.backends` with its direct path (``None``: none)."""
+    timing: Timing = field(default_factory=Timing)
+    """How its own time is read."""
+
+    def version(self) -> str:
+        """Installed version of :attr:`package` (``"not installed"``, ``"unknown"``)."""
+        return package_version(self.package)
 
 
 SOLVERS: dict[str, SolverSpec] = {
@@ -50,20 +94,25 @@ SOLVERS: dict[str, SolverSpec] = {
     for spec in (
         SolverSpec("CLARABEL", "CLARABEL", lambda eps: {
             "tol_gap_abs": eps, "tol_gap_rel": eps, "tol_feas": eps, "tol_ktratio": eps,
-            "max_iter": 200}, "interior-point"),
+            "max_iter": 200}, "interior-point", "clarabel", ("#1f77b4", "o"), "clarabel",
+            Timing(note="its solve_time reads above the wall time of the call it times")),
         SolverSpec("OSQP", "OSQP", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, _osqp_polish_option(): True, "max_iter": 200_000},
-            "ADMM"),
+            "ADMM", "osqp", ("#ff7f0e", "s"), "osqp",
+            Timing(note="its run_time includes the data update on the direct path")),
         SolverSpec("PIQP", "PIQP", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, "max_iter": 250, "compute_timings": True},
-            "proximal interior-point"),
+            "proximal interior-point", "piqp", ("#2ca02c", "^"), "piqp",
+            Timing(note="its run_time includes the data update on the direct path")),
         # cvxpy (1.9) runs PROXQP's dense backend; its sparse one fails there with a
         # TypeError (cvxpy passes a box flag the sparse constructor does not take).
         SolverSpec("PROXQP", "PROXQP", lambda eps: {
             "eps_abs": eps, "eps_rel": 0.0, "max_iter": 10_000},
-            "proximal augmented Lagrangian (dense backend)"),
+            "proximal augmented Lagrangian (dense backend)", "proxsuite", ("#d62728", "D"),
+            timing=Timing(note="cvxpy reports 0.0 s for it: its time is unknown")),
         SolverSpec("SCS", "SCS", lambda eps: {
-            "eps_abs": eps, "eps_rel": eps, "max_iters": 200_000}, "ADMM (conic)"),
+            "eps_abs": eps, "eps_rel": eps, "max_iters": 200_000}, "ADMM (conic)", "scs",
+            ("#9467bd", "v")),
     )
 }
 """Every solver the package knows; :func:`available_solvers` lists those installed."""
@@ -71,7 +120,7 @@ SOLVERS: dict[str, SolverSpec] = {
 
 @cache
 def _installed_in_cvxpy() -> frozenset[str]:
-    """Solvers cvxpy reports installed; asked once, as it costs about 1 ms a call."""
+    """Solvers cvxpy reports installed; asked once, as cvxpy probes every solver each call."""
     return frozenset(cp.installed_solvers())
 
 

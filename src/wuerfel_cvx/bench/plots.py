@@ -31,16 +31,14 @@ from matplotlib.ticker import FuncFormatter
 from matplotlib.typing import LineStyleType
 from numpy.typing import ArrayLike, NDArray
 
+from ..solvers import SOLVERS
+
 SOLVER_STYLES: dict[str, tuple[str, str]] = {
-    "CLARABEL": ("#1f77b4", "o"),
-    "OSQP": ("#ff7f0e", "s"),
-    "PIQP": ("#2ca02c", "^"),
-    "PROXQP": ("#d62728", "D"),
-    "SCS": ("#9467bd", "v"),
+    **{name: spec.style for name, spec in SOLVERS.items()},
     "PYMUNK": ("#8c564b", "P"),
     "MUJOCO": ("#e377c2", "X"),
 }
-"""Colour and marker of each known solver or peer engine, the same in every plot."""
+"""Colour and marker of each known solver (its ``SolverSpec.style``) or peer engine."""
 
 _FALLBACK_STYLES: tuple[tuple[str, str], ...] = (
     ("#7f7f7f", "h"), ("#bcbd22", "p"), ("#17becf", "*"), ("#000000", "<"), ("#aec7e8", ">"))

@@ -13,7 +13,6 @@ import platform
 import time
 from dataclasses import dataclass
 from functools import cache
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
@@ -31,12 +30,9 @@ from ..sleep import SleepSettings
 from ..solve import StepSolution, solve_step_qp
 from ..solvers import SOLVERS
 from ..trajectory import Trajectory
+from ..versions import package_version
 from . import schema
 from .suite import REFERENCE_REFINEMENT, REFERENCE_SOLVER, REFERENCE_TOL, GridPoint
-
-SOLVER_PACKAGES = {"CLARABEL": "clarabel", "OSQP": "osqp", "PIQP": "piqp",
-                   "PROXQP": "proxsuite", "SCS": "scs"}
-"""The Python package whose version is reported for each solver."""
 
 
 @dataclass(frozen=True)
@@ -94,7 +90,8 @@ def load_reference(path: Path) -> Reference:
 def machine() -> dict[str, str]:
     """CPU, Python and package versions of this process, as stored in every row."""
     return {"cpu": _cpu_name(), "python_version": platform.python_version(),
-            "package_version": _version("wuerfel_cvx"), "cvxpy_version": _version("cvxpy")}
+            "package_version": package_version("wuerfel_cvx"),
+            "cvxpy_version": package_version("cvxpy")}
 
 
 def run_point(point: GridPoint, reference: Reference | None,
@@ -263,18 +260,11 @@ def _message(exc: BaseException) -> str:
 
 def _solver_version(solver: str) -> str:
     if solver in SOLVERS:
-        return _version(SOLVER_PACKAGES.get(solver, solver.lower()))
+        return SOLVERS[solver].version()
     try:
         return peer_version(solver)
     except Exception:  # an unknown name: the row will carry the error itself
         return "unknown"
-
-
-def _version(package: str) -> str:
-    try:
-        return version(package)
-    except PackageNotFoundError:
-        return "not installed"
 
 
 def _cpu_name() -> str:

@@ -1,18 +1,35 @@
 """The step QP: one type shared by all formulations.
 
 Every formulation builds the same shape of problem in its unknowns ``x`` (corner
-accelerations or velocities, flattened ``(x_0, y_0, x_1, y_1, ...)``)::
+accelerations or velocities, flattened ``(x_0, y_0, x_1, y_1, ...)``, and any extra
+unknowns a formulation adds)::
 
-    minimise    sum_i w_i (x_i - t_i)^2
-    subject to  E x == e          (rods, and held table corners)
-                G x >= h          (sides: point versus edge)
+    minimise    sum_i w_i (x_i - t_i)^2  +  |F (x - t)|^2     (F optional: P = F' F)
+    subject to  E x == e                 (rods, and held table corners)
+                h <= G x <= u            (sides: point versus edge; u = +inf by default)
 
 declared as a :class:`cvxpy.Problem`.  The numeric data are kept beside it so that a
 solution can be checked independently of the solver (:func:`wuerfel_cvx.solve.kkt_residuals`).
+
+The coupling cost is given by a sparse factor ``F`` rather than by ``P`` itself: the term
+``|F (x - t)|^2`` is positive semidefinite by construction, keeps the objective's constant
+(as the weighted term does), and stays disciplined-parametrised with ``F`` and ``F t`` as
+parameters, which ``(x - t)' P (x - t)`` with a parametrised ``t`` is not in cvxpy.
+
+Multipliers (the signs every solve path returns and the KKT check tests): ``y`` of
+``E x == e`` and ``z = z_lower - z_upper`` of ``h <= G x <= u``, with ``z_lower >= 0``
+for ``G x >= h`` and ``z_upper >= 0`` for ``G x <= u``, so that
+
+    2 W (x - t) + 2 F' F (x - t) + E' y - G' z = 0.
+
+A row with ``u = +inf`` has ``z >= 0``; a two-sided row's ``z`` takes the sign of the bound
+it rests on.  :data:`PARAMETER_SLOTS` names the numbers a compiled problem takes as
+parameters, and where in a :class:`StepQP` each comes from.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import cvxpy as cp
@@ -31,6 +48,9 @@ class DeclaredQP:
     variable: cp.Variable
     eq_constraint: cp.Constraint | None
     ineq_constraint: cp.Constraint | None
+    """``G x >= h`` (every inequality row)."""
+    upper_constraint: cp.Constraint | None = None
+    """``(G x)[r] <= u[r]`` for the rows ``r`` with a finite upper bound."""
 
 
 @dataclass
@@ -40,14 +60,19 @@ class StepQP:
     weights: FloatArray
     """Objective weights w (kg), one per unknown."""
     target: FloatArray
-    """Unconstrained minimiser t (units of the unknowns)."""
+    """Unconstrained minimiser t (units of the unknowns) of the weighted term."""
     eq_matrix: sp.csr_array
     eq_rhs: FloatArray
     ineq_matrix: sp.csr_array
     ineq_rhs: FloatArray
+    """Lower bounds h of ``G x`` (finite)."""
     contacts: Contacts
     """The contacts whose side constraints are the rows of ``G``."""
     _declared: DeclaredQP | None = field(default=None, repr=False)
+    ineq_upper: FloatArray | None = None
+    """Upper bounds u of ``G x`` (``+inf`` for a one-sided row); ``None``: all ``+inf``."""
+    cost_factor: sp.csr_array | None = None
+    """The factor F of the coupling cost ``|F (x - t)|^2`` (kg^(1/2)); ``None``: none."""
 
     def declared(self) -> DeclaredQP:
         """The QP as its own cvxpy problem (declared once, on first call)."""
@@ -90,6 +115,89 @@ class StepQP:
         """Number of inequality rows."""
         return int(self.ineq_matrix.shape[0])
 
+    @property
+    def upper_rows(self) -> np.ndarray:
+        """Indices of the inequality rows with a finite upper bound (int64)."""
+        if self.ineq_upper is None:
+            return np.zeros(0, dtype=np.int64)
+        return np.flatnonzero(np.isfinite(self.ineq_upper)).astype(np.int64)
+
+    @property
+    def n_cost_rows(self) -> int:
+        """Rows of the coupling factor F (0 without one)."""
+        return 0 if self.cost_factor is None else int(self.cost_factor.shape[0])
+
+    def objective_gradient(self, x: FloatArray) -> FloatArray:
+        """``2 W (x - t) + 2 F' F (x - t)``: the objective's gradient at ``x``."""
+        gradient = 2.0 * self.weights * (x - self.target)
+        if self.cost_factor is not None and self.n_cost_rows:
+            gradient = gradient + 2.0 * (self.cost_factor.T @ (self.cost_factor
+                                                               @ (x - self.target)))
+        return gradient
+
+    def slots(self) -> tuple[str, ...]:
+        """Names of the :data:`PARAMETER_SLOTS` this QP fills (those with numbers)."""
+        present = {"weighted_target": True, "eq_values": self.n_equalities > 0,
+                   "eq_rhs": self.n_equalities > 0, "ineq_values": self.n_inequalities > 0,
+                   "ineq_rhs": self.n_inequalities > 0, "ineq_upper": self.upper_rows.size > 0,
+                   "cost_values": self.n_cost_rows > 0, "cost_target": self.n_cost_rows > 0}
+        return tuple(name for name in PARAMETER_SLOTS if present[name])
+
+    def structure(self) -> tuple[object, ...]:
+        """What a compiled problem of this QP depends on besides its parameters' numbers.
+
+        Sizes, the weights, the sparsity patterns of ``E``, ``G`` and ``F``, and which rows
+        have an upper bound.  Equal structures compile to the same parametrised problem.
+        """
+        eq, ineq = self.eq_matrix, self.ineq_matrix
+        key: tuple[object, ...] = (self.n_variables, self.weights.tobytes(),
+                                   eq.shape, eq.indptr.tobytes(), eq.indices.tobytes(),
+                                   ineq.shape, ineq.indptr.tobytes(), ineq.indices.tobytes())
+        if self.ineq_upper is not None:
+            key += (self.upper_rows.tobytes(),)
+        if self.cost_factor is not None:
+            factor = self.cost_factor
+            key += (factor.shape, factor.indptr.tobytes(), factor.indices.tobytes())
+        return key
+
+
+@dataclass(frozen=True)
+class ParameterSlot:
+    """One group of a step QP's numbers that a compiled problem takes as a parameter."""
+
+    values: Callable[[StepQP], FloatArray]
+    """The numbers, read from a :class:`StepQP` (a matrix's nonzeros in CSR order)."""
+    matrix: Callable[[StepQP], sp.csr_array] | None = None
+    """For a matrix's nonzeros: the matrix (its pattern is the parameter's sparsity)."""
+    multiplier: str | None = None
+    """For a right-hand side: the multiplier block of its rows (``eq``, ``lower``, ``upper``)."""
+
+
+def _upper_bounds(qp: StepQP) -> FloatArray:
+    assert qp.ineq_upper is not None
+    return np.asarray(qp.ineq_upper[qp.upper_rows], dtype=np.float64)
+
+
+def _factor(qp: StepQP) -> sp.csr_array:
+    assert qp.cost_factor is not None
+    return qp.cost_factor
+
+
+PARAMETER_SLOTS: dict[str, ParameterSlot] = {
+    "weighted_target": ParameterSlot(lambda qp: np.sqrt(qp.weights) * qp.target),
+    "eq_values": ParameterSlot(lambda qp: qp.eq_matrix.data, matrix=lambda qp: qp.eq_matrix),
+    "eq_rhs": ParameterSlot(lambda qp: qp.eq_rhs, multiplier="eq"),
+    "ineq_values": ParameterSlot(lambda qp: qp.ineq_matrix.data,
+                                 matrix=lambda qp: qp.ineq_matrix),
+    "ineq_rhs": ParameterSlot(lambda qp: qp.ineq_rhs, multiplier="lower"),
+    "ineq_upper": ParameterSlot(_upper_bounds, multiplier="upper"),
+    "cost_values": ParameterSlot(lambda qp: _factor(qp).data, matrix=_factor),
+    "cost_target": ParameterSlot(lambda qp: _factor(qp) @ qp.target),
+}
+"""Every parameter slot, by name, in the order a compiled problem declares them:
+``sqrt(w) t``; the nonzeros of ``E`` and ``e``; of ``G`` and ``h``; the finite ``u``;
+the nonzeros of ``F`` and ``F t``."""
+
 
 def declare_qp(
     weights: FloatArray,
@@ -99,15 +207,29 @@ def declare_qp(
     ineq_matrix: sp.csr_array,
     ineq_rhs: FloatArray,
     contacts: Contacts,
+    *,
+    ineq_upper: FloatArray | None = None,
+    cost_factor: sp.csr_array | None = None,
 ) -> StepQP:
-    """The QP ``min sum w (x - t)^2  s.t.  E x == e, G x >= h`` (declared in cvxpy lazily).
+    """The QP ``min sum w (x - t)^2 + |F (x - t)|^2  s.t.  E x == e, h <= G x <= u``.
 
-    ``E`` and ``G`` are stored in canonical CSR form (sorted indices, no duplicates), so
-    equal sparsity patterns have equal index arrays.
+    ``ineq_rhs`` is ``h``; ``ineq_upper`` (``u``, ``+inf`` entries for one-sided rows) and
+    ``cost_factor`` (``F``) are optional.  It is declared in cvxpy lazily.  ``E``, ``G`` and
+    ``F`` are stored in canonical CSR form (sorted indices, no duplicates), so equal
+    sparsity patterns have equal index arrays.  Raises ``ValueError`` if ``ineq_upper`` does
+    not have one entry per row of ``G`` or ``F`` not one column per unknown.
     """
+    if ineq_upper is not None and np.shape(ineq_upper) != np.shape(ineq_rhs):
+        raise ValueError(f"ineq_upper has shape {np.shape(ineq_upper)}, the rows of G "
+                         f"{np.shape(ineq_rhs)}")
+    if cost_factor is not None and cost_factor.shape[1] != np.shape(weights)[0]:
+        raise ValueError(f"cost_factor has {cost_factor.shape[1]} columns for "
+                         f"{np.shape(weights)[0]} unknowns")
     return StepQP(weights=weights, target=target, eq_matrix=_canonical(eq_matrix),
                   eq_rhs=eq_rhs, ineq_matrix=_canonical(ineq_matrix), ineq_rhs=ineq_rhs,
-                  contacts=contacts)
+                  contacts=contacts,
+                  ineq_upper=None if ineq_upper is None else np.asarray(ineq_upper, float),
+                  cost_factor=None if cost_factor is None else _canonical(cost_factor))
 
 
 def _canonical(matrix: sp.csr_array) -> sp.csr_array:
@@ -122,16 +244,23 @@ def _canonical(matrix: sp.csr_array) -> sp.csr_array:
 
 def _declare(qp: StepQP) -> DeclaredQP:
     x = cp.Variable(qp.n_variables, name="x")
-    objective = cp.Minimize(cp.sum_squares(cp.multiply(np.sqrt(qp.weights), x - qp.target)))
+    cost = cp.sum_squares(cp.multiply(np.sqrt(qp.weights), x - qp.target))
+    if qp.cost_factor is not None and qp.n_cost_rows:
+        cost = cost + cp.sum_squares(qp.cost_factor @ x - qp.cost_factor @ qp.target)
     constraints: list[cp.Constraint] = []
-    eq_constraint = ineq_constraint = None
+    eq_constraint = ineq_constraint = upper_constraint = None
     if qp.n_equalities:
         eq_constraint = qp.eq_matrix @ x == qp.eq_rhs
         constraints.append(eq_constraint)
     if qp.n_inequalities:
         ineq_constraint = qp.ineq_matrix @ x >= qp.ineq_rhs
         constraints.append(ineq_constraint)
-    return DeclaredQP(cp.Problem(objective, constraints), x, eq_constraint, ineq_constraint)
+    rows = qp.upper_rows
+    if rows.size:
+        upper_constraint = qp.ineq_matrix[rows] @ x <= _upper_bounds(qp)
+        constraints.append(upper_constraint)
+    return DeclaredQP(cp.Problem(cp.Minimize(cost), constraints), x, eq_constraint,
+                      ineq_constraint, upper_constraint)
 
 
 def point_rows(

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import time
-from importlib.metadata import PackageNotFoundError, version
 from typing import Any, Protocol
 
 import numpy as np
@@ -28,6 +27,7 @@ from ..model import Model, State
 from ..recorder import TrajectoryRecorder, physical_metrics, run_info
 from ..scene import Scene
 from ..trajectory import Trajectory
+from ..versions import package_version as package_version  # re-exported by peers
 
 POSE_COLUMNS = ("x", "y", "theta", "vx", "vy", "omega")
 """Columns of a pose array ``(n, 6)``: m, m, rad, m/s, m/s, rad/s."""
@@ -94,14 +94,6 @@ def check_run_arguments(dt: float, steps: int) -> None:
         raise InputError(f"must be a positive finite number of seconds, got {dt}", field="dt")
     if isinstance(steps, bool) or not isinstance(steps, int | np.integer) or steps < 0:
         raise InputError(f"must be a non-negative integer, got {steps}", field="steps")
-
-
-def package_version(package: str) -> str:
-    """Installed version of a distribution, or ``"not installed"``."""
-    try:
-        return version(package)
-    except PackageNotFoundError:
-        return "not installed"
 
 
 def run_peer(engine: str, package: str, scene: Scene, world: PeerWorld, dt: float,

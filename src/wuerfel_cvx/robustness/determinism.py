@@ -32,13 +32,14 @@ from __future__ import annotations
 import hashlib
 import sys
 from dataclasses import dataclass
-from importlib.metadata import version
 
 import numpy as np
 
 from ..geometry import FloatArray
 from ..simulate import simulate
+from ..solvers import SOLVERS
 from ..trajectory import Trajectory
+from ..versions import package_version
 
 #: Decimals (of metres) the golden digests round positions to.
 GOLDEN_DECIMALS = 9
@@ -48,9 +49,6 @@ GOLDEN_SOLVERS = ("CLARABEL", "OSQP", "PIQP")
 
 #: Packages whose versions decide the golden digests (the solver's own is added).
 PINNED_PACKAGES = ("numpy", "scipy", "cvxpy")
-
-_SOLVER_PACKAGE = {"CLARABEL": "clarabel", "OSQP": "osqp", "PIQP": "piqp"}
-
 
 @dataclass(frozen=True)
 class GoldenRun:
@@ -94,8 +92,8 @@ def largest_difference(a: Trajectory, b: Trajectory) -> float:
 
 def pinned_versions(solver: str) -> dict[str, str]:
     """Installed versions of the packages a golden digest depends on."""
-    packages = (*PINNED_PACKAGES, _SOLVER_PACKAGE[solver])
-    return {package: version(package) for package in packages}
+    packages = (*PINNED_PACKAGES, SOLVERS[solver].package)
+    return {package: package_version(package) for package in packages}
 
 
 def golden_file_text() -> str:

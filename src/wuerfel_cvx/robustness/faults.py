@@ -84,7 +84,7 @@ def solver_options_from_call(solver: str, from_call: int,
 @contextmanager
 def clarabel_raises() -> Iterator[None]:
     """Within the block, CLARABEL's direct path (step 3 on) raises ``RuntimeError``."""
-    from ..direct import DirectClarabel
+    from ..backends.clarabel import DirectClarabel
 
     original = DirectClarabel.solve
 

@@ -21,9 +21,9 @@ import platform
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
+from ..versions import package_version
 from .faults import FaultOutcome, run_fault_injections
 from .fuzz import FuzzResult, run_fuzz
 from .properties import PropertySweepResult, run_property_sweep
@@ -190,7 +190,7 @@ def _stamp(run: RobustnessRun) -> list[str]:
     from ..bench.runner import machine
 
     packages = ("wuerfel_cvx", "cvxpy", "clarabel", "osqp", "piqp", "numpy", "scipy")
-    versions = ", ".join(f"{name} {_version(name)}" for name in packages)
+    versions = ", ".join(f"{name} {package_version(name)}" for name in packages)
     now = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     return [
         f"- **Date:** {now}",
@@ -282,10 +282,3 @@ def _bugs_section() -> list[str]:
     for bug in FIXED_BUGS:
         lines.append(f"| {bug.found_by} | {bug.symptom} | {bug.fix} | `{bug.test}` |")
     return lines + [""]
-
-
-def _version(package: str) -> str:
-    try:
-        return version(package)
-    except PackageNotFoundError:
-        return "not installed"

@@ -1,0 +1,77 @@
+"""Clarabel's direct backend: cvxpy's conic data updated in a persistent ``DefaultSolver``.
+
+Clarabel takes cvxpy's conic data as ``A = -A_cone``, ``b = b_cone``; a multiplier ``z``
+of a row with coefficient ``c`` is ``c z`` for an equality and ``-c z`` for an inequality
+in our sign convention.  Clarabel's settings are fixed when a structure is set up.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..formulations.qp import StepQP
+from ._cvxpy import Unavailable, clarabel_settings, compile_conic, status_name
+from ._map import DirectResult, ParameterMap
+
+
+@dataclass
+class DirectClarabel:
+    """A structure's parameter map and its persistent Clarabel solver."""
+
+    mapping: ParameterMap
+    b_rows: np.ndarray
+    solver: Any
+
+    def solve(self, qp: StepQP, settings: dict[str, Any]) -> DirectResult:
+        """Solve ``qp`` (this structure); ``settings`` were fixed when it was set up."""
+        m = self.mapping
+        values, q = m.values(qp)
+        a = _matrix(m, values)
+        b = np.zeros(m.shape[0])
+        b[self.b_rows] = values[m.n_matrix_entries:]
+        started = time.perf_counter()
+        self.solver.update(q=q, b=b, A=a)
+        result = self.solver.solve()
+        native_time = time.perf_counter() - started
+        z = np.asarray(result.z, dtype=np.float64)
+        eq_dual, ineq_dual = m.duals(qp, lambda block: block[1] * z[block[0]],
+                                     lambda block: -block[1] * z[block[0]])
+        return DirectResult(
+            x=m.primal(result.x, qp), eq_dual=eq_dual, ineq_dual=ineq_dual,
+            status=status_name("CLARABEL", str(result.status)),
+            reported_time=float(result.solve_time), native_time=native_time,
+            iterations=int(result.iterations))
+
+
+def _matrix(mapping: ParameterMap, values: np.ndarray) -> sp.csc_matrix:
+    """Clarabel's ``A = -A_cone`` from the conic data's nonzeros."""
+    count = mapping.n_matrix_entries
+    return sp.csc_matrix((-values[:count], mapping.indices[:count], mapping.indptr[:-1]),
+                         shape=(mapping.shape[0], mapping.shape[1] - 1))
+
+
+def build(problem: Any, names: dict[int, str], qp: StepQP,
+          options: dict[str, Any]) -> DirectClarabel:
+    """Clarabel's direct path for a compiled ``problem`` whose parameters hold ``qp``."""
+    import clarabel
+
+    mapping, data = compile_conic(problem, names, qp)
+    ours = sp.csc_array(_matrix(mapping, mapping.values(qp)[0]))
+    reference = data.A
+    if not (np.array_equal(reference.indptr, ours.indptr)
+            and np.array_equal(reference.indices, ours.indices)
+            and np.allclose(reference.data, ours.data, rtol=0, atol=1e-12)):
+        raise Unavailable("the conic matrix does not reproduce cvxpy's")
+    solver = clarabel.DefaultSolver(sp.csc_matrix(sp.triu(data.P).tocsc()), data.c,
+                                    sp.csc_matrix(reference), data.b, data.cones,
+                                    clarabel_settings(options))
+    if not solver.is_data_update_allowed():
+        raise Unavailable("Clarabel does not allow data updates with these settings")
+    return DirectClarabel(mapping=mapping,
+                          b_rows=np.asarray(mapping.indices[mapping.n_matrix_entries:]),
+                          solver=solver)

@@ -1,0 +1,47 @@
+"""The solver registry: one place for a solver's package, version, style, timing, backend."""
+
+from __future__ import annotations
+
+import importlib
+import math
+from importlib.metadata import version
+
+import pytest
+
+from wuerfel_cvx import versions
+from wuerfel_cvx.bench import plots
+from wuerfel_cvx.solvers import SOLVERS, Timing, available_solvers
+
+
+@pytest.mark.parametrize("solver", available_solvers())
+def test_an_installed_solver_reports_its_distribution_version(solver: str) -> None:
+    spec = SOLVERS[solver]
+    assert spec.version() == version(spec.package)
+
+
+def test_a_missing_distribution_is_not_installed() -> None:
+    assert versions.package_version("no-such-distribution-wuerfel") == versions.NOT_INSTALLED
+
+
+def test_plots_take_each_solver_style_from_its_spec() -> None:
+    for name, spec in SOLVERS.items():
+        assert plots.solver_style(name) == spec.style
+    styles = [spec.style for spec in SOLVERS.values()]
+    assert len(set(styles)) == len(styles)  # no two solvers look alike
+
+
+def test_each_direct_backend_is_a_module_with_a_builder() -> None:
+    for spec in SOLVERS.values():
+        if spec.backend is not None:
+            module = importlib.import_module(f"wuerfel_cvx.backends.{spec.backend}")
+            assert callable(module.build)
+
+
+def test_timing_rules() -> None:
+    timing = Timing()
+    assert timing.solver_time(2e-3, 1e-3) == 1e-3  # the native calls' wall time caps it
+    assert timing.solver_time(1e-3, 2e-3) == 1e-3
+    assert timing.solver_time(1e-3) == 1e-3  # through cvxpy: the report alone
+    assert math.isnan(timing.solver_time(0.0))  # "no time" is unknown, not free
+    assert math.isnan(timing.solver_time(math.nan))
+    assert Timing(capped_by_native_wall=False).solver_time(2e-3, 1e-3) == 2e-3

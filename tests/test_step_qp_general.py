@@ -1,0 +1,235 @@
+"""The wider step QP: a coupling cost ``|F (x - t)|^2``, two-sided rows, extra unknowns.
+
+A small QP with all three is solved exactly from its active set (a linear KKT system,
+solved by numpy), independently of every solver path; the KKT check, the fresh
+declaration, the compiled problem and each direct backend are measured against it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from wuerfel_cvx.compiled import CompiledQPCache
+from wuerfel_cvx.contacts import Contacts
+from wuerfel_cvx.formulations.qp import PARAMETER_SLOTS, StepQP, declare_qp
+from wuerfel_cvx.solve import SOLVE_PATHS, VERIFY_FACTOR, kkt_residuals, solve_step_qp
+from wuerfel_cvx.solvers import SOLVERS, TOLERANCE_PRESETS, available_solvers
+
+HIGH = TOLERANCE_PRESETS["high"]
+DIRECT_SOLVERS = [name for name, spec in SOLVERS.items() if spec.backend is not None]
+pytestmark = pytest.mark.filterwarnings(  # cvxpy reading its own sparse parameters
+    "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")
+
+
+def wide_qp() -> StepQP:
+    """A QP with four unknowns, one equality and two-sided rows active at either bound.
+
+    The third unknown has no weight of its own: an extra unknown held by the coupling cost.
+    """
+    return declare_qp(
+        np.array([1.0, 2.0, 0.0, 1.0]), np.array([1.0, -0.5, -2.0, 0.3]),
+        sp.csr_array(np.array([[1.0, 1.0, 1.0, 1.0]])), np.array([1.0]),
+        sp.csr_array(np.array([[1.0, 0.0, -1.0, 0.0], [0.0, 1.0, 0.0, 0.0],
+                               [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])),
+        np.array([0.0, -0.3, -1.0, -1.0]), Contacts.empty(),
+        ineq_upper=np.array([2.0, np.inf, 0.5, 1.0]),
+        cost_factor=sp.csr_array(np.array([[1.0, -1.0, 0.0, 0.0], [0.0, 1.0, 1.0, 0.0]])))
+
+
+@dataclasses.dataclass(frozen=True)
+class Exact:
+    """The exact solution and multipliers (``z = z_lower - z_upper``) of a QP."""
+
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+
+
+def exact_solution(qp: StepQP, lower: np.ndarray, upper: np.ndarray) -> Exact:
+    """Solve the KKT system of ``qp`` with the rows ``lower`` and ``upper`` held at a bound.
+
+    ``H (x - t) + E' y - G_A' z_A = 0``, ``E x = e``, ``G_A x = b_A`` with
+    ``H = 2 (W + F' F)``: one linear system.
+    """
+    assert qp.cost_factor is not None and qp.ineq_upper is not None
+    n = qp.n_variables
+    hessian = 2.0 * (np.diag(qp.weights) + (qp.cost_factor.T @ qp.cost_factor).toarray())
+    G = qp.ineq_matrix.toarray()
+    active = np.concatenate([lower, upper])
+    rows = np.vstack([qp.eq_matrix.toarray(), G[active]])
+    rhs = np.concatenate([qp.eq_rhs, qp.ineq_rhs[lower], qp.ineq_upper[upper]])
+    m = rows.shape[0]
+    kkt = np.block([[hessian, rows.T], [rows, np.zeros((m, m))]])
+    # unknowns (x, y, -z_A): H x + E' y - G_A' z_A = H t
+    solution = np.linalg.solve(kkt, np.concatenate([hessian @ qp.target, rhs]))
+    z = np.zeros(qp.n_inequalities)
+    z[active] = -solution[n + qp.n_equalities:]
+    return Exact(solution[:n], solution[n:n + qp.n_equalities], z)
+
+
+@pytest.fixture(scope="module")
+def exact() -> Exact:
+    # The active set is read off a tight CLARABEL solve of an independent declaration
+    # (only which rows sit at which bound is taken from it; the numbers are recomputed).
+    qp = wide_qp()
+    solution = solve_step_qp(wide_qp(), "CLARABEL", "high")
+    lhs = qp.ineq_matrix @ solution.x
+    assert qp.ineq_upper is not None
+    at_lower = np.flatnonzero(np.abs(lhs - qp.ineq_rhs) < 1e-6)
+    at_upper = np.flatnonzero(np.abs(lhs - qp.ineq_upper) < 1e-6)
+    assert at_lower.size and at_upper.size  # the data rest on both kinds of bound
+    return exact_solution(qp, at_lower, at_upper)
+
+
+def agreement(qp: StepQP, exact: Exact) -> float:
+    """How far (units of x) a verified solution may be from the exact one.
+
+    A relative residual ``r`` scaled by ``1 + s`` (``s``, the largest term it balances)
+    moves the minimiser of a strongly convex QP by at most ``r (1 + s) / lambda_min``,
+    ``lambda_min`` the smallest eigenvalue of ``H = 2 (W + F' F)``.
+    """
+    assert qp.cost_factor is not None
+    hessian = 2.0 * (np.diag(qp.weights) + (qp.cost_factor.T @ qp.cost_factor).toarray())
+    smallest = float(np.linalg.eigvalsh(hessian).min())
+    assert smallest > 0.0  # strongly convex, though one unknown has no weight of its own
+    scale = 1.0 + float(np.max(np.abs(hessian @ (exact.x - qp.target))))
+    return VERIFY_FACTOR * HIGH * scale / smallest
+
+
+def test_the_exact_solution_is_a_kkt_point_with_both_signs(exact: Exact) -> None:
+    qp = wide_qp()
+    assert qp.ineq_upper is not None
+    residuals = kkt_residuals(qp, exact.x, exact.y, exact.z)
+    assert residuals.worst() < 1e-14  # round-off of one linear solve
+    lhs = qp.ineq_matrix @ exact.x
+    assert np.all(exact.z[np.isclose(lhs, qp.ineq_rhs)] > 0)  # resting on a lower bound
+    assert np.all(exact.z[np.isclose(lhs, qp.ineq_upper)] < 0)  # resting on an upper bound
+
+
+def test_the_kkt_check_sees_a_wrong_sign_a_violated_upper_bound_and_slack(
+        exact: Exact) -> None:
+    qp = wide_qp()
+    upper_active = int(np.flatnonzero(exact.z < 0)[0])
+    flipped = exact.z.copy()
+    flipped[upper_active] *= -1.0  # the multiplier of the other bound
+    assert kkt_residuals(qp, exact.x, exact.y, flipped).dual > 1e-2
+    one_sided = int(np.flatnonzero(np.isinf(qp.ineq_upper))[0])  # type: ignore[arg-type]
+    pulling = exact.z.copy()
+    pulling[one_sided] = -1.0  # a one-sided row cannot pull
+    assert kkt_residuals(qp, exact.x, exact.y, pulling).dual > 1e-2
+    beyond = exact.x + 0.1 * qp.ineq_matrix.toarray()[upper_active]  # past the upper bound
+    assert kkt_residuals(qp, beyond, exact.y, exact.z).primal > 1e-3
+    inactive = np.flatnonzero(exact.z == 0.0)
+    assert inactive.size
+    slack = exact.z.copy()
+    slack[inactive[0]] = -0.5  # pushing on a row that rests on neither bound
+    assert kkt_residuals(qp, exact.x, exact.y, slack).complementarity > 1e-3
+
+
+def test_the_coupling_cost_enters_the_gradient(exact: Exact) -> None:
+    qp = wide_qp()
+    without = dataclasses.replace(qp, cost_factor=None, _declared=None)
+    assert kkt_residuals(without, exact.x, exact.y, exact.z).dual > 1e-2
+
+
+@pytest.mark.parametrize("solver", available_solvers())
+def test_every_solver_declared_afresh_finds_the_exact_solution(solver: str,
+                                                                exact: Exact) -> None:
+    qp = wide_qp()
+    solution = solve_step_qp(qp, solver, "high")
+    assert solution.path == "declared" and solution.verified, solution.residuals
+    assert np.max(np.abs(solution.x - exact.x)) <= agreement(qp, exact)
+    np.testing.assert_allclose(solution.ineq_dual, exact.z, rtol=0,
+                               atol=agreement(qp, exact) * (1 + np.abs(exact.z).max()))
+
+
+@pytest.mark.parametrize("solver", DIRECT_SOLVERS + ["SCS"])
+def test_compiled_and_direct_paths_find_the_exact_solution(solver: str,
+                                                            exact: Exact) -> None:
+    cache = CompiledQPCache(compile_after=1)
+    first = solve_step_qp(wide_qp(), solver, "high", cache=cache)
+    second = solve_step_qp(wide_qp(), solver, "high", cache=cache)
+    expected = "direct" if SOLVERS[solver].backend is not None else "compiled"
+    assert (first.path, second.path) == ("compiled", expected)
+    qp = wide_qp()
+    for solution in (first, second):
+        assert solution.verified, (solution.path, solution.residuals)
+        assert np.max(np.abs(solution.x - exact.x)) <= agreement(qp, exact)
+        np.testing.assert_allclose(solution.ineq_dual, exact.z, rtol=0,
+                                   atol=agreement(qp, exact) * (1 + np.abs(exact.z).max()))
+
+
+def test_new_numbers_in_the_same_structure_are_solved_anew() -> None:
+    cache = CompiledQPCache(compile_after=1)
+    solve_step_qp(wide_qp(), "OSQP", "high", cache=cache)
+    moved = wide_qp()
+    assert moved.ineq_upper is not None
+    moved.ineq_upper[0] = 1.5  # another upper bound, same rows bounded: same structure
+    assert moved.structure() == wide_qp().structure()
+    direct = solve_step_qp(moved, "OSQP", "high", cache=cache)
+    fresh = solve_step_qp(dataclasses.replace(moved, _declared=None), "CLARABEL", "high")
+    assert direct.path == "direct" and direct.verified
+    assert np.max(np.abs(direct.x - fresh.x)) <= 2 * agreement(moved, exact_of(moved))
+    assert (moved.ineq_matrix @ direct.x)[0] <= 1.5 + 1e-6
+
+
+def exact_of(qp: StepQP) -> Exact:
+    """The exact solution of ``qp`` with the active set of a tight CLARABEL solve."""
+    assert qp.ineq_upper is not None
+    x = solve_step_qp(dataclasses.replace(qp, _declared=None), "CLARABEL", "high").x
+    lhs = qp.ineq_matrix @ x
+    return exact_solution(qp, np.flatnonzero(np.abs(lhs - qp.ineq_rhs) < 1e-6),
+                          np.flatnonzero(np.abs(lhs - qp.ineq_upper) < 1e-6))
+
+
+def test_slots_and_structure_follow_the_data() -> None:
+    qp = wide_qp()
+    assert qp.slots() == tuple(PARAMETER_SLOTS)  # this QP fills every slot
+    plain = dataclasses.replace(qp, ineq_upper=None, cost_factor=None, _declared=None)
+    assert plain.slots() == ("weighted_target", "eq_values", "eq_rhs", "ineq_values",
+                             "ineq_rhs")
+    assert plain.structure() != qp.structure()
+    all_infinite = dataclasses.replace(plain, ineq_upper=np.full(4, np.inf))
+    assert "ineq_upper" not in all_infinite.slots()
+    for name in qp.slots():
+        slot = PARAMETER_SLOTS[name]
+        if slot.matrix is not None:  # a matrix slot holds that matrix's nonzeros
+            np.testing.assert_array_equal(slot.values(qp), slot.matrix(qp).data)
+
+
+def test_non_finite_upper_bounds_are_invalid_data() -> None:
+    from wuerfel_cvx.errors import StepFailure
+
+    for bad in (np.nan, -np.inf):
+        qp = wide_qp()
+        assert qp.ineq_upper is not None
+        qp.ineq_upper[0] = bad
+        with pytest.raises(StepFailure) as caught:
+            solve_step_qp(qp, "CLARABEL", "high")
+        assert caught.value.status == "invalid_data" and "ineq_upper" in caught.value.detail
+
+
+def test_paths_on_a_repeated_structure() -> None:
+    # compile_after=2: a structure seen once is declared, the second sighting compiles it
+    # and the third is solved on the direct path (SCS has no direct backend).
+    for solver, third in (("OSQP", "direct"), ("SCS", "compiled")):
+        cache = CompiledQPCache()
+        paths = [solve_step_qp(wide_qp(), solver, "high", cache=cache).path
+                 for _ in range(3)]
+        assert paths == ["declared", "compiled", third]
+    assert set(SOLVE_PATHS) == {"declared", "compiled", "direct"}
+    assert solve_step_qp(wide_qp(), "OSQP", "high").path == "declared"  # no cache
+
+
+def test_mismatched_shapes_are_rejected() -> None:
+    qp = wide_qp()
+    with pytest.raises(ValueError, match="ineq_upper"):
+        declare_qp(qp.weights, qp.target, qp.eq_matrix, qp.eq_rhs, qp.ineq_matrix,
+                   qp.ineq_rhs, qp.contacts, ineq_upper=np.ones(2))
+    with pytest.raises(ValueError, match="cost_factor"):
+        declare_qp(qp.weights, qp.target, qp.eq_matrix, qp.eq_rhs, qp.ineq_matrix,
+                   qp.ineq_rhs, qp.contacts, cost_factor=sp.csr_array(np.ones((1, 3))))
