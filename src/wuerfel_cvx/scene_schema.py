@@ -276,9 +276,9 @@ def _check_no_overlap(scene: Scene) -> None:
     names = ([f"squares[{i}]" for i in range(len(scene.squares))]
              + [f"boxes[{i}]" for i in range(len(scene.boxes))]
              + [f"tables[{j}]" for j in range(len(scene.tables))])
-    polygons = [b.corners() for b in scene.bodies] + [t.corners() for t in scene.tables]
-    for a, b in _candidate_pairs(scene):
-        depth = polygon_overlap_depth(polygons[a], polygons[b])
+    shapes = [*scene.bodies, *scene.tables]
+    for a, b in _candidate_pairs(scene):  # corners only of the bodies in a candidate pair
+        depth = polygon_overlap_depth(shapes[a].corners(), shapes[b].corners())
         if depth > OVERLAP_TOLERANCE:
             raise InputError(
                 f"overlaps {names[b]} by {depth:.3g} m at the start "
