@@ -165,15 +165,15 @@ def _domino_row(_: int | None) -> Scene:
     # Frictionless, a domino pushed at its top would mostly slide forward; a low curb just
     # in front of each base (after the first) blocks the slide, so it tips over the curb.
     width, height = DOMINO_SIZE
-    tilt = -0.2  # the first leans clockwise, towards the others, standing on a corner
-    first_y = (width * math.sin(-tilt) + height * math.cos(tilt)) / 2
-    dominoes = [Box(center=(0.0, first_y), size=DOMINO_SIZE, angle=tilt)]
+    # the first leans 0.2 rad clockwise, towards the others; at the same centre height
+    # as the rest, its lowest corner is (1 - cos 0.2) / 2 - 0.05 sin 0.2 = 33 um up
+    dominoes = [Box(center=(0.0, height / 2), size=DOMINO_SIZE, angle=-0.2)]
     curbs = []
     for k in range(1, DOMINO_COUNT):
         dominoes.append(Box(center=(k * DOMINO_PITCH, height / 2), size=DOMINO_SIZE))
-        front = k * DOMINO_PITCH + width / 2 + CURB_GAP
-        curbs.append(Table(center=(front + CURB_SIZE / 2, CURB_SIZE / 2),
-                           size=(CURB_SIZE, CURB_SIZE)))
+        # to the nanometre, so that examples/domino-row.toml states the same numbers
+        middle = round(k * DOMINO_PITCH + width / 2 + CURB_GAP + CURB_SIZE / 2, 9)
+        curbs.append(Table(center=(middle, CURB_SIZE / 2), size=(CURB_SIZE, CURB_SIZE)))
     return Scene("domino-row", boxes=tuple(dominoes), tables=(FLOOR, *curbs))
 
 
