@@ -14,11 +14,12 @@ Matched physics (SI units throughout)
   order: a slide along x (qpos = centre x, m), a slide along z (qpos = centre y, m) and
   a hinge about ``-y`` through the centre, so that a positive joint angle (rad) is the
   scene's counter-clockwise angle.  qvel is ``(vx, vy, omega)`` (m/s, m/s, rad/s).
-* Its ``<inertial>`` has its mass ``m`` (kg) and ``diaginertia (m h^2/4, I, m w^2/4)``
-  (kg m^2) with ``I = m (w^2 + h^2)/4``: the 4 corner masses of the package's model as a
-  lamina of width ``w`` along x and height ``h`` along z (the y component, about the
-  hinge, is ``I``, not the solid ``m (w^2 + h^2)/12``; the others add up to it, the
-  triangle inequality with equality).
+* Its ``<inertial>`` has its mass ``m`` (kg) and ``diaginertia (I/2, I, I/2)``
+  (kg m^2) with ``I = m (w^2 + h^2)/4``, the moment of the 4 corner masses of the
+  package's model about the hinge (not the solid ``m (w^2 + h^2)/12``).  Only the hinge
+  turns, so the other two components never act; halves of ``I`` add up to it exactly
+  in floating point, which MuJoCo's triangle-inequality check needs (the lamina's own
+  ``m h^2/4`` and ``m w^2/4`` can miss it by an ulp).
 * Its geom is a box of half sizes ``(w/2, SQUARE_HALF_DEPTH, h/2)`` (m); tables are
   static box geoms of the world body, half sizes ``(w/2, TABLE_HALF_DEPTH, h/2)``,
   rotated by the table's angle about ``-y``.  The depths only place contact points along
@@ -90,7 +91,7 @@ def scene_mjcf(scene: Scene, dt: float) -> str:
             f'      <joint name="square{i}_y" type="slide" axis="0 0 1"/>',
             f'      <joint name="square{i}_angle" type="hinge" axis="0 -1 0"/>',
             f'      <inertial pos="0 0 0" mass="{_num(m)}"'
-            f' diaginertia="{_nums(m * h * h / 4, moment, m * w * w / 4)}"/>',
+            f' diaginertia="{_nums(moment / 2, moment, moment / 2)}"/>',
             f'      <geom name="square{i}" type="box"'
             f' size="{_nums(w / 2, SQUARE_HALF_DEPTH, h / 2)}"/>',
             "    </body>",
