@@ -13,8 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from wuerfel_cvx import Scene, Square, StepFailure, simulate
-from wuerfel_cvx.bodies import Box
+from wuerfel_cvx import Box, Scene, Square, StepFailure, simulate
 from wuerfel_cvx.errors import InputError
 from wuerfel_cvx.geometry import FloatArray, rectangle_corners, rot90, square_corners
 from wuerfel_cvx.peers import PEER_ENGINES, available_peers, peer_version, simulate_peer

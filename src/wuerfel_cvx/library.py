@@ -209,8 +209,8 @@ ENTRIES: tuple[SceneEntry, ...] = (
                "edge", _wall_contact),
     SceneEntry("plank-drop", "a 2 x 0.5 m plank dropped from y = 1.5 m at 0.3 rad: lands on "
                "a corner, settles flat", _plank_drop),
-    SceneEntry("domino-row", "six 0.1 x 1 m dominoes 0.45 m apart, curbs in front of their "
-               "feet; the first, tipped 0.2 rad, knocks them over", _domino_row),
+    SceneEntry("domino-row", "six 0.1 x 1 m dominoes, curbs at their feet; the first, "
+               "tipped 0.2 rad, knocks them over", _domino_row),
 )
 
 _NAME = re.compile(r"^(?P<base>[a-z][a-z-]*?)(?:-(?P<number>\d+))?$")
