@@ -13,11 +13,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from wuerfel_cvx import Scene, Square, StepFailure, simulate
+from wuerfel_cvx import Box, Scene, Square, StepFailure, simulate
 from wuerfel_cvx.errors import InputError
-from wuerfel_cvx.geometry import FloatArray, rot90, square_corners
+from wuerfel_cvx.geometry import FloatArray, rectangle_corners, rot90, square_corners
 from wuerfel_cvx.peers import PEER_ENGINES, available_peers, peer_version, simulate_peer
-from wuerfel_cvx.peers._common import initial_poses, run_peer
+from wuerfel_cvx.peers._common import initial_poses, matched_moment, run_peer
 from wuerfel_cvx.simulate import METRIC_COLUMNS
 from wuerfel_cvx.trajectory import Trajectory
 
@@ -158,6 +158,61 @@ def test_engine_geometry_matches_the_corner_layout(engine: str) -> None:
     np.testing.assert_allclose(poses[0], [0.3, -0.2, 0.7, 0.0, 0.0, 0.0])
 
 
+def _odd_plank() -> Scene:
+    """A rotated 2.4 x 0.6 m plank of 3 kg: m (w^2 + h^2)/4 = 4.59 kg m^2 (solid: 1.53)."""
+    return Scene("plank", boxes=(Box(center=(0.3, -0.2), size=(2.4, 0.6), angle=0.7,
+                                     mass=3.0),))
+
+
+def test_matched_moment_is_that_of_the_four_corner_masses() -> None:
+    # four masses m/4 at distance sqrt(w^2 + h^2)/2 from the centre
+    assert matched_moment(3.0, 2.4, 0.6) == pytest.approx(4 * 0.75 * (1.2**2 + 0.3**2))
+    assert matched_moment(3.0, 2.0, 2.0) == 3.0 * 2.0**2 / 2  # a square: m s^2 / 2
+
+
+def test_a_plank_has_matched_mass_moment_and_shape(engine: str) -> None:
+    scene = _odd_plank()
+    plank = scene.boxes[0]
+    (w, h), m = plank.size, plank.mass
+    moment = m * (w**2 + h**2) / 4
+    ours = rectangle_corners(plank.center, w, h, plank.angle)
+    local = [(-w / 2, -h / 2), (w / 2, -h / 2), (w / 2, h / 2), (-w / 2, h / 2)]
+    if engine == "PYMUNK":
+        from wuerfel_cvx.peers.pymunk_peer import build_world as build_pymunk
+
+        body = build_pymunk(scene, DT).bodies[0]
+        assert body.mass == pytest.approx(m, rel=1e-12)
+        assert body.moment == pytest.approx(moment, rel=1e-12)
+        (shape,) = body.shapes
+        theirs = np.array([tuple(body.local_to_world(v)) for v in shape.get_vertices()])
+        np.testing.assert_allclose(np.sort(theirs, axis=0), np.sort(ours, axis=0), atol=1e-12)
+        theirs = np.array([tuple(body.local_to_world(p)) for p in local])
+    else:
+        import mujoco
+
+        from wuerfel_cvx.peers.mujoco_peer import build_world as build_mujoco
+
+        world = build_mujoco(scene, DT)
+        mass_matrix = np.zeros((3, 3))
+        mujoco.mj_fullM(world.model, world.data, mass_matrix)
+        np.testing.assert_allclose(mass_matrix, np.diag([m, m, moment]), rtol=1e-12,
+                                   atol=1e-12)
+        np.testing.assert_allclose(world.model.geom_size[0][[0, 2]], [w / 2, h / 2])
+        frame = world.data.geom_xmat[0].reshape(3, 3)
+        xyz = world.data.geom_xpos[0] + np.array([frame @ (x, 0.0, z) for x, z in local])
+        theirs = xyz[:, [0, 2]]
+    np.testing.assert_allclose(theirs, ours, atol=1e-12)
+
+
+def test_bodies_enter_the_engine_squares_first_then_boxes(engine: str) -> None:
+    scene = Scene("mixed", (Square(center=(-3.0, 5.0), size=0.5),),
+                  boxes=(Box(center=(3.0, 5.0), size=(2.0, 0.5), angle=0.4),))
+    traj = simulate_peer(engine, scene, DT, 1)
+    np.testing.assert_array_equal(traj.points[0], scene.initial_points())
+    # one step of free flight moves each body by at most g dt^2 (semi-implicit Euler)
+    np.testing.assert_allclose(traj.points[1], traj.points[0], atol=G * DT**2 + ROUND_OFF)
+
+
 # ------------------------------------------------------------------ contact
 def test_resting_square_stays_near_rest(engine: str) -> None:
     scene = Scene.named("resting-square")
@@ -182,6 +237,17 @@ def test_tilted_drop_lands_flat_and_rests(engine: str) -> None:
     # Frictionless floor: only vertical normal forces, so the centre keeps x = 0.
     assert abs(float(traj.points[-1, :, 0].mean())) < 1e-6
     assert traj.metrics["rod_drift"].max() < ROUND_OFF  # rigid bodies: corners stay rigid
+
+
+def test_plank_drop_lands_flat_and_rests(engine: str) -> None:
+    traj = simulate_peer(engine, "plank-drop", DT, 200)  # 2 s: lands at about 0.45 s
+    heights = np.sort(traj.points[-1, :, 1])
+    # on a long side: two corners on the floor, two 0.5 m up, within the settled depth
+    assert np.all(np.abs(heights[:2]) <= SETTLED_DEPTH[engine])
+    assert np.all(heights[2:] == pytest.approx(0.5, abs=SETTLED_DEPTH[engine]))
+    assert np.max(corner_speeds(traj)) <= AT_REST_SPEED
+    assert abs(float(traj.points[-1, :, 0].mean())) < 1e-6  # frictionless: x stays 0
+    assert traj.metrics["rod_drift"].max() < ROUND_OFF
 
 
 # ------------------------------------------------------------------ interface

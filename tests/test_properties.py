@@ -166,9 +166,9 @@ def test_random_scenes_are_valid_and_reproducible() -> None:
     counts = {scene.n_boxes for scene in first}
     assert counts <= set(range(1, MAX_SQUARES + 1)) and len(counts) > 3
     for scene in first:  # the constructor already refused overlaps; check the ranges
-        masses = [s.mass for s in scene.squares]
+        masses = [s.mass for s in scene.bodies]
         assert max(masses) / min(masses) <= MASS_RANGE[1] / MASS_RANGE[0]
-        lowest = min(float(s.corners()[:, 1].min()) for s in scene.squares)
+        lowest = min(float(s.corners()[:, 1].min()) for s in scene.bodies)
         assert lowest >= 0.0  # above the table's top face
         assert Scene.from_dict(scene.to_dict()) == scene
 

@@ -306,12 +306,16 @@ _entry_values = st.one_of(_vector, _values, st.floats(-2e6, 2e6))
 _square = st.dictionaries(
     st.sampled_from(["center", "size", "angle", "mass", "velocity", "angular_velocity",
                      "spin"]), _entry_values, max_size=6)
+_box = st.dictionaries(
+    st.sampled_from(["center", "size", "angle", "mass", "velocity", "angular_velocity",
+                     "sise"]), _entry_values, max_size=6)
 _table = st.dictionaries(st.sampled_from(["center", "size", "angle"]), _entry_values,
                          max_size=3)
 _scene = st.fixed_dictionaries({}, optional={
     "name": st.text(max_size=5) | _values, "gravity": _vector | _values,
     "allow_overlap": st.booleans() | _values, "squares": st.lists(_square, max_size=3) | _values,
     "tables": st.lists(_table, max_size=2) | _values,
+    "boxes": st.lists(_box, max_size=2) | _values,
 })
 
 
@@ -328,6 +332,11 @@ def test_any_structured_scene_loads_or_is_one_input_error(data: dict[str, Any]) 
         assert LIMITS["length"].smallest <= square.size <= LIMITS["length"].largest
         assert LIMITS["mass"].smallest <= square.mass <= LIMITS["mass"].largest
         assert np.all(np.isfinite(square.corners()))
+    for box in scene.boxes:
+        assert all(LIMITS["length"].smallest <= side <= LIMITS["length"].largest
+                   for side in box.size)
+        assert LIMITS["mass"].smallest <= box.mass <= LIMITS["mass"].largest
+        assert np.all(np.isfinite(box.corners()))
 
 
 def test_seed_files_are_valid_scenes(tmp_path: Path) -> None:

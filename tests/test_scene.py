@@ -248,7 +248,15 @@ BAD_INPUT: list[tuple[str, str | bytes | None, str | None, str]] = [
     ("empty-name", "name = \"\"\n" + _SQ, "name", "non-empty string"),
     ("squares-not-array", "squares = 3\n", "squares", "array of tables"),
     ("square-not-table", "squares = [1.0]\n", "squares[0]", "expected a table"),
-    ("no-squares", "name = \"empty\"\n", "squares", "at least one square"),
+    ("no-squares", "name = \"empty\"\n", "squares", "at least one square or box"),
+    ("several-unknown-keys", _SQ + "sise = 1.0\ncolour = 'red'\n", "squares[0]",
+     "unknown keys 'colour', 'sise' (allowed: angle, angular_velocity, center, mass, size, "
+     "velocity)"),
+    ("several-unknown-top-level-keys", "colour = 'red'\nfriction = 0.5\n" + _SQ, None,
+     "unknown keys 'colour', 'friction' (allowed: allow_overlap, boxes, gravity, name, "
+     "squares, tables)"),
+    ("box-in-squares", "[[squares]]\ncenter = [0, 2]\nsize = [2.0, 0.5]\n", "squares[0].size",
+     "expected a number, got list"),
     ("squares-overlap", _SQ + "[[squares]]\ncenter = [0.5, 2.5]\n", "squares[0]",
      "overlaps squares[1]"),
     ("third-square-overlaps-second",
@@ -286,6 +294,18 @@ def test_bad_input_raises_input_error_naming_file_and_field(
         assert field in error.field
         assert field in text
     assert isinstance(error, ValueError)  # InputError is also a ValueError
+
+
+def test_several_unknown_keys_are_all_named_on_one_line_with_printable_quoting(
+        tmp_path: Path) -> None:
+    path = write_scene(tmp_path, _SQ + '"\u202eevil" = 1\n"" = 2\nzz = 3\n')
+    with pytest.raises(InputError) as info:
+        Scene.from_toml(path)
+    assert info.value.field == "squares[0]"
+    # sorted as written; bare keys in single quotes, the others escaped in double quotes
+    assert info.value.reason == ('unknown keys "", \'zz\', "\\u202eevil" (allowed: angle, '
+                                 "angular_velocity, center, mass, size, velocity)")
+    assert "\n" not in str(info.value) and "\u202e" not in str(info.value)
 
 
 def test_overlap_error_message_mentions_overlap_and_allow_overlap(tmp_path: Path) -> None:

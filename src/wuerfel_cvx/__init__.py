@@ -11,12 +11,12 @@ and point-versus-edge inequalities, declared in CVXPY and solved by a chosen sol
 from __future__ import annotations
 
 from .errors import InputError, StepFailure, WuerfelError
-from .scene import Scene, Square, Table
+from .scene import Box, Scene, Square, Table
 from .simulate import simulate
 from .solvers import available_solvers
 from .trajectory import Trajectory
 
 __version__ = "0.1.0"
 
-__all__ = ["InputError", "Scene", "Square", "StepFailure", "Table", "Trajectory",
+__all__ = ["Box", "InputError", "Scene", "Square", "StepFailure", "Table", "Trajectory",
            "WuerfelError", "available_solvers", "simulate"]

@@ -2,7 +2,8 @@
 
 Each entry is a builder; families take a number after a dash (``stack-10``,
 ``pyramid-4``, ``rain-50``, ``heavy-on-light-1000``).  Every scene has a floor whose
-top face is at ``y = 0``; unit squares unless stated otherwise.
+top face is at ``y = 0``; unit squares unless stated otherwise (``plank-drop`` and
+``domino-row`` are boxes).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError
-from .scene import Scene, Square, Table
+from .scene import Box, Scene, Square, Table
 
 FLOOR = Table(center=(0.0, -0.5), size=(40.0, 1.0), angle=0.0)
 """The default table: 40 m wide, 1 m thick, top face at y = 0."""
@@ -138,6 +139,44 @@ def _wall_contact(_: int | None) -> Scene:
     return Scene("wall-contact", (square,), (FLOOR, wall))
 
 
+PLANK_SIZE = (2.0, 0.5)
+"""Width and height (m) of the plank of ``plank-drop``."""
+DOMINO_SIZE = (0.1, 1.0)
+"""Width and height (m) of each domino of ``domino-row``."""
+DOMINO_PITCH = 0.45
+"""Distance (m) between neighbouring dominoes' centres: less than their height, so a
+falling one reaches the next."""
+DOMINO_COUNT = 6
+"""Dominoes in ``domino-row``."""
+CURB_SIZE = 0.05
+"""Side (m) of the square curb in front of each domino but the first, on the floor."""
+CURB_GAP = 1e-3
+"""Gap (m) between a domino's front face and its curb."""
+
+
+def _plank_drop(_: int | None) -> Scene:
+    # Lowest corner 1.5 - (1.0 sin 0.3 + 0.25 cos 0.3) = 0.97 m above the floor; it lands
+    # on that corner and tips onto a long side, coming to rest flat at y = 0.25 m.
+    plank = Box(center=(0.0, 1.5), size=PLANK_SIZE, angle=0.3)
+    return Scene("plank-drop", boxes=(plank,), tables=(FLOOR,))
+
+
+def _domino_row(_: int | None) -> Scene:
+    # Frictionless, a domino pushed at its top would mostly slide forward; a low curb just
+    # in front of each base (after the first) blocks the slide, so it tips over the curb.
+    width, height = DOMINO_SIZE
+    # the first leans 0.2 rad clockwise, towards the others; at the same centre height
+    # as the rest, its lowest corner is (1 - cos 0.2) / 2 - 0.05 sin 0.2 = 33 um up
+    dominoes = [Box(center=(0.0, height / 2), size=DOMINO_SIZE, angle=-0.2)]
+    curbs = []
+    for k in range(1, DOMINO_COUNT):
+        dominoes.append(Box(center=(k * DOMINO_PITCH, height / 2), size=DOMINO_SIZE))
+        # to the nanometre, so that examples/domino-row.toml states the same numbers
+        middle = round(k * DOMINO_PITCH + width / 2 + CURB_GAP + CURB_SIZE / 2, 9)
+        curbs.append(Table(center=(middle, CURB_SIZE / 2), size=(CURB_SIZE, CURB_SIZE)))
+    return Scene("domino-row", boxes=tuple(dominoes), tables=(FLOOR, *curbs))
+
+
 def _require(n: int | None, family: str) -> int:
     if n is None or n < 1:
         raise InputError(f"'{family}-N' needs a positive integer N", source=family)
@@ -168,6 +207,10 @@ ENTRIES: tuple[SceneEntry, ...] = (
                "meet edge ends", _edge_end_landing),
     SceneEntry("wall-contact", "a square slides at 3 m/s into a wall: contact on a vertical "
                "edge", _wall_contact),
+    SceneEntry("plank-drop", "a 2 x 0.5 m plank dropped from y = 1.5 m at 0.3 rad: lands on "
+               "a corner, settles flat", _plank_drop),
+    SceneEntry("domino-row", "six 0.1 x 1 m dominoes, curbs at their feet; the first, "
+               "tipped 0.2 rad, knocks them over", _domino_row),
 )
 
 _NAME = re.compile(r"^(?P<base>[a-z][a-z-]*?)(?:-(?P<number>\d+))?$")

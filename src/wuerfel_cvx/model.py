@@ -1,9 +1,10 @@
 """The mechanical model of a scene: point masses, rods, bodies and the state.
 
-Every body (square or table) owns 4 consecutive rows of the *all-points* array:
-squares first (square ``b`` at rows ``4b..4b+3``), then tables (table ``t`` at rows
-``4(n+t)..4(n+t)+3``), each counter-clockwise.  Square corners are the QP's
-variables; table corners are constants unless the seed's heavy-table variant is
+Every body owns 4 consecutive rows of the *all-points* array: the moving boxes first
+(box ``b`` of :attr:`Scene.bodies <wuerfel_cvx.scene.Scene.bodies>`, squares then boxes,
+at rows ``4b..4b+3``), then tables (table ``t`` at rows ``4(n+t)..4(n+t)+3``), each
+counter-clockwise.  A square is a box of equal width and height.  Box corners are the
+QP's variables; table corners are constants unless the seed's heavy-table variant is
 chosen, in which case they become variables of mass ``table_mass`` held still by an
 equality ("Tischrestriktion").
 """
@@ -21,8 +22,9 @@ from .scene import Scene
 
 IntArray = NDArray[np.int64]
 
-#: The 5 rods of a square as corner pairs: 4 sides and the diagonal 0-2 (seed 2.1).
-SQUARE_RODS: tuple[tuple[int, int], ...] = ((0, 1), (1, 2), (2, 3), (3, 0), (0, 2))
+#: The 5 rods of a box as corner pairs: 4 sides and the diagonal 0-2 (seed 2.1); their
+#: rest lengths are the box's own width, height and diagonal.
+BOX_RODS: tuple[tuple[int, int], ...] = ((0, 1), (1, 2), (2, 3), (3, 0), (0, 2))
 
 
 @dataclass(frozen=True)
@@ -35,15 +37,18 @@ class Model:
     box_sizes: FloatArray
     """Width and height of each box (m), shape ``(n, 2)``."""
     point_masses: FloatArray
-    """Mass of each square corner (kg), shape ``(4 n,)``."""
+    """Mass of each box corner (kg), shape ``(4 n,)``: a quarter of the box's mass."""
     rods: IntArray
-    """Rod end points ``(5 n, 2)`` as rows of the square-points array."""
+    """Rod end points ``(5 n, 2)`` as rows of the box-points array."""
     rod_lengths: FloatArray
     """Rest length of each rod (m), shape ``(5 n,)``."""
     table_points: FloatArray
     """Table corners ``(4 t, 2)`` (m), fixed."""
     reference_corners: FloatArray
-    """Corners ``(n, 4, 2)`` of each square centred at 0 with angle 0 (m)."""
+    """Corners ``(n, 4, 2)`` of each box centred at 0 with angle 0 (m).
+
+    A box's moment of inertia about its centre is ``sum m_i |r_i|^2 = m (w^2 + h^2) / 4``
+    (kg m^2) over these corners."""
     gravity: FloatArray
     """Gravitational acceleration ``(2,)`` (m/s^2)."""
     table_mass: float | None = None
@@ -58,9 +63,10 @@ class Model:
             raise InputError(f"table_mass must be a positive finite number, got {table_mass}",
                              field="table_mass")
         n = scene.n_boxes
-        sizes = np.array([[s.size, s.size] for s in scene.squares], dtype=np.float64).reshape(-1, 2)
-        masses = np.repeat(np.array([s.mass for s in scene.squares]) / 4.0, 4)
-        pairs = SQUARE_RODS + (((1, 3),) if extra_rod else ())
+        bodies = scene.bodies
+        sizes = np.array([[b.width, b.height] for b in bodies], dtype=np.float64).reshape(-1, 2)
+        masses = np.repeat(np.array([b.mass for b in bodies]) / 4.0, 4)
+        pairs = BOX_RODS + (((1, 3),) if extra_rod else ())
         rods = np.array([[4 * b + i, 4 * b + j] for b in range(n) for i, j in pairs],
                         dtype=np.int64)
         reference = np.stack([rectangle_corners((0.0, 0.0), w, h, 0.0) for w, h in sizes])

@@ -1,11 +1,12 @@
 """Code shared by the peer engines: poses to corners, the step loop, metrics rows.
 
-A peer engine models each square as one rigid body with pose
+A peer engine models each square or box as one rigid body with pose
 ``(x, y, theta, vx, vy, omega)``: centre (m), angle (rad, counter-clockwise), centre
 velocity (m/s) and angular velocity (rad/s, counter-clockwise).  This module turns
-poses into the corner layout of :class:`~wuerfel_cvx.model.State` (square ``i`` at rows
-``4i..4i+3``, counter-clockwise from the corner that is lower-left at angle 0, exactly
-as :func:`~wuerfel_cvx.geometry.square_corners`) and records a
+poses into the corner layout of :class:`~wuerfel_cvx.model.State` (body ``i`` of
+:attr:`Scene.bodies <wuerfel_cvx.scene.Scene.bodies>` at rows ``4i..4i+3``,
+counter-clockwise from the corner that is lower-left at angle 0, exactly as
+:func:`~wuerfel_cvx.geometry.rectangle_corners`) and records a
 :class:`~wuerfel_cvx.trajectory.Trajectory` whose metrics are computed by the same
 functions of :mod:`wuerfel_cvx.metrics` as for the package's own simulator.
 """
@@ -53,23 +54,25 @@ class PeerWorld(Protocol):
         """Contact points the engine used in the last step, or ``None`` if unknown."""
 
 
-def matched_moment(mass: float, size: float) -> float:
-    """Moment of inertia (kg m^2) of 4 corner masses ``mass / 4`` on a square of side ``size``.
+def matched_moment(mass: float, width: float, height: float) -> float:
+    """Moment of inertia (kg m^2) of 4 corner masses ``mass / 4`` on a ``width x height`` box.
 
-    ``4 (mass / 4) (size^2 / 2) = mass size^2 / 2``: the value of the package's model,
-    three times the solid square's ``mass size^2 / 6``.
+    Each corner is ``sqrt(w^2 + h^2) / 2`` from the centre, so the moment is
+    ``mass (w^2 + h^2) / 4``: the value of the package's model, three times the solid
+    box's ``mass (w^2 + h^2) / 12`` (``mass s^2 / 2`` for a square of side ``s``).
     """
-    return mass * size * size / 2.0
+    return mass * (width * width + height * height) / 4.0
 
 
 def initial_poses(scene: Scene) -> FloatArray:
-    """The scene's initial poses ``(n, 6)`` (see :data:`POSE_COLUMNS`)."""
-    return np.array([[s.center[0], s.center[1], s.angle, s.velocity[0], s.velocity[1],
-                      s.angular_velocity] for s in scene.squares], dtype=np.float64)
+    """The initial poses ``(n, 6)`` (:data:`POSE_COLUMNS`) of the squares, then the boxes."""
+    return np.array([[b.center[0], b.center[1], b.angle, b.velocity[0], b.velocity[1],
+                      b.angular_velocity] for b in scene.bodies],
+                    dtype=np.float64).reshape(-1, 6)
 
 
 def corners_from_poses(sizes: FloatArray, poses: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Corner positions and velocities ``(4 n, 2)`` (m, m/s) of rigid squares.
+    """Corner positions and velocities ``(4 n, 2)`` (m, m/s) of rigid boxes.
 
     ``sizes`` are the widths and heights ``(n, 2)`` (m) and ``poses`` the poses ``(n, 6)``.
     The corners of box ``i`` are ``rectangle_corners((x, y), w, h, theta)`` at rows

@@ -9,15 +9,18 @@ Matched physics (SI units throughout)
   velocities, then positions with them), so free flight is off the parabola by exactly
   ``|g| dt t / 2`` (m), as in the package's own stepping.  Gravity ``(gx, gy)`` (m/s^2)
   becomes ``(gx, 0, gy)``.
-* Each square is a child body of the world at the origin with three joints, in this
+* Each square or box (in the order of ``Scene.bodies``: squares, then boxes) is a child
+  body of the world at the origin with three joints, in this
   order: a slide along x (qpos = centre x, m), a slide along z (qpos = centre y, m) and
   a hinge about ``-y`` through the centre, so that a positive joint angle (rad) is the
   scene's counter-clockwise angle.  qvel is ``(vx, vy, omega)`` (m/s, m/s, rad/s).
-* Its ``<inertial>`` has mass ``Square.mass`` (kg) and ``diaginertia
-  (m s^2/4, m s^2/2, m s^2/4)`` (kg m^2): the 4 corner masses of the package's model
-  as a lamina in the x-z plane (the y component, about the hinge, is ``m s^2/2``, not
-  the solid ``m s^2/6``; the others satisfy the triangle inequality with equality).
-* Its geom is a box of half sizes ``(s/2, SQUARE_HALF_DEPTH, s/2)`` (m); tables are
+* Its ``<inertial>`` has its mass ``m`` (kg) and ``diaginertia (I/2, I, I/2)``
+  (kg m^2) with ``I = m (w^2 + h^2)/4``, the moment of the 4 corner masses of the
+  package's model about the hinge (not the solid ``m (w^2 + h^2)/12``).  Only the hinge
+  turns, so the other two components never act; halves of ``I`` add up to it exactly
+  in floating point, which MuJoCo's triangle-inequality check needs (the lamina's own
+  ``m h^2/4`` and ``m w^2/4`` can miss it by an ulp).
+* Its geom is a box of half sizes ``(w/2, SQUARE_HALF_DEPTH, h/2)`` (m); tables are
   static box geoms of the world body, half sizes ``(w/2, TABLE_HALF_DEPTH, h/2)``,
   rotated by the table's angle about ``-y``.  The depths only place contact points along
   y, which exert no torque about the hinge.
@@ -28,7 +31,7 @@ Matched physics (SI units throughout)
   ``solimp = (0.9, 0.95, 0.001, 0.5, 2)``; a resting body sits a fraction of a
   millimetre deep and landings penetrate further.  Default Newton solver (100
   iterations, tolerance 1e-8), pyramidal cone, no joint damping or armature.
-* Every square body is a child of the world, so squares collide with each other and
+* Every moving body is a child of the world, so they collide with each other and
   with the tables (parent filtering does not apply to the world); tables do not
   collide with each other.
 """
@@ -48,7 +51,7 @@ ENGINE = "MUJOCO"
 PACKAGE = "mujoco"
 """The distribution that provides the engine."""
 SQUARE_HALF_DEPTH = 0.5
-"""Half extent (m) of a square's box geom along MuJoCo's y (out of the plane)."""
+"""Half extent (m) of a square's or box's geom along MuJoCo's y (out of the plane)."""
 TABLE_HALF_DEPTH = 1.0
 """Half extent (m) of a table's box geom along y: deeper than any square."""
 
@@ -63,7 +66,7 @@ def _nums(*values: float) -> str:
 
 
 def scene_mjcf(scene: Scene, dt: float) -> str:
-    """The MJCF XML text of a scene with time step ``dt`` (s); body ``square{i}`` per square."""
+    """The MJCF XML text of a scene with time step ``dt`` (s); body ``square{i}`` per box."""
     gx, gy = scene.gravity
     lines = [
         f'<mujoco model="wuerfel-{scene.name}">',
@@ -79,9 +82,9 @@ def scene_mjcf(scene: Scene, dt: float) -> str:
             f' axisangle="{_nums(0.0, -1.0, 0.0, table.angle)}"'
             f' size="{_nums(w / 2, TABLE_HALF_DEPTH, h / 2)}"/>'
         )
-    for i, square in enumerate(scene.squares):
-        m, s = square.mass, square.size
-        moment = matched_moment(m, s)
+    for i, body in enumerate(scene.bodies):
+        m, w, h = body.mass, body.width, body.height
+        moment = matched_moment(m, w, h)
         lines += [
             f'    <body name="square{i}" pos="0 0 0">',
             f'      <joint name="square{i}_x" type="slide" axis="1 0 0"/>',
@@ -90,7 +93,7 @@ def scene_mjcf(scene: Scene, dt: float) -> str:
             f'      <inertial pos="0 0 0" mass="{_num(m)}"'
             f' diaginertia="{_nums(moment / 2, moment, moment / 2)}"/>',
             f'      <geom name="square{i}" type="box"'
-            f' size="{_nums(s / 2, SQUARE_HALF_DEPTH, s / 2)}"/>',
+            f' size="{_nums(w / 2, SQUARE_HALF_DEPTH, h / 2)}"/>',
             "    </body>",
         ]
     lines += ["  </worldbody>", "</mujoco>"]
@@ -101,7 +104,8 @@ class MujocoWorld:
     """A compiled MuJoCo model and its data holding a scene.
 
     ``model`` and ``data`` are the :class:`mujoco.MjModel` and :class:`mujoco.MjData`;
-    square ``i`` owns ``qpos[3i:3i+3] = (x, y, theta)`` and ``qvel[3i:3i+3]``.
+    body ``i`` of ``scene.bodies`` owns ``qpos[3i:3i+3] = (x, y, theta)`` and
+    ``qvel[3i:3i+3]``.
 
     Parameters
     ----------
@@ -120,7 +124,7 @@ class MujocoWorld:
         self.data: Any = mujoco.MjData(self.model)
         self.n_boxes = scene.n_boxes
         if self.model.nq != 3 * self.n_boxes or self.model.nv != 3 * self.n_boxes:
-            raise RuntimeError(f"expected 3 degrees of freedom per square, got nq = "
+            raise RuntimeError(f"expected 3 degrees of freedom per body, got nq = "
                                f"{self.model.nq}, nv = {self.model.nv}")
         poses = initial_poses(scene)
         self.data.qpos[:] = poses[:, 0:3].ravel()

@@ -6,10 +6,11 @@ Matched physics (SI units throughout)
   scene's.  Chipmunk integrates positions with the velocities of the previous step and
   then velocities (semi-implicit Euler), so free flight is off the parabola by exactly
   ``|g| dt t / 2`` (m), the same order as the package's own velocity-level stepping.
-* Each square is a dynamic :class:`pymunk.Body` with mass ``Square.mass`` (kg) and moment
-  of inertia ``mass size^2 / 2`` (kg m^2, the 4-corner-mass value, not the solid
-  square's ``mass size^2 / 6``), set explicitly after its shape is attached; its shape is
-  ``Poly.create_box`` of side ``size`` (m) with no rounding radius.
+* Each square or box is a dynamic :class:`pymunk.Body` with its mass (kg) and moment of
+  inertia ``mass (w^2 + h^2) / 4`` (kg m^2, the 4-corner-mass value, not the solid
+  box's ``mass (w^2 + h^2) / 12``), set explicitly after its shape is attached; its
+  shape is ``Poly.create_box`` of its width and height ``(w, h)`` (m) with no rounding
+  radius.  Bodies are added in the order of ``Scene.bodies`` (squares, then boxes).
 * Each table is a static body at the table's centre and angle with a box shape.
 * Frictionless and inelastic: ``friction = 0`` and ``elasticity = 0`` on every shape.
 * ``Space.collision_slop`` = :data:`COLLISION_SLOP` = 1e-3 m (pymunk's default 0.1 is
@@ -45,7 +46,7 @@ ITERATIONS = 10
 
 
 class PymunkWorld:
-    """A pymunk space holding a scene; ``bodies[i]`` is square ``i``.
+    """A pymunk space holding a scene; ``bodies[i]`` is ``scene.bodies[i]``.
 
     Parameters
     ----------
@@ -75,15 +76,15 @@ class PymunkWorld:
             base.angle = table.angle
             self.space.add(base, _frictionless_box(base, table.size))
         self.bodies: list[pymunk.Body] = []
-        for square in scene.squares:
-            moment = matched_moment(square.mass, square.size)
-            body = pymunk.Body(square.mass, moment)
-            body.position = square.center
-            body.angle = square.angle
-            body.velocity = square.velocity
-            body.angular_velocity = square.angular_velocity
-            self.space.add(body, _frictionless_box(body, (square.size, square.size)))
-            body.mass = square.mass  # explicit, after the shape: nothing recomputes them
+        for item in scene.bodies:
+            moment = matched_moment(item.mass, item.width, item.height)
+            body = pymunk.Body(item.mass, moment)
+            body.position = item.center
+            body.angle = item.angle
+            body.velocity = item.velocity
+            body.angular_velocity = item.angular_velocity
+            self.space.add(body, _frictionless_box(body, (item.width, item.height)))
+            body.mass = item.mass  # explicit, after the shape: nothing recomputes them
             body.moment = moment
             self.bodies.append(body)
 
@@ -97,7 +98,7 @@ class PymunkWorld:
                          for b in self.bodies], dtype=np.float64)
 
     def n_contacts(self) -> int:
-        """Contact points of the arbiters touching the squares in the last step."""
+        """Contact points of the arbiters touching the moving bodies in the last step."""
         import pymunk
 
         total = 0.0
@@ -106,7 +107,7 @@ class PymunkWorld:
             nonlocal total
             a, b = arbiter.bodies
             other = b if a is body else a
-            # A square-square arbiter is met from both squares: count it half each time.
+            # An arbiter of two moving bodies is met from both: count it half each time.
             weight = 1.0 if other.body_type == pymunk.Body.STATIC else 0.5
             total += weight * len(arbiter.contact_point_set.points)
 

@@ -4,7 +4,8 @@
 
 - *structured* ones edit the parsed scene (wrong types, missing and unknown keys, huge,
   tiny, infinite and NaN numbers, negative sizes and masses, big integers, dates,
-  unicode, nested lists, many squares) and write it back with :mod:`tomli_w`;
+  unicode, nested lists, many squares or boxes, a square's scalar ``size`` on a box and
+  a box's ``[w, h]`` on a square) and write it back with :mod:`tomli_w`;
 - *textual* ones edit the file's bytes (number tokens TOML allows such as ``inf``,
   ``nan``, ``1e309`` and 30-digit integers, deep nesting, flipped and inserted bytes,
   invalid UTF-8, truncation, duplicated lines, megabytes of comments).
@@ -50,7 +51,8 @@ MAX_EXAMPLES = 10
 CROSS_CHECK = ("OSQP", "PIQP")
 
 #: Library scenes whose files seed the structured mutations (small: one step is cheap).
-SEED_SCENES = ("tilted-drop", "stack-3", "overlap-recovery", "wall-contact", "rain-4")
+SEED_SCENES = ("tilted-drop", "stack-3", "overlap-recovery", "wall-contact", "rain-4",
+               "plank-drop", "domino-row")
 
 #: Numbers a field may be replaced by: boundaries of :data:`wuerfel_cvx.scene.LIMITS`,
 #: the extremes of doubles, signs, and TOML integers beyond 64 bits.
@@ -146,7 +148,7 @@ def check_input(path: Path, *, step: bool = True,
     except BaseException as exc:  # noqa: BLE001 - any other exception is the finding
         return "crash", _describe(exc)
     if not step:
-        return "accepted", f"{scene.n_boxes} squares (not stepped)"
+        return "accepted", f"{scene.n_boxes} bodies (not stepped)"
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error", RuntimeWarning)  # overflow in the geometry
@@ -164,7 +166,7 @@ def check_input(path: Path, *, step: bool = True,
     if not (np.all(np.isfinite(trajectory.points)) and
             np.all(np.isfinite(trajectory.velocities))):
         return "crash", "a loaded scene stepped to a non-finite state"
-    return "accepted", f"{scene.n_boxes} squares"
+    return "accepted", f"{scene.n_boxes} bodies"
 
 
 def _judge_input_error(error: InputError, source: str) -> tuple[Outcome, str]:
@@ -278,7 +280,7 @@ def _mutate_structure(rng: random.Random, text: bytes) -> tuple[str, bytes]:
 def _slots(data: dict[str, Any]) -> list[tuple[str, dict[str, Any], str]]:
     """Every ``(dotted path, containing table, key)`` of the scene's values."""
     slots = [(key, data, key) for key in data]
-    for group in ("squares", "tables"):
+    for group in ("squares", "boxes", "tables"):
         entries = data.get(group)
         if isinstance(entries, list):
             for i, entry in enumerate(entries):
@@ -341,22 +343,38 @@ def _nest(rng: random.Random, data: dict[str, Any]) -> str:
 def _many_squares(rng: random.Random, data: dict[str, Any]) -> str:
     count = rng.choice((40, 40, 400))  # 400: as many as the library's largest scene
     spread = rng.choice((1.0, 3.0))  # 1.0: touching or overlapping unit squares
-    squares = [{"center": [spread * (i % 40), 5.0 + spread * (i // 40)],
-                "size": 1.0 if spread > 1.0 else rng.choice((1.0, 1.2))}
-               for i in range(count)]
-    data["squares"] = squares
-    return f"{count} squares at spacing {spread}"
+    group = rng.choice(("squares", "boxes"))
+    bodies = []
+    for i in range(count):
+        side = 1.0 if spread > 1.0 else rng.choice((1.0, 1.2))
+        bodies.append({"center": [spread * (i % 40), 5.0 + spread * (i // 40)],
+                       "size": side if group == "squares" else [side, side / 2]})
+    data[group] = bodies
+    return f"{count} {group} at spacing {spread}"
+
+
+def _swap_size_kind(rng: random.Random, data: dict[str, Any]) -> str:
+    """A square's ``size`` written as a box's pair, or a box's pair as a scalar."""
+    entries = [(group, i, entry) for group in ("squares", "boxes")
+               for i, entry in enumerate(data.get(group) or [])
+               if isinstance(entry, dict) and "size" in entry]
+    if not entries:
+        return _set_value(rng, data)
+    group, index, entry = rng.choice(entries)
+    size = entry["size"]
+    entry["size"] = size[0] if isinstance(size, list) and size else [size, size]
+    return f"swap the kind of {group}[{index}].size"
 
 
 def _empty_groups(rng: random.Random, data: dict[str, Any]) -> str:
-    group = rng.choice(("squares", "tables"))
+    group = rng.choice(("squares", "boxes", "tables"))
     data[group] = rng.choice(([], [{}], [[]], {}, [{"center": []}]))
     return f"replace {group} by {data[group]!r}"
 
 
 _STRUCTURE_EDITS: tuple[Callable[[random.Random, dict[str, Any]], str], ...] = (
     _set_value, _set_value, _set_value, _negate, _delete_key, _add_key, _unicode_name,
-    _nest, _many_squares, _empty_groups,
+    _nest, _many_squares, _empty_groups, _swap_size_kind,
 )
 
 
@@ -391,7 +409,7 @@ def _flip_bytes(rng: random.Random, text: bytes) -> tuple[str, bytes]:
 
 def _insert_bytes(rng: random.Random, text: bytes) -> tuple[str, bytes]:
     chunk = rng.choice((b"\xff\xfe", b"\xc3", b"\x00", b"\r", b"\"", b"'''", b"[[", b"]]",
-                        b"=", b"\n[[squares]]\n", b"\\u0000", "ü".encode(),
+                        b"=", b"\n[[squares]]\n", b"\n[[boxes]]\n", b"\\u0000", "ü".encode(),
                         "\U0001f9ca".encode()))
     position = rng.randrange(len(text) + 1)
     return f"insert {chunk!r} at {position}", text[:position] + chunk + text[position:]

@@ -1,6 +1,7 @@
 """Random valid scenes and the physical invariants every run of them must keep.
 
-A generated scene is 1 to 8 squares of random size, angle, mass (ratio up to 100),
+A generated scene is 1 to 8 squares and boxes (about half of each; a box's width to
+height ratio up to 4 either way) of random size, angle, mass (ratio up to 100),
 velocity and spin, placed without overlap above one wide table (top face at y = 0).
 :func:`random_scene` draws one from a :class:`numpy.random.Generator`; the property
 tests draw the same :class:`SquareDraw` numbers with hypothesis and call the same
@@ -95,13 +96,14 @@ from typing import Any
 
 import numpy as np
 
+from ..bodies import half_diagonal
 from ..errors import StepFailure
 from ..formulations import VelocityFormulation
 from ..formulations.rigid import body_velocities
 from ..library import FLOOR
 from ..metrics import deepest_penetration, total_energy
 from ..model import Model, State
-from ..scene import Scene, Square
+from ..scene import Box, Scene, Square
 from ..simulate import simulate
 from ..trajectory import Trajectory
 
@@ -126,15 +128,20 @@ SPIN_LIMIT = 10.0
 X_RANGE = (-4.0, 4.0)
 """Horizontal centre position (m)."""
 GAP_RANGE = (0.0, 1.0)
-"""Clearance (m) between a square's bounding circle and what is below it."""
+"""Clearance (m) between a body's bounding circle and what is below it."""
+BOX_SHARE = 0.5
+"""Probability that a generated body is a box rather than a square."""
+ASPECT_RANGE = (0.25, 4.0)
+"""Width over height of a generated box (log-uniform); its area is ``size^2``."""
 
 
 @dataclass(frozen=True)
 class SquareDraw:
-    """The random numbers of one generated square (placed by :func:`scene_from_draws`)."""
+    """The random numbers of one generated square or box (see :func:`scene_from_draws`)."""
 
     size: float
-    """Side length (m)."""
+    """Side length (m) of a square; a box of the same area has sides
+    ``size sqrt(aspect)`` (width) and ``size / sqrt(aspect)`` (height)."""
     angle: float
     """Orientation (rad)."""
     mass: float
@@ -146,38 +153,56 @@ class SquareDraw:
     x: float
     """Horizontal centre position (m)."""
     gap: float
-    """Clearance (m) above the table or the squares already placed below."""
+    """Clearance (m) above the table or the bodies already placed below."""
+    aspect: float | None = None
+    """Width over height of a box (1); ``None`` for a square."""
+
+    def body(self, center: tuple[float, float]) -> Square | Box:
+        """The drawn square or box at ``center`` (m)."""
+        if self.aspect is None:
+            return Square(center, self.size, self.angle, self.mass, self.velocity,
+                          self.angular_velocity)
+        stretch = math.sqrt(self.aspect)
+        return Box(center, (self.size * stretch, self.size / stretch), self.angle, self.mass,
+                   self.velocity, self.angular_velocity)
+
+    def radius(self) -> float:
+        """Bounding-circle radius (m): the half diagonal."""
+        if self.aspect is None:
+            return self.size / math.sqrt(2.0)
+        return half_diagonal(self.body((0.0, 0.0)))
 
 
 def scene_from_draws(draws: Sequence[SquareDraw], name: str = "generated") -> Scene:
-    """Place the drawn squares above the library's floor without overlap.
+    """Place the drawn squares and boxes above the library's floor without overlap.
 
-    Squares are placed in order; each is kept apart from the floor and from every
-    square placed before it by its bounding circle (radius half the diagonal) plus
-    its ``gap``: it sits ``gap`` above the floor, or above the highest earlier square
-    whose circle it would meet horizontally.  Circles apart means squares apart, so
+    Bodies are placed in order; each is kept apart from the floor and from every
+    body placed before it by its bounding circle (radius half the diagonal) plus
+    its ``gap``: it sits ``gap`` above the floor, or above the highest earlier body
+    whose circle it would meet horizontally.  Circles apart means bodies apart, so
     the scene passes the loader's overlap check for any draws.
     """
     placed: list[tuple[float, float, float]] = []  # x, y, radius
-    squares = []
+    bodies = []
     for draw in draws:
-        radius = draw.size / math.sqrt(2.0)
+        radius = draw.radius()
         y = radius + draw.gap
         for x_other, y_other, radius_other in placed:
             if abs(draw.x - x_other) < radius + radius_other + draw.gap:
                 y = max(y, y_other + radius_other + radius + draw.gap)
         placed.append((draw.x, y, radius))
-        squares.append(Square(center=(draw.x, y), size=draw.size, angle=draw.angle,
-                              mass=draw.mass, velocity=draw.velocity,
-                              angular_velocity=draw.angular_velocity))
-    return Scene(name, tuple(squares), (FLOOR,))
+        bodies.append(draw.body((draw.x, y)))
+    return Scene(name, tuple(b for b in bodies if isinstance(b, Square)), (FLOOR,),
+                 boxes=tuple(b for b in bodies if isinstance(b, Box)))
 
 
 def random_draws(rng: np.random.Generator, n_squares: int | None = None) -> list[SquareDraw]:
-    """Random square parameters in the documented ranges (``n_squares`` 1..8 if None)."""
+    """Random square and box parameters in the documented ranges (1..8 bodies if None)."""
     count = int(rng.integers(1, MAX_SQUARES + 1)) if n_squares is None else n_squares
     draws = []
     for _ in range(count):
+        is_box = rng.uniform() < BOX_SHARE
+        aspect = float(math.exp(rng.uniform(*np.log(ASPECT_RANGE))))
         draws.append(SquareDraw(
             size=float(rng.uniform(*SIZE_RANGE)),
             angle=float(rng.uniform(-math.pi, math.pi)),
@@ -187,13 +212,14 @@ def random_draws(rng: np.random.Generator, n_squares: int | None = None) -> list
             angular_velocity=float(rng.uniform(-SPIN_LIMIT, SPIN_LIMIT)),
             x=float(rng.uniform(*X_RANGE)),
             gap=float(rng.uniform(*GAP_RANGE)),
+            aspect=aspect if is_box else None,
         ))
     return draws
 
 
 def random_scene(rng: np.random.Generator, n_squares: int | None = None,
                  name: str = "generated") -> Scene:
-    """A random valid scene: 1 to 8 squares (or ``n_squares``) above the floor."""
+    """A random valid scene: 1 to 8 squares and boxes (or ``n_squares``) above the floor."""
     return scene_from_draws(random_draws(rng, n_squares), name=name)
 
 
@@ -232,9 +258,9 @@ def run_bounds(trajectory: Trajectory, scene: Scene | None = None,
     steps = trajectory.n_steps
     n = scene.n_boxes
     gravity = float(np.hypot(*scene.gravity))
-    masses = np.array([s.mass for s in scene.squares])
+    masses = np.array([b.mass for b in scene.bodies])
     total_mass = float(masses.sum())
-    radius = max(s.size for s in scene.squares) / math.sqrt(2.0)
+    radius = max(half_diagonal(b) for b in scene.bodies)
     spin, speed = _spins_and_speeds(trajectory, n)
     depth_start = deepest_penetration(Model.from_scene(scene), trajectory.points[0])
     metrics = trajectory.metrics
