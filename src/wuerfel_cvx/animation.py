@@ -168,9 +168,9 @@ class Frame:
         self.label.set_text(f"t = {self.trajectory.times[index]:.3f} s   step {index}")
 
 
-LONG_TABLE = 3.0
-"""A table longer along x (or y) than this many times the view of the bodies and the
-other tables is a floor (or wall) running on: the view holds only its part in reach."""
+LONG_TABLE = 5.0
+"""A table longer along x (or y) than this many times the bodies' view (their extent and
+margin) is a floor (or wall) running on: the view holds only its part near them."""
 
 Limits = tuple[tuple[float, float], tuple[float, float]]
 
@@ -180,8 +180,8 @@ def view_limits(trajectory: Trajectory, indices: IntArray) -> Limits:
 
     The bodies of every state in ``indices`` are inside with a margin (at least 0.5 m), and
     every table with a fifth of it, except along an axis where a table is longer than
-    :data:`LONG_TABLE` times the bodies' extent (a 40 m floor under a 1 m square): there
-    the view holds the bodies, and reaches the table's nearest end if it lies beside them.
+    :data:`LONG_TABLE` times the bodies' view (a 40 m floor under a 1 m square): there the
+    view holds the bodies, and reaches the table's nearest end if it lies beside them.
     """
     bodies = np.asarray(trajectory.points)[indices].reshape(-1, 2)
     tables = np.asarray(trajectory.table_points, dtype=np.float64).reshape(-1, 4, 2)
@@ -190,11 +190,10 @@ def view_limits(trajectory: Trajectory, indices: IntArray) -> Limits:
     t_low, t_high = tables.min(axis=1), tables.max(axis=1)  # (tables, 2) each
     if bodies.size:
         low, high = bodies.min(axis=0), bodies.max(axis=0)
-        short = (t_high - t_low) <= LONG_TABLE * np.maximum(high - low, 1.0)
     else:
         low, high = t_low.min(axis=0), t_high.max(axis=0)
-        short = np.ones_like(t_low, dtype=bool)
     pad = max(0.5, 0.1 * float(np.max(high - low)))
+    short = (t_high - t_low) <= LONG_TABLE * (high - low + 2 * pad)
     # Bodies get the whole margin, tables a fifth of it: a floor's underside needs no air.
     low = np.min(np.vstack([low - pad, np.where(short, t_low - pad / 5, np.inf)]), axis=0)
     high = np.max(np.vstack([high + pad, np.where(short, t_high + pad / 5, -np.inf)]), axis=0)
