@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.lines import Line2D
+from matplotlib.typing import LineStyleType
 
 from .figures import many_formulations, new_figure, pairs, save_figure, solver_handles, subplot_grid
 from .selection import (
@@ -40,12 +41,13 @@ def plot_pareto(results: pd.DataFrame, out_dir: str | Path, stem: str = "pareto"
     rows = math.ceil(len(scenes) / min(columns, len(scenes)))
     figure = new_figure(4.3 * min(columns, len(scenes)), 3.3 * rows + 1.0)
     axes = subplot_grid(figure, len(scenes), columns, share=True)
+    drawn: set[str] = set()
     for axis, scene in zip(axes, scenes, strict=True):
-        _pareto_panel(axis, points[is_value(points["scene"], scene)], floor)
+        drawn |= _pareto_panel(axis, points[is_value(points["scene"], scene)], floor)
         axis.set_title(scene, fontsize=10)
     for axis in axes:
         axis.label_outer()
-    handles = _pareto_legend(points)
+    handles = _pareto_legend(points, drawn)
     figure.legend(handles=handles, loc="outside lower center", ncols=min(6, len(handles)),
                   fontsize=8, frameon=False)
     figure.suptitle("Speed against accuracy (status ok, with a trajectory error)",
@@ -63,17 +65,18 @@ def plot_pareto_headline(results: pd.DataFrame, out_dir: str | Path, scene: str 
         return []
     figure = new_figure(7.5, 5.2)
     axis = figure.subplots()
-    _pareto_panel(axis, points, log_floor(points["trajectory_error"]))
+    drawn = _pareto_panel(axis, points, log_floor(points["trajectory_error"]))
     axis.set_title(f"Speed against accuracy: {scene}", fontsize=11)
-    axis.legend(handles=_pareto_legend(points), loc="best", fontsize=8)
+    axis.legend(handles=_pareto_legend(points, drawn), loc="best", fontsize=8)
     return save_figure(figure, Path(out_dir), stem)
 
 
-def _pareto_panel(axis: Axes, points: pd.DataFrame, floor: float) -> None:
+def _pareto_panel(axis: Axes, points: pd.DataFrame, floor: float) -> set[str]:
+    """Draw one panel; returns the kinds of line drawn (``tol``, ``dt``, ``front``)."""
     x = points["wall_time_per_simulated_second"].to_numpy(dtype=float)
     y = np.maximum(points["trajectory_error"].to_numpy(dtype=float), floor)
     plotted = points.assign(_x=x, _y=y, _variant=variant_labels(points).to_numpy())
-    _sweep_lines(axis, plotted)
+    drawn = _sweep_lines(axis, plotted)
     for (formulation, solver), group in plotted.groupby(["formulation", "solver"]):
         colour, marker = solver_style(str(solver))
         axis.scatter(group["_x"], group["_y"], marker=marker, s=36, zorder=3,
@@ -83,6 +86,7 @@ def _pareto_panel(axis: Axes, points: pd.DataFrame, floor: float) -> None:
     if len(front):
         axis.plot(x[front], y[front], drawstyle="steps-post", color="black", linewidth=1.4,
                   alpha=0.8, zorder=2)
+        drawn.add("front")
     if bool(np.any(points["trajectory_error"].to_numpy(dtype=float) <= floor)):
         axis.axhline(floor, color="grey", linestyle=(0, (1, 2)), linewidth=0.8)
         axis.annotate(f"error 0 (drawn at {floor:.0e} m)", (0.01, floor), fontsize=7,
@@ -93,9 +97,12 @@ def _pareto_panel(axis: Axes, points: pd.DataFrame, floor: float) -> None:
     axis.set_xlabel("wall time per simulated second (s/s)")
     axis.set_ylabel("trajectory error (m)")
     axis.grid(True, which="major", linewidth=0.3, alpha=0.6)
+    return drawn
 
 
-def _sweep_lines(axis: Axes, plotted: pd.DataFrame) -> None:
+def _sweep_lines(axis: Axes, plotted: pd.DataFrame) -> set[str]:
+    """Join configurations across tolerances and across time steps; returns which were."""
+    drawn: set[str] = set()
     base = ["formulation", "solver", "_variant"]
     sweeps = ((["dt", *base], "tol", "-"), (["tol", *base], "dt", ":"))
     for keys, along, style in sweeps:
@@ -108,16 +115,25 @@ def _sweep_lines(axis: Axes, plotted: pd.DataFrame) -> None:
             colour, _ = solver_style(str(group["solver"].iloc[0]))
             axis.plot(ordered["_x"], ordered["_y"], linestyle=style, color=colour,
                       linewidth=0.9, alpha=0.55, zorder=1)
+            drawn.add(along)
+    return drawn
 
 
-def _pareto_legend(points: pd.DataFrame) -> list[Line2D]:
+_PARETO_LINES: dict[str, tuple[str, float, LineStyleType, str]] = {
+    "tol": ("grey", 0.9, "-", "across tol presets"),
+    "dt": ("grey", 0.9, ":", "across dt"),
+    "front": ("black", 1.4, "-", "Pareto front"),
+}
+"""Colour, width, style and legend text of each kind of line in the speed/accuracy plots."""
+
+
+def _pareto_legend(points: pd.DataFrame, drawn: set[str]) -> list[Line2D]:
+    """Entries for the solvers of ``points`` and for the kinds of line ``drawn``."""
     handles = solver_handles(pairs(points), many_formulations(points), lines=False)
-    handles += [
-        Line2D([], [], color="grey", linewidth=0.9, label="across tol presets"),
-        Line2D([], [], color="grey", linewidth=0.9, linestyle=":", label="across dt"),
-        Line2D([], [], color="black", linewidth=1.4, label="Pareto front"),
-    ]
-    return handles
+    return handles + [Line2D([], [], color=colour, linewidth=width, linestyle=style,
+                             label=label)
+                      for kind, (colour, width, style, label) in _PARETO_LINES.items()
+                      if kind in drawn]
 
 
 def plot_drift_penetration(results: pd.DataFrame, series_dir: str | Path, out_dir: str | Path,

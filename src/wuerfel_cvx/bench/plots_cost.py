@@ -100,10 +100,11 @@ def plot_success_rates(results: pd.DataFrame, out_dir: str | Path,
     axis.set_ylim(0, 1.3)
     axis.set_yticks(np.linspace(0.0, 1.0, 6))
     axis.set_ylabel("rate")
-    axis.legend(handles=[Patch(facecolor="grey", label="success (claimed on every step)"),
-                         Patch(facecolor="white", edgecolor="grey", hatch="///",
-                               label="verified / success (n/a: no residual check)")],
-                loc="upper center", ncols=2, fontsize=8, frameon=False)
+    handles = [Patch(facecolor="grey", label="success (claimed on every step)")]
+    if bool(counts["verified_rate"].notna().any()):  # some hatched bar was drawn
+        handles.append(Patch(facecolor="white", edgecolor="grey", hatch="///",
+                             label="verified / success (n/a: no residual check)"))
+    axis.legend(handles=handles, loc="upper center", ncols=2, fontsize=8, frameon=False)
     axis.set_title("Success and verified rates per solver (counts above bars)", fontsize=11)
     return save_figure(figure, Path(out_dir), stem)
 
@@ -167,31 +168,55 @@ def plot_timing_breakdown(results: pd.DataFrame, out_dir: str | Path,
     if table.empty:
         return []
     table, labels = _sorted_with_labels(table)
-    figure = new_figure(max(5.0, 1.2 + 0.8 * len(table)), 4.2)
+    figure = new_figure(max(5.0, 1.2 + 0.8 * len(table)) + 2.0, 4.2)  # + the legend
     axis = figure.subplots()
-    for position, row in enumerate(table.itertuples()):
-        colour, _ = solver_style(str(row.solver))
-        _stacked_bar(axis, float(position), colour, 1e3 * as_float(row.solver_time),
-                     1e3 * as_float(row.modelling), 1e3 * as_float(row.wall))
+    peers = bool(table["formulation"].eq("peer").any())
+    if peers:  # engines a hundred times faster or slower: a linear axis hides them
+        axis.set_yscale("log")
+    kinds = {_stacked_bar(axis, float(position), solver_style(str(row.solver))[0],
+                          1e3 * as_float(row.solver_time), 1e3 * as_float(row.modelling),
+                          1e3 * as_float(row.wall), log=peers)
+             for position, row in enumerate(table.itertuples())}
+    if peers:
+        tops = table["wall"].to_numpy(dtype=float)
+        tops = tops[np.isfinite(tops) & (tops > 0)]
+        if len(tops):  # bars start a decade below the fastest engine's step
+            axis.set_ylim(bottom=10.0 ** math.floor(math.log10(1e3 * float(tops.min()))))
+        axis.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+        axis.yaxis.set_minor_formatter(FuncFormatter(  # 2 and 5 of each decade
+            lambda value, _: f"{value:g}" if f"{value:.0e}"[0] in "25" else ""))
     axis.set_xticks(range(len(labels)), labels, fontsize=8)
-    axis.set_ylabel("median time per step (ms)")
-    axis.legend(handles=[Patch(facecolor="grey", label="solver's own time"),
-                         Patch(facecolor="grey", alpha=0.35, label="modelling (rest of step)"),
-                         Patch(facecolor="white", edgecolor="grey", hatch="..",
-                               label="whole step (no split)")], fontsize=8)
+    axis.set_ylabel("median time per step (ms)" + (", log scale" if peers else ""))
+    axis.legend(handles=[patch for kind, patches in _TIMING_LEGEND.items() if kind in kinds
+                         for patch in patches], fontsize=8, loc="upper left",
+                bbox_to_anchor=(1.01, 1.0))
     axis.set_title("Where a step's time goes (medians over grid points)", fontsize=11)
     return save_figure(figure, Path(out_dir), stem)
 
 
+_TIMING_LEGEND: dict[str, tuple[Patch, ...]] = {
+    "split": (Patch(facecolor="grey", label="solver's own time"),
+              Patch(facecolor="grey", alpha=0.35, label="modelling (rest of step)")),
+    "whole": (Patch(facecolor="white", edgecolor="grey", hatch="..",
+                    label="whole step (no split)"),),
+}
+"""Legend entries of the timing bars, by kind of bar (split or whole step)."""
+
+
 def _stacked_bar(axis: Axes, x: float, colour: str, solver_ms: float, modelling_ms: float,
-                 wall_ms: float) -> None:
-    if math.isnan(solver_ms) or math.isnan(modelling_ms):
+                 wall_ms: float, log: bool = False) -> str:
+    """Draw one solver's bar; returns its kind (``split`` or ``whole``, see above).
+
+    On a log axis a bar starts at the axis' floor, so only its top is a time.
+    """
+    if math.isnan(solver_ms) or math.isnan(modelling_ms) or (log and solver_ms <= 0):
         axis.bar(x, wall_ms, 0.6, color="white", edgecolor=colour, hatch="..")
-        top = wall_ms
+        kind, top = "whole", wall_ms
     else:
         axis.bar(x, solver_ms, 0.6, color=colour, edgecolor=colour)
         axis.bar(x, modelling_ms, 0.6, bottom=solver_ms, color=colour, alpha=0.35,
                  edgecolor=colour)
-        top = solver_ms + modelling_ms
+        kind, top = "split", solver_ms + modelling_ms
     axis.annotate(f"{wall_ms:.3g}", (x, top), ha="center", va="bottom", fontsize=7,
                   xytext=(0, 2), textcoords="offset points")
+    return kind

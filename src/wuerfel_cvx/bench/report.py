@@ -68,6 +68,7 @@ def write_report(results_csv: str | Path, root: str | Path = "reports",
     the results CSV goes there too, so a report carries its data.  Returns the README's path.
     """
     results_csv = Path(results_csv)
+    _refuse_metrics_file(results_csv)
     results = schema.read_results(results_csv)
     suite = suite_name(results, source=str(results_csv))
     if headline is not None and headline not in set(results["scene"].dropna()):
@@ -182,3 +183,22 @@ def _remove_old_plots(out_dir: Path) -> None:
     for stem in plots.PLOT_STEMS:
         for suffix in (".png", ".svg"):
             (out_dir / f"{stem}{suffix}").unlink(missing_ok=True)
+
+
+def _refuse_metrics_file(path: Path) -> None:
+    """Say what a per-step metrics CSV is, instead of listing the columns it lacks.
+
+    A file whose header shares more columns with :data:`~wuerfel_cvx.simulate.METRIC_COLUMNS`
+    than with the results schema is taken for a metrics file.
+    """
+    try:
+        with path.open(encoding="utf-8") as handle:
+            header = set(handle.readline().strip().split(","))
+    except (OSError, UnicodeDecodeError):
+        return  # read_results says what is wrong with it
+    from ..simulate import METRIC_COLUMNS
+
+    if len(header & set(METRIC_COLUMNS)) > len(header & set(schema.COLUMN_NAMES)):
+        raise InputError("is a per-step metrics file of one run (from 'simulate --out' or "
+                         "Trajectory.save); 'report' takes a benchmark results CSV written "
+                         "by 'wuerfel-cvx bench'", source=str(path))

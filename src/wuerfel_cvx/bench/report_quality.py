@@ -81,8 +81,9 @@ def accuracy_section(results: pd.DataFrame, images: dict[str, list[Path]],
     table = solver_rows(accuracy_table(results))
     parts = ["## Accuracy",
              "Over the completed grid points (status ok).  Trajectory error: largest corner "
-             "distance to the reference (the same scene at dt/8 with CLARABEL at tol high, "
-             "or the resting initial state), over the points that have a reference.  "
+             "distance to the reference: the same formulation at dt/8 (same scene, CLARABEL "
+             "at tol high, fixed tables and five rods; for peers the velocity formulation), "
+             "or the resting initial state; over the points that have a reference.  "
              "Energy gain: largest E(t) − E(0); positive means the step made energy."]
     if table.empty:
         parts.append("No grid point completed.")
@@ -194,5 +195,6 @@ def _failed_references(results: pd.DataFrame) -> str:
           cell_text(group["reference_kind"].iloc[0]).replace("|", "\\|")]
          for (scene, formulation, dt), group in groups),
         align="lllrl")
-    return ("\n\n### Failed reference runs\n\nThe dt/8 reference (CLARABEL at tol high) of "
-            "these scenes failed, so their grid points have no trajectory error.\n\n" + table)
+    return ("\n\n### Failed reference runs\n\nThe reference run of these scenes (the same "
+            "formulation at dt/8, CLARABEL at tol high) failed, so their grid points have no "
+            "trajectory error.\n\n" + table)

@@ -126,7 +126,11 @@ def speed_section(results: pd.DataFrame, images: dict[str, list[Path]],
         parts += ["### Where the time goes", image,
                   "Medians over all completed grid points of each solver (not only the common "
                   "ones); an engine that reports no solver time of its own gets one hatched "
-                  "bar for the whole step."]
+                  "bar for the whole step."
+                  + ("  With peer engines the time axis is logarithmic, as their steps take "
+                     "a fraction of ours: read a bar by the number on its top (on a log axis "
+                     "the solver and modelling parts are not in proportion)."
+                     if bool(peers.any()) else "")]
     return "\n\n".join(parts)
 
 
@@ -143,20 +147,29 @@ def point_time_table(results: pd.DataFrame) -> str:
     rows = completed_rows(results)
     if rows.empty or len(rows) > POINT_TABLE_LIMIT:
         return ""
-    rows = rows.sort_values(["scene", "formulation", "solver", "tol", "dt", "sleep"],
-                            kind="stable")
+    rows = rows.sort_values(["scene", "formulation", "solver", "tol", "dt", "table_mass",
+                             "sleep"], kind="stable", na_position="first")
     table = markdown_table(
-        ["scene", "formulation", "solver", "tol", "dt (s)", "sleep", "wall (ms)",
-         "solver (ms)", "step / solver"],
+        ["scene", "formulation", "solver", "tol", "dt (s)", "table mass (kg)", "sleep",
+         "wall (ms)", "solver (ms)", "step / solver"],
         ([row.scene, row.formulation, row.solver, row.tol, format_number(row.dt),
-          "yes" if bool(row.sleep) else "no", format_ms(row.wall_time_per_step_median),
+          table_mass_text(row.table_mass), "yes" if bool(row.sleep) else "no",
+          format_ms(row.wall_time_per_step_median),
           format_ms(row.solver_time_per_step_median),
           format_ratio(plots.as_float(row.step_over_solver_median))]
          for row in rows.itertuples()),
-        align="lllllrrrr")
+        align="llllllrrrr")
     return ("### Each grid point\n\nMedian whole-step and solver time per step of every "
             "completed grid point, and the median of their per-step ratio (*step / solver*).  "
+            "*Table mass*: the seed's heavy-table variant (table corners as variables of "
+            "that mass per corner), *fixed* for constant tables.  "
             "Peer engines' *solver* is their own stepping function.\n\n" + table)
+
+
+def table_mass_text(mass: object) -> str:
+    """A table mass (kg) as cell text, ``fixed`` when the tables are constants."""
+    value = plots.as_float(mass)
+    return "fixed" if math.isnan(value) else format_number(value)
 
 
 def _formulations(results: pd.DataFrame) -> list[str]:
