@@ -130,8 +130,13 @@ def speed_section(results: pd.DataFrame, images: dict[str, list[Path]],
                   + ("  With peer engines the time axis is logarithmic, as their steps take "
                      "a fraction of ours: read a bar by the number on its top (on a log axis "
                      "the solver and modelling parts are not in proportion)."
-                     if bool(peers.any()) else "")]
+                     if _peers_timed(results) else "")]
     return "\n\n".join(parts)
+
+
+def _peers_timed(results: pd.DataFrame) -> bool:
+    """Whether the timing plot has a peer engine's bar (then its axis is logarithmic)."""
+    return bool(plots.timing_breakdown(results)["formulation"].eq("peer").any())
 
 
 POINT_TABLE_LIMIT = 60
