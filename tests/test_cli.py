@@ -373,3 +373,18 @@ def test_animation_progress_follows_the_flag(flag: str, shown: bool, tmp_path: P
                  "--animate", str(tmp_path / "a.gif")]) == 0
     err = capsys.readouterr().err
     assert ("a.gif:" in err and "frame" in err) is shown  # tqdm's bar: "a.gif: ... frame/s"
+
+
+def test_ctrl_c_before_any_trajectory_keeps_nothing(tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    import wuerfel_cvx.cli as cli
+    from wuerfel_cvx.errors import Interrupted
+
+    def stopped(*args: object, **kwargs: object) -> Trajectory:
+        raise Interrupted(1)  # no trajectory attached
+
+    monkeypatch.setattr(cli, "simulate", stopped)
+    assert main(["simulate", "tilted-drop", "--out", str(tmp_path / "run")]) == 130
+    assert capsys.readouterr().err == "wuerfel-cvx: interrupted during step 1; kept no steps\n"
+    assert list(tmp_path.iterdir()) == []

@@ -153,11 +153,13 @@ def _simulate(args: argparse.Namespace) -> int:
         _keep_partial(failure.trajectory, args, progress, "before it")
         return 1
     except Interrupted as stop:
-        kept = stop.trajectory.n_steps if stop.trajectory is not None else 0
         where = _keep_partial(stop.trajectory, args, progress, "done")
-        print(f"{PROG}: interrupted during step {stop.step}; kept {kept} steps"
-              + (f" in {where}" if where else " (no --out or --animate to keep them in)"),
-              file=sys.stderr)
+        if stop.trajectory is None:
+            kept = "kept no steps"
+        else:
+            kept = f"kept {stop.trajectory.n_steps} steps " + (
+                f"in {where}" if where else "(no --out or --animate to keep them in)")
+        print(f"{PROG}: interrupted during step {stop.step}; {kept}", file=sys.stderr)
         return INTERRUPTED
     print(trajectory.summary())
     rescued = trajectory.metrics["status"] != trajectory.metrics["primary_status"]
