@@ -1,14 +1,15 @@
 """Pictures of a trajectory: one frame, or an animation written to a GIF or an MP4.
 
-A frame shows the squares as polygons, the tables filled, the *active contacts* (corners
-within :data:`CONTACT_MARGIN` of a foreign body's edge, found by the package's own
-contact search :func:`~wuerfel_cvx.contacts.find_contacts`) as dots, and the time and
-step in a corner.  Axes are in metres with equal aspect, fixed over an animation.
+A frame shows the moving bodies as polygons, the tables filled, the *active contacts*
+(corners within :data:`CONTACT_MARGIN` of a foreign body's edge, found by the package's
+own contact search :func:`~wuerfel_cvx.contacts.find_contacts`) as dots, and the time and
+step in a band above the axes.  Axes are in metres with equal aspect, fixed over an
+animation, and hold every body and table (:func:`view_limits`).
 
 A long trajectory is subsampled: frames are taken at ``fps`` frames per second of
 simulated time (nearest stored state) and at most ``max_frames`` of them, so an
-animation plays in real time unless the cap slows it.  ``.gif`` is written with Pillow;
-``.mp4`` needs ``ffmpeg`` on the ``PATH``.
+animation plays in real time unless the cap slows it.  ``.gif`` is written with Pillow
+from blitted frames (:func:`blitted_frames`); ``.mp4`` needs ``ffmpeg`` on the ``PATH``.
 """
 
 from __future__ import annotations
