@@ -223,3 +223,168 @@ def test_islands_flag_reaches_simulate(flags: list[str], islands: bool,
     assert main(["simulate", "stack-3", "--steps", "3", *flags]) == 0
     assert seen["islands"] is islands
     assert "verified steps       3/3" in capsys.readouterr().out
+
+
+# ------------------------------------------------- outputs checked before the run
+def _refuse_to_simulate(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Make the CLI's simulate fail the test if it is reached."""
+    import wuerfel_cvx.cli as cli
+
+    def not_expected(*args: object, **kwargs: object) -> Trajectory:
+        raise AssertionError("the run started although its outputs were already known bad")
+
+    monkeypatch.setattr(cli, "simulate", not_expected)
+
+
+def _one_error_line(captured: pytest.CaptureResult[str]) -> str:
+    assert captured.out == ""  # no summary: the run never started
+    lines = captured.err.splitlines()
+    assert len(lines) == 1, captured.err
+    assert lines[0].startswith(ERROR_PREFIX)
+    return lines[0]
+
+
+@pytest.mark.parametrize("fps", ["0", "-5", "nan", "inf"])
+def test_bad_fps_is_refused_before_the_run(fps: str, tmp_path: Path,
+                                           monkeypatch: pytest.MonkeyPatch,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    _refuse_to_simulate(monkeypatch)
+    status = main(["simulate", "tilted-drop", "--steps", "300", "--fps", fps,
+                   "--animate", str(tmp_path / "a.gif")])
+    line = _one_error_line(capsys.readouterr())
+    assert status == 2
+    assert "--fps" in line and "positive number of frames per second" in line
+    assert not (tmp_path / "a.gif").exists()
+
+
+@pytest.mark.parametrize(("option", "target", "reason"), [
+    ("--animate", "blocker/a.gif", "blocker is a file, not a folder"),
+    ("--animate", "folder.gif", "a folder of that name exists"),
+    ("--out", "blocker/run", "blocker is a file, not a folder"),
+    ("--out", "folder.npz", "a folder of that name exists"),
+])
+def test_unwritable_output_is_refused_before_the_run(
+        option: str, target: str, reason: str, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "blocker").write_text("not a folder")
+    (tmp_path / "folder.gif").mkdir()
+    (tmp_path / "folder.npz").mkdir()
+    monkeypatch.chdir(tmp_path)
+    _refuse_to_simulate(monkeypatch)
+    status = main(["simulate", "tilted-drop", "--steps", "300", option, target])
+    line = _one_error_line(capsys.readouterr())
+    assert status == 2
+    assert line == f"{ERROR_PREFIX} {target}: {option}: cannot write ({reason})"
+
+
+def test_checking_the_outputs_leaves_no_file_behind(tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    # A bad --fps is found after --out was checked: the check must not leave files.
+    _refuse_to_simulate(monkeypatch)
+    status = main(["simulate", "tilted-drop", "--out", str(tmp_path / "new" / "run"),
+                   "--animate", str(tmp_path / "new" / "a.gif"), "--fps", "0"])
+    assert status == 2
+    assert "--fps" in capsys.readouterr().err
+    assert list((tmp_path / "new").iterdir()) == []
+
+
+def test_version_is_the_distributions(capsys: pytest.CaptureFixture[str]) -> None:
+    import tomllib
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    assert capsys.readouterr().out == f"wuerfel-cvx {version('wuerfel_cvx')}\n"
+    project = Path(__file__).resolve().parents[1] / "pyproject.toml"
+    assert version("wuerfel_cvx") == tomllib.loads(project.read_text())["project"]["version"]
+
+
+def test_version_in_a_real_process(tmp_path: Path) -> None:
+    from importlib.metadata import version
+
+    result = run_cli("--version", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == f"wuerfel-cvx {version('wuerfel_cvx')}"
+
+
+# ------------------------------------------------------------------- Ctrl-C
+def _interrupt_after(done: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The CLI's simulate runs ``done`` real steps, then stops as Ctrl-C would."""
+    import wuerfel_cvx.cli as cli
+    from wuerfel_cvx.errors import Interrupted
+    from wuerfel_cvx.simulate import simulate
+
+    def interrupted(*args: object, **kwargs: object) -> Trajectory:
+        kwargs["steps"] = done
+        stop = Interrupted(done + 1)
+        stop.trajectory = simulate(*args, **kwargs)  # type: ignore[arg-type]
+        raise stop
+
+    monkeypatch.setattr(cli, "simulate", interrupted)
+
+
+def test_ctrl_c_keeps_the_steps_done(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    from PIL import Image
+
+    _interrupt_after(3, monkeypatch)
+    out, gif = tmp_path / "run", tmp_path / "run.gif"
+    status = main(["simulate", "tilted-drop", "--steps", "300", "--out", str(out),
+                   "--animate", str(gif), "--fps", "100", "--no-progress"])
+    captured = capsys.readouterr()
+    assert status == 130
+    assert captured.out == ""  # no summary of a run that did not end
+    assert captured.err.splitlines()[-1] == (
+        f"wuerfel-cvx: interrupted during step 4; kept 3 steps in {out}.npz and {gif}")
+    assert "Traceback" not in captured.err
+    kept = Trajectory.load(f"{out}.npz")
+    assert kept.n_steps == 3 and len(kept.metrics) == 3
+    with Image.open(gif) as image:
+        assert image.n_frames == 4  # states 0..3, at 100 fps of 10 ms steps
+
+
+def test_ctrl_c_without_outputs_says_so(monkeypatch: pytest.MonkeyPatch,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    _interrupt_after(2, monkeypatch)
+    assert main(["simulate", "tilted-drop", "--no-progress"]) == 130
+    assert capsys.readouterr().err == ("wuerfel-cvx: interrupted during step 3; kept 2 steps "
+                                       "(no --out or --animate to keep them in)\n")
+
+
+def test_ctrl_c_outside_a_run_is_one_line(monkeypatch: pytest.MonkeyPatch,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    import wuerfel_cvx.cli as cli
+
+    def stopped(*args: object, **kwargs: object) -> Trajectory:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "simulate", stopped)
+    assert main(["simulate", "tilted-drop"]) == 130
+    assert capsys.readouterr().err == "wuerfel-cvx: interrupted\n"
+
+
+# ------------------------------------------------------------- GIF progress
+@pytest.mark.parametrize(("flag", "shown"), [("--progress", True), ("--no-progress", False)])
+def test_animation_progress_follows_the_flag(flag: str, shown: bool, tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", "single-drop", "--steps", "8", "--fps", "100", flag,
+                 "--animate", str(tmp_path / "a.gif")]) == 0
+    err = capsys.readouterr().err
+    assert ("a.gif:" in err and "frame" in err) is shown  # tqdm's bar: "a.gif: ... frame/s"
+
+
+def test_ctrl_c_before_any_trajectory_keeps_nothing(tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    import wuerfel_cvx.cli as cli
+    from wuerfel_cvx.errors import Interrupted
+
+    def stopped(*args: object, **kwargs: object) -> Trajectory:
+        raise Interrupted(1)  # no trajectory attached
+
+    monkeypatch.setattr(cli, "simulate", stopped)
+    assert main(["simulate", "tilted-drop", "--out", str(tmp_path / "run")]) == 130
+    assert capsys.readouterr().err == "wuerfel-cvx: interrupted during step 1; kept no steps\n"
+    assert list(tmp_path.iterdir()) == []

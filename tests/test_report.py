@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from matplotlib.figure import Figure
 
 from wuerfel_cvx.bench import plots, schema
 from wuerfel_cvx.bench.report import markdown_table, write_report
@@ -358,13 +359,122 @@ def test_each_completed_grid_point_has_its_own_timing_row(readme: str) -> None:
     assert 0 < len(done) <= 60  # the fixture is a small suite: the table is shown
     table = table_after(readme, "### Each grid point")
     assert len(table) == len(done)
-    shown = {(cells[0], cells[1], cells[2], cells[3], cells[4]): cells for cells in table}
+    shown = {tuple(cells[:7]): cells for cells in table}
+    assert len(shown) == len(done)  # the key tells every grid point apart
     for row in done:
+        mass = f"{float(row['table_mass']):.3g}" if row["table_mass"] else "fixed"
         cells = shown[(row["scene"], row["formulation"], row["solver"], row["tol"],
-                       f"{float(row['dt']):.3g}")]
-        assert cells[6] == f"{1e3 * float(row['wall_time_per_step_median']):.3g}"
+                       f"{float(row['dt']):.3g}", mass,
+                       "yes" if row["sleep"] == "true" else "no")]
+        assert cells[7] == f"{1e3 * float(row['wall_time_per_step_median']):.3g}"
         if row["step_over_solver_median"]:
-            assert cells[8] == f"{float(row['step_over_solver_median']):.2f}"
+            assert cells[9] == f"{float(row['step_over_solver_median']):.2f}"
+
+
+def test_grid_point_table_names_the_table_mass(readme: str) -> None:
+    header = next(line for line in readme.split("### Each grid point", 1)[1].splitlines()
+                  if line.startswith("|"))
+    assert "| table mass (kg) |" in header
+    table = table_after(readme, "### Each grid point")
+    heavy = {float(r["table_mass"]) for r in fixture_rows()
+             if r["table_mass"] and r["status"] == "ok" and r["wall_time_per_step_median"]}
+    assert heavy == {1e6, 1e9}  # the fixture's heavy-table variants
+    assert {cells[5] for cells in table} == {"fixed", "1e+06", "1e+09"}
+
+
+def test_reference_is_named_as_the_same_formulation_at_dt8(readme: str) -> None:
+    accuracy = readme.split("## Accuracy", 1)[1].split("##", 1)[0]
+    assert "the same formulation at dt/8" in accuracy
+    assert "the same scene at dt/8" not in readme  # the old, vaguer wording
+
+
+def test_a_metrics_csv_is_named_for_what_it_is(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    from wuerfel_cvx import simulate
+    from wuerfel_cvx.cli import main
+
+    saved = simulate("tilted-drop", steps=3).save(tmp_path / "run.npz")
+    metrics = saved.with_name("run.metrics.csv")
+    assert metrics.is_file()
+    assert main(["report", str(metrics), "--root", str(tmp_path / "reports")]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err == (
+        f"wuerfel-cvx: error: {metrics}: is a per-step metrics file of one run (from "
+        "'simulate --out' or Trajectory.save); 'report' takes a benchmark results CSV "
+        "written by 'wuerfel-cvx bench'\n")
+    assert not (tmp_path / "reports").exists()
+
+
+def test_a_results_csv_with_a_wrong_header_still_lists_the_columns(tmp_path: Path) -> None:
+    rows = fixture_rows()
+    broken = tmp_path / "results.csv"
+    with broken.open("w", encoding="utf-8", newline="") as handle:
+        fields = [name for name in rows[0] if name != "energy_gain"]
+        writer = csv.DictWriter(handle, fieldnames=fields, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
+    with pytest.raises(InputError, match=r"missing \['energy_gain'\]"):
+        write_report(broken, tmp_path / "reports")
+
+
+# ------------------------------------------------------------------ legends and scales
+Drawn = dict[str, Figure]
+
+
+@pytest.fixture
+def drawn(monkeypatch: pytest.MonkeyPatch) -> Drawn:
+    """The figures the plot functions would save, by stem (nothing is written)."""
+    from wuerfel_cvx.bench import plots_accuracy, plots_cost
+
+    figures: Drawn = {}
+
+    def keep(figure: Figure, out_dir: Path, stem: str) -> list[Path]:
+        figures[stem] = figure
+        return [out_dir / f"{stem}.png"]
+
+    for module in (plots_accuracy, plots_cost):
+        monkeypatch.setattr(module, "save_figure", keep)
+    return figures
+
+
+def legend_texts(figure: Figure) -> list[str]:
+    legends = [*figure.legends, *(axis.get_legend() for axis in figure.axes)]
+    return [text.get_text() for legend in legends if legend is not None
+            for text in legend.get_texts()]
+
+
+def test_legends_list_only_the_solvers_and_lines_drawn(tmp_path: Path, drawn: Drawn) -> None:
+    results = schema.read_results(RESULTS)
+    # One tolerance and one dt of the velocity formulation, without the peer engine.
+    one = results[(results["formulation"] == "velocity") & (results["tol"] == "default")
+                  & (results["dt"] == results["dt"].min())]
+    assert plots.plot_pareto(one, tmp_path)
+    assert plots.plot_pareto_headline(one, tmp_path)
+    shown = {str(s) for s in plots.pareto_points(one)["solver"].unique()}
+    for stem in ("pareto", "pareto-headline"):
+        texts = legend_texts(drawn[stem])
+        assert "across tol presets" not in texts and "across dt" not in texts
+        assert "Pareto front" in texts
+        assert "PYMUNK" not in texts
+        assert {text.split(" ")[0] for text in texts} - {"Pareto"} == shown
+    assert plots.plot_pareto(results, tmp_path)  # the whole fixture sweeps both
+    texts = legend_texts(drawn["pareto"])
+    assert {"across tol presets", "across dt", "Pareto front", "PYMUNK"} <= set(texts)
+
+
+def test_timing_bars_are_logarithmic_with_peers_only(tmp_path: Path, drawn: Drawn) -> None:
+    results = schema.read_results(RESULTS)
+    assert plots.plot_timing_breakdown(results, tmp_path)
+    axis = drawn["timing-breakdown"].axes[0]
+    assert axis.get_yscale() == "log"
+    assert "whole step (no split)" in legend_texts(drawn["timing-breakdown"])
+    ours = results[results["formulation"] != "peer"]
+    assert plots.plot_timing_breakdown(ours, tmp_path)
+    axis = drawn["timing-breakdown"].axes[0]
+    assert axis.get_yscale() == "linear"
+    assert legend_texts(drawn["timing-breakdown"]) == ["solver's own time",
+                                                        "modelling (rest of step)"]
 
 
 def test_solver_time_above_the_step_time_gives_no_modelling_mean(tmp_path: Path) -> None:

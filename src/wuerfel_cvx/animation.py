@@ -1,19 +1,21 @@
 """Pictures of a trajectory: one frame, or an animation written to a GIF or an MP4.
 
-A frame shows the squares as polygons, the tables filled, the *active contacts* (corners
-within :data:`CONTACT_MARGIN` of a foreign body's edge, found by the package's own
-contact search :func:`~wuerfel_cvx.contacts.find_contacts`) as dots, and the time and
-step in a corner.  Axes are in metres with equal aspect, fixed over an animation.
+A frame shows the moving bodies as polygons, the tables filled, the *active contacts*
+(corners within :data:`CONTACT_MARGIN` of a foreign body's edge, found by the package's
+own contact search :func:`~wuerfel_cvx.contacts.find_contacts`) as dots, and the time and
+step in a band above the axes.  Axes are in metres with equal aspect, fixed over an
+animation, and hold every body and table (:func:`view_limits`).
 
 A long trajectory is subsampled: frames are taken at ``fps`` frames per second of
 simulated time (nearest stored state) and at most ``max_frames`` of them, so an
-animation plays in real time unless the cap slows it.  ``.gif`` is written with Pillow;
-``.mp4`` needs ``ffmpeg`` on the ``PATH``.
+animation plays in real time unless the cap slows it.  ``.gif`` is written with Pillow
+from blitted frames (:func:`blitted_frames`); ``.mp4`` needs ``ffmpeg`` on the ``PATH``.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -24,13 +26,15 @@ from .contacts import find_contacts
 from .errors import InputError
 from .geometry import FloatArray
 from .model import IntArray, Model
-from .scene import Scene, Square, Table
+from .scene import Scene
 
 if TYPE_CHECKING:  # matplotlib is imported when a picture is drawn, not with the package
     from matplotlib.artist import Artist
     from matplotlib.axes import Axes
     from matplotlib.collections import PathCollection, PolyCollection
+    from matplotlib.figure import Figure
     from matplotlib.text import Text
+    from PIL.Image import Image
 
     from .trajectory import Trajectory
 
@@ -54,9 +58,7 @@ def frame_indices(times: FloatArray, fps: float = DEFAULT_FPS,
     ``times`` ``(N,)`` (s), ascending.  The first and last state are always shown; the
     others are the states nearest to multiples of ``1 / fps`` seconds, without repeats.
     """
-    if not (math.isfinite(fps) and fps > 0):
-        raise InputError(f"must be a positive number of frames per second, got {fps}",
-                         field="fps")
+    check_frame_rate(fps)
     if isinstance(max_frames, bool) or not isinstance(max_frames, int) or max_frames < 2:
         raise InputError(f"must be an integer of at least 2, got {max_frames}",
                          field="max_frames")
@@ -82,23 +84,47 @@ def nearest_index(times: FloatArray, t: float) -> int:
 
 
 def trajectory_model(trajectory: Trajectory) -> Model:
-    """A :class:`Model` with the trajectory's squares and tables, for the contact search.
+    """The trajectory's :class:`Model`, for the contact search of the frames.
 
-    Squares are rebuilt from the first stored corners (centre, side, angle) and tables
-    from :attr:`Trajectory.table_points`; masses are not stored and play no part in
-    finding contacts, so each square gets 1 kg.
+    :meth:`Trajectory.model` rebuilds the very scene that was run from
+    ``info["scene_data"]``; a trajectory without it (a file written before scenes were
+    recorded) gets :func:`model_from_corners`.
     """
-    corners = trajectory.points[0].reshape(-1, 4, 2)
-    squares = tuple(Square(center=_center(c), size=float(np.linalg.norm(c[1] - c[0])),
-                           angle=_angle(c)) for c in corners)
-    tables = []
-    for c in np.asarray(trajectory.table_points).reshape(-1, 4, 2):
-        tables.append(Table(center=_center(c), angle=_angle(c),
-                            size=(float(np.linalg.norm(c[1] - c[0])),
-                                  float(np.linalg.norm(c[2] - c[1])))))
-    scene = Scene(str(trajectory.info.get("scene", "trajectory")), squares, tuple(tables),
-                  allow_overlap=True)
-    return Model.from_scene(scene)
+    model = trajectory.model()
+    return model if model is not None else model_from_corners(trajectory)
+
+
+def model_from_corners(trajectory: Trajectory) -> Model:
+    """A :class:`Model` rebuilt from the first stored corners and the table corners.
+
+    Each body's centre and angle come from its corners; its width from side 0-1 and its
+    height from side 1-2 (m), so boxes of any width x height are rebuilt (through the
+    ``[[boxes]]`` schema when some body is not square).  Masses are not stored and play
+    no part in finding contacts, so each body gets 1 kg.
+    """
+    corners = np.asarray(trajectory.points[0]).reshape(-1, 4, 2)
+    bodies = [_body_of(c) for c in corners]
+    tables = [_body_of(c) for c in np.asarray(trajectory.table_points).reshape(-1, 4, 2)]
+    square = all(math.isclose(w, h, rel_tol=SQUARE_TOLERANCE) for _, (w, h), _ in bodies)
+    data: dict[str, object] = {
+        "name": str(trajectory.info.get("scene", "trajectory")), "allow_overlap": True,
+        "tables": [{"center": list(c), "size": list(s), "angle": a} for c, s, a in tables],
+        "squares" if square else "boxes": [
+            {"center": list(c), "size": s[0] if square else list(s), "angle": a}
+            for c, s, a in bodies]}
+    return Model.from_scene(Scene.from_dict(data, source="<trajectory corners>"))
+
+
+SQUARE_TOLERANCE = 1e-9
+"""Relative difference of two side lengths below which a rebuilt body is a square."""
+
+
+def _body_of(corners: FloatArray) -> tuple[tuple[float, float], tuple[float, float], float]:
+    """Centre (m), (width, height) (m) and angle (rad) of four counter-clockwise corners."""
+    center = corners.mean(axis=0)
+    edge = corners[1] - corners[0]
+    size = (float(np.linalg.norm(edge)), float(np.linalg.norm(corners[2] - corners[1])))
+    return (float(center[0]), float(center[1])), size, float(math.atan2(edge[1], edge[0]))
 
 
 def touching_points(model: Model, points: FloatArray,
@@ -118,16 +144,21 @@ class Frame:
 
     axes: Axes
     squares: PolyCollection
-    """One polygon per square."""
+    """One polygon per moving body."""
     tables: PolyCollection
     """One filled polygon per table."""
     contacts: PathCollection
     """One dot per touching corner."""
     label: Text
-    """Time and step, in the upper left corner."""
+    """Time and step, in a band above the axes (never over a body)."""
     model: Model
     trajectory: Trajectory
     margin: float
+
+    @property
+    def moving(self) -> tuple[Artist, ...]:
+        """The artists that :meth:`show` changes."""
+        return (self.squares, self.contacts, self.label)
 
     def show(self, index: int) -> None:
         """Draw stored state ``index`` (0 is the initial state)."""
@@ -135,16 +166,42 @@ class Frame:
         self.squares.set_verts(list(points.reshape(-1, 4, 2)))
         touching = touching_points(self.model, points, self.margin)
         self.contacts.set_offsets(touching if touching.size else np.zeros((0, 2)))
-        self.label.set_text(f"t = {self.trajectory.times[index]:.3f} s\nstep {index}")
+        self.label.set_text(f"t = {self.trajectory.times[index]:.3f} s   step {index}")
 
 
-def view_limits(trajectory: Trajectory, indices: IntArray) -> tuple[tuple[float, float],
-                                                                     tuple[float, float]]:
-    """Limits (m) of x and y that hold the squares of the shown states, with a margin."""
-    shown = trajectory.points[indices].reshape(-1, 2)
-    low, high = shown.min(axis=0), shown.max(axis=0)
+LONG_TABLE = 5.0
+"""A table longer along x (or y) than this many times the bodies' view (their extent and
+margin) is a floor (or wall) running on: the view holds only its part near them."""
+
+Limits = tuple[tuple[float, float], tuple[float, float]]
+
+
+def view_limits(trajectory: Trajectory, indices: IntArray) -> Limits:
+    """Limits (m) of x and y that hold the bodies of the shown states and the tables.
+
+    The bodies of every state in ``indices`` are inside with a margin (at least 0.5 m), and
+    every table with a fifth of it, except along an axis where a table is longer than
+    :data:`LONG_TABLE` times the bodies' view (a 40 m floor under a 1 m square): there the
+    view holds the bodies, and reaches the table's nearest end if it lies beside them.
+    """
+    bodies = np.asarray(trajectory.points)[indices].reshape(-1, 2)
+    tables = np.asarray(trajectory.table_points, dtype=np.float64).reshape(-1, 4, 2)
+    if bodies.size == 0 and tables.size == 0:
+        return (-1.0, 1.0), (-1.0, 1.0)
+    t_low, t_high = tables.min(axis=1), tables.max(axis=1)  # (tables, 2) each
+    if bodies.size:
+        low, high = bodies.min(axis=0), bodies.max(axis=0)
+    else:
+        low, high = t_low.min(axis=0), t_high.max(axis=0)
     pad = max(0.5, 0.1 * float(np.max(high - low)))
-    return (float(low[0]) - pad, float(high[0]) + pad), (float(low[1]) - pad, float(high[1]) + pad)
+    short = (t_high - t_low) <= LONG_TABLE * (high - low + 2 * pad)
+    # Bodies get the whole margin, tables a fifth of it: a floor's underside needs no air.
+    low = np.min(np.vstack([low - pad, np.where(short, t_low - pad / 5, np.inf)]), axis=0)
+    high = np.max(np.vstack([high + pad, np.where(short, t_high + pad / 5, -np.inf)]), axis=0)
+    # A long table wholly beside that view: the view reaches its nearest end.
+    low = np.min(np.vstack([low, np.clip(low, t_low, t_high)]), axis=0)
+    high = np.max(np.vstack([high, np.clip(high, t_low, t_high)]), axis=0)
+    return (float(low[0]), float(high[0])), (float(low[1]), float(high[1]))
 
 
 def draw_frame(trajectory: Trajectory, index: int, ax: Axes | None = None, *,
@@ -152,7 +209,7 @@ def draw_frame(trajectory: Trajectory, index: int, ax: Axes | None = None, *,
                model: Model | None = None) -> Frame:
     """Draw stored state ``index`` on ``ax`` (a new figure if ``None``); returns its artists.
 
-    ``indices`` are the states whose squares the view must hold (default: all).
+    ``indices`` are the states whose bodies the view must hold (default: all).
     """
     import matplotlib.pyplot as plt
     from matplotlib.collections import PolyCollection
@@ -160,8 +217,8 @@ def draw_frame(trajectory: Trajectory, index: int, ax: Axes | None = None, *,
 
     if not 0 <= index <= trajectory.n_steps:
         raise InputError(f"state {index} is outside 0..{trajectory.n_steps}", field="index")
-    if ax is None:
-        _, ax = plt.subplots(figsize=(6.0, 4.5))
+    if ax is None:  # constrained: the legend below the x label stays in the figure
+        _, ax = plt.subplots(figsize=(6.0, 4.5), layout="constrained")
     model = model if model is not None else trajectory_model(trajectory)
     shown = np.arange(trajectory.n_steps + 1) if indices is None else indices
     xlim, ylim = view_limits(trajectory, shown)
@@ -169,22 +226,23 @@ def draw_frame(trajectory: Trajectory, index: int, ax: Axes | None = None, *,
                             facecolors="0.75", edgecolors="0.35", linewidths=0.8,
                             label="tables")
     squares = PolyCollection([], facecolors="#9ecae1", edgecolors="#08519c", linewidths=1.0,
-                             label="squares")
+                             label="bodies")
     ax.add_collection(tables)
     ax.add_collection(squares)
     contacts = ax.scatter(np.zeros(0), np.zeros(0), s=14, color="#d62728", zorder=3,
                           label=f"contact (< {1e3 * margin:g} mm)")
-    label = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", ha="left",
-                    family="monospace", fontsize=9, zorder=5,  # readable over squares
-                    bbox={"facecolor": "white", "alpha": 0.7, "edgecolor": "none"})
+    points = ax.figure.dpi_scale_trans
+    # The time label sits in a band between the axes and the title, outside the axes.
+    label = ax.text(0.5, 1.0, "", transform=ax.transAxes + ScaledTranslation(0, 3 / 72, points),
+                    va="bottom", ha="center", family="monospace", fontsize=9)
     ax.set_xlim(*xlim)
     ax.set_ylim(*ylim)
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(str(trajectory.info.get("scene", "")))
+    ax.set_title(str(trajectory.info.get("scene", "")), pad=17)
     # Below the x label: a fixed 30 points under the axes, whatever the figure's size.
-    below_label = ax.transAxes + ScaledTranslation(0.0, -30 / 72, ax.figure.dpi_scale_trans)
+    below_label = ax.transAxes + ScaledTranslation(0.0, -30 / 72, points)
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below_label,
               ncol=3, fontsize=7, frameon=False, handlelength=1.2, columnspacing=1.0)
     frame = Frame(ax, squares, tables, contacts, label, model, trajectory, margin)
@@ -213,56 +271,99 @@ def animation_writer(path: str | Path) -> str:
     return writer_name
 
 
+def check_frame_rate(fps: float, field: str = "fps") -> float:
+    """``fps`` if it is a positive finite number of frames per second, else InputError."""
+    if not (math.isfinite(fps) and fps > 0):
+        raise InputError(f"must be a positive number of frames per second, got {fps}",
+                         field=field)
+    return fps
+
+
 def animate(trajectory: Trajectory, path: str | Path, *, fps: float = DEFAULT_FPS,
             max_frames: int = DEFAULT_MAX_FRAMES, dpi: float = 80.0,
             figsize: tuple[float, float] = (6.0, 4.5),
-            margin: float = CONTACT_MARGIN) -> Path:
+            margin: float = CONTACT_MARGIN, progress: bool = False) -> Path:
     """Write an animation to ``path`` (``.gif`` with Pillow, ``.mp4`` with ffmpeg).
 
     Frames are chosen by :func:`frame_indices`; playback is real time, or slower when
-    ``max_frames`` caps a long run.  Returns the path.  Raises :class:`InputError` for an
-    unsupported suffix, ``.mp4`` without ffmpeg, or a path that cannot be written.
+    ``max_frames`` caps a long run.  ``progress`` shows a bar of the frames on standard
+    error.  Returns the path.  Raises :class:`InputError` for an unsupported suffix,
+    ``.mp4`` without ffmpeg, or a path that cannot be written.
     """
-    import matplotlib.pyplot as plt
-    from matplotlib import animation as mpl_animation
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from tqdm.auto import tqdm
 
     path = Path(path)
     writer_name = animation_writer(path)
     indices = frame_indices(trajectory.times, fps, max_frames)
     span = float(trajectory.times[indices[-1]] - trajectory.times[indices[0]])
     playback_fps = fps if indices.size < 2 or span <= 0 else min(fps, (indices.size - 1) / span)
+    # Writers take whole frames per second (a GIF stores 10 ms units anyway).
+    whole_fps = max(1, round(playback_fps))
+    figure = Figure(figsize=figsize, dpi=dpi)
+    FigureCanvasAgg(figure)
+    frame = draw_frame(trajectory, int(indices[0]), figure.subplots(), indices=indices,
+                       margin=margin)
+    figure.tight_layout()
+    shown = tqdm([int(i) for i in indices], disable=not progress, unit="frame",
+                 desc=path.name, leave=False)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot write the animation ({exc.strerror})", source=str(path)) \
-            from None
-    fig, ax = plt.subplots(figsize=figsize)
-    try:
-        frame = draw_frame(trajectory, int(indices[0]), ax, indices=indices, margin=margin)
-        fig.tight_layout()
-
-        def update(index: int) -> list[Artist]:
-            frame.show(int(index))
-            return [frame.squares, frame.contacts, frame.label]
-
-        movie = mpl_animation.FuncAnimation(fig, update, frames=[int(i) for i in indices],
-                                            blit=False, repeat=False)
-        # Writers take whole frames per second (a GIF stores 10 ms units anyway).
-        writer = mpl_animation.writers[writer_name](fps=max(1, round(playback_fps)))
-        movie.save(str(path), writer=writer, dpi=dpi)
+        if writer_name == "pillow":
+            _write_gif(figure, frame, shown, path, whole_fps)
+        else:
+            _write_movie(figure, frame, shown, path, writer_name, whole_fps, dpi)
     except OSError as exc:
         raise InputError(f"cannot write the animation ({exc.strerror or exc})",
                          source=str(path)) from None
-    finally:
-        plt.close(fig)
     return path
 
 
-def _center(corners: FloatArray) -> tuple[float, float]:
-    center = corners.mean(axis=0)
-    return float(center[0]), float(center[1])
+def _write_gif(figure: Figure, frame: Frame, indices: Iterable[int], path: Path,
+               fps: int) -> None:
+    """Write a looping GIF of ``1000 / fps`` ms frames from :func:`blitted_frames`.
+
+    The settings of matplotlib's Pillow writer, from frames drawn in a fraction of the time.
+    """
+    images = list(blitted_frames(figure, frame, indices))
+    images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps),
+                   loop=0)
 
 
-def _angle(corners: FloatArray) -> float:
-    edge = corners[1] - corners[0]
-    return float(math.atan2(edge[1], edge[0]))
+def blitted_frames(figure: Figure, frame: Frame, indices: Iterable[int]) -> Iterator[Image]:
+    """RGBA images of ``frame`` at each state of ``indices``, as full redraws would look.
+
+    The still parts (axes, ticks, tables, legend, title) are drawn once; per frame only
+    :attr:`Frame.moving` is drawn over a copy of them (blitting).
+    """
+    from PIL import Image as PILImage
+
+    canvas = figure.canvas
+    for artist in frame.moving:
+        artist.set_animated(True)  # left out of the full draw below
+    try:
+        canvas.draw()
+        background = canvas.copy_from_bbox(figure.bbox)  # type: ignore[attr-defined]
+        for index in indices:
+            canvas.restore_region(background)  # type: ignore[attr-defined]
+            frame.show(index)
+            for artist in frame.moving:
+                figure.draw_artist(artist)
+            rgba = np.array(canvas.buffer_rgba())  # type: ignore[attr-defined]
+            yield PILImage.fromarray(rgba, "RGBA")
+    finally:
+        for artist in frame.moving:
+            artist.set_animated(False)
+
+
+def _write_movie(figure: Figure, frame: Frame, indices: Iterable[int], path: Path,
+                 writer_name: str, fps: int, dpi: float) -> None:
+    """One full redraw per frame through matplotlib's writer (``ffmpeg`` for ``.mp4``)."""
+    from matplotlib import animation as mpl_animation
+
+    writer = mpl_animation.writers[writer_name](fps=fps)
+    with writer.saving(figure, str(path), dpi):
+        for index in indices:
+            frame.show(index)
+            writer.grab_frame()

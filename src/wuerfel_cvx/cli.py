@@ -6,7 +6,8 @@
 ``wuerfel-cvx robustness`` writes ``reports/robustness.md``;
 ``wuerfel-cvx scenes`` lists the named scenes; ``wuerfel-cvx solvers`` lists the
 installed solvers.  Bad input ends with one line on standard error and exit status 2;
-a failed step ends with status 1 after saving the trajectory computed so far.
+a failed step ends with status 1, and Ctrl-C with status 130, after saving (and
+animating) the steps computed so far.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from .errors import InputError, StepFailure
+from .errors import InputError, Interrupted, StepFailure
 from .formulations import FORMULATIONS
 from .library import ENTRIES
 from .simulate import simulate
@@ -30,6 +31,7 @@ PROG = "wuerfel-cvx"
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``wuerfel-cvx`` command."""
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"{PROG} {package_version()}")
     commands = parser.add_subparsers(dest="command", required=True)
 
     run = commands.add_parser("simulate", help="simulate a scene and print a summary")
@@ -97,6 +99,18 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def package_version() -> str:
+    """The installed version of the package (from its distribution's metadata)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("wuerfel_cvx")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        from . import __version__
+
+        return f"{__version__} (not installed)"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     args = build_parser().parse_args(argv)
@@ -120,14 +134,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except InputError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # outside a run's steps (those keep theirs: Interrupted)
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return INTERRUPTED
 
 
 def _simulate(args: argparse.Namespace) -> int:
     progress = sys.stderr.isatty() if args.progress is None else args.progress
-    if args.animate:  # a bad suffix or a missing ffmpeg is reported before the run
-        from .animation import animation_writer
-
-        animation_writer(args.animate)
+    _check_outputs(args)  # a bad --out, --animate or --fps is reported before the run
     try:
         trajectory = simulate(args.scene, dt=args.dt, steps=args.steps, solver=args.solver,
                               formulation=args.formulation, tol=args.tol,
@@ -136,15 +150,17 @@ def _simulate(args: argparse.Namespace) -> int:
                               islands=args.islands, fallback=args.fallback)
     except StepFailure as failure:
         print(f"{PROG}: {failure}", file=sys.stderr)
-        if args.out and failure.trajectory is not None:
-            path = _save(failure.trajectory, args.out)
-            print(f"{PROG}: saved the {failure.trajectory.n_steps} steps before it to {path}",
-                  file=sys.stderr)
-        if args.animate and failure.trajectory is not None:  # a picture of the run so far
-            written = failure.trajectory.animate(args.animate, fps=args.fps)
-            print(f"{PROG}: animated the {failure.trajectory.n_steps} steps before it in "
-                  f"{written}", file=sys.stderr)
+        _keep_partial(failure.trajectory, args, progress, "before it")
         return 1
+    except Interrupted as stop:
+        where = _keep_partial(stop.trajectory, args, progress, "done")
+        if stop.trajectory is None:
+            kept = "kept no steps"
+        else:
+            kept = f"kept {stop.trajectory.n_steps} steps " + (
+                f"in {where}" if where else "(no --out or --animate to keep them in)")
+        print(f"{PROG}: interrupted during step {stop.step}; {kept}", file=sys.stderr)
+        return INTERRUPTED
     print(trajectory.summary())
     rescued = trajectory.metrics["status"] != trajectory.metrics["primary_status"]
     if rescued.any():
@@ -155,8 +171,78 @@ def _simulate(args: argparse.Namespace) -> int:
         path = _save(trajectory, args.out)
         print(f"saved {path} and {trajectory.metrics_path(path)}")
     if args.animate:
-        print(f"wrote {trajectory.animate(args.animate, fps=args.fps)}")
+        print(f"wrote {_animate(trajectory, args, progress)}")
     return 0
+
+
+INTERRUPTED = 130
+"""Exit status of a run stopped by Ctrl-C (128 + SIGINT, as shells report it)."""
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Raise :class:`InputError` now for outputs that could only fail after the run."""
+    if args.out:
+        npz = _npz_path(args.out)
+        for path in (npz, npz.with_name(npz.stem + ".metrics.csv")):
+            _check_writable(path, source=args.out, field="--out")
+    if args.animate:
+        from .animation import animation_writer, check_frame_rate
+
+        check_frame_rate(args.fps, field="--fps")
+        animation_writer(args.animate)  # a bad suffix or a missing ffmpeg
+        _check_writable(Path(args.animate), source=args.animate, field="--animate")
+
+
+def _npz_path(out: str) -> Path:
+    """Where :meth:`Trajectory.save` writes for ``--out`` (``.npz`` appended if absent)."""
+    path = Path(out)
+    return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+
+
+def _check_writable(path: Path, source: str, field: str) -> None:
+    """Create ``path``'s folder and open ``path`` for writing (removed again if new)."""
+    existed = path.exists()
+    blocking = next((folder for folder in path.parents if folder.exists()), None)
+    if blocking is not None and not blocking.is_dir():
+        raise InputError(f"cannot write ({blocking} is a file, not a folder)", source=source,
+                         field=field)
+    if path.is_dir():
+        raise InputError("cannot write (a folder of that name exists)", source=source,
+                         field=field)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("ab"):
+            pass
+    except OSError as exc:
+        raise InputError(f"cannot write ({exc.strerror or exc})", source=source,
+                         field=field) from None
+    if not existed:
+        path.unlink()
+
+
+def _keep_partial(trajectory: Trajectory | None, args: argparse.Namespace, progress: bool,
+                  steps_were: str) -> str:
+    """Save and animate the steps of a run cut short; returns where they went ('' if not)."""
+    if trajectory is None:
+        return ""
+    kept = []
+    if args.out:
+        path = _save(trajectory, args.out)
+        kept.append(str(path))
+        print(f"{PROG}: saved the {trajectory.n_steps} steps {steps_were} to {path}",
+              file=sys.stderr)
+    if args.animate:  # a picture of the run so far
+        written = _animate(trajectory, args, progress)
+        kept.append(str(written))
+        print(f"{PROG}: animated the {trajectory.n_steps} steps {steps_were} in {written}",
+              file=sys.stderr)
+    return " and ".join(kept)
+
+
+def _animate(trajectory: Trajectory, args: argparse.Namespace, progress: bool) -> Path:
+    from .animation import animate
+
+    return animate(trajectory, args.animate, fps=args.fps, progress=progress)
 
 
 def _bench(args: argparse.Namespace) -> int:
@@ -199,6 +285,7 @@ def _robustness(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
 
 
 def _save(trajectory: Trajectory, out: str) -> Path:
+    """Save to ``--out``; a path that cannot be written is an :class:`InputError`."""
     try:
         return trajectory.save(out)
     except OSError as exc:

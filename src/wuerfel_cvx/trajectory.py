@@ -110,15 +110,17 @@ class Trajectory:
         return plot(self, t, ax)
 
     def animate(self, path: str | Path, *, fps: float = 25.0, max_frames: int = 300,
-                dpi: float = 80.0, figsize: tuple[float, float] = (6.0, 4.5)) -> Path:
+                dpi: float = 80.0, figsize: tuple[float, float] = (6.0, 4.5),
+                progress: bool = False) -> Path:
         """Write an animation: ``.gif`` (Pillow) or ``.mp4`` (needs ffmpeg); returns the path.
 
         ``fps`` frames per simulated second, at most ``max_frames`` frames
-        (:func:`wuerfel_cvx.animation.animate`).
+        (:func:`wuerfel_cvx.animation.animate`); ``progress`` shows a bar of the frames.
         """
         from .animation import animate
 
-        return animate(self, path, fps=fps, max_frames=max_frames, dpi=dpi, figsize=figsize)
+        return animate(self, path, fps=fps, max_frames=max_frames, dpi=dpi, figsize=figsize,
+                       progress=progress)
 
     def summary(self) -> str:
         """A few lines on the run: duration, extremes of the metrics, timing."""
