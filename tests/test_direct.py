@@ -9,8 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from qp_bank import qp_bank
-from test_solver_agreement import AGREEMENT
+from qp_bank import AGREEMENT, qp_bank
 from wuerfel_cvx import simulate
 from wuerfel_cvx.compiled import CompiledQP, CompiledQPCache
 from wuerfel_cvx.direct import (

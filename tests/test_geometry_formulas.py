@@ -28,11 +28,11 @@ import pytest
 import sympy as sp
 from numpy.typing import NDArray
 
+from oracles import penetration_depth
 from wuerfel_cvx.geometry import (
     cross,
     edge_distances,
     edge_parameter,
-    penetration_depth,
     polygon_overlap_depth,
     rectangle_corners,
     rot90,

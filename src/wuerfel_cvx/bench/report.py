@@ -27,7 +27,7 @@ README = "README.md"
 MISSING = "–"
 """Text of an empty table cell."""
 
-_POINT_KEY = ["scene", "tol", "dt", "duration", "table_mass", "extra_rod", "sleep"]
+_POINT_KEY = ["scene", "tol", "dt", "duration", "table_mass", "extra_rod", "sleep", "islands"]
 """Columns that identify a grid point apart from the solver (within one formulation)."""
 _ENGINE_KEY = ["scene", "dt", "duration"]
 """Columns that identify a grid point when solvers are compared with peer engines."""
@@ -347,17 +347,18 @@ def point_time_table(results: pd.DataFrame) -> str:
     rows = _completed(results)
     if rows.empty or len(rows) > POINT_TABLE_LIMIT:
         return ""
-    rows = rows.sort_values(["scene", "formulation", "solver", "tol", "dt", "sleep"],
-                            kind="stable")
+    rows = rows.sort_values(["scene", "formulation", "solver", "tol", "dt", "sleep",
+                             "islands"], kind="stable")
     table = markdown_table(
-        ["scene", "formulation", "solver", "tol", "dt (s)", "sleep", "wall (ms)",
+        ["scene", "formulation", "solver", "tol", "dt (s)", "sleep", "islands", "wall (ms)",
          "solver (ms)", "step / solver"],
         ([row.scene, row.formulation, row.solver, row.tol, format_number(row.dt),
-          "yes" if bool(row.sleep) else "no", format_ms(row.wall_time_per_step_median),
+          "yes" if bool(row.sleep) else "no", "yes" if bool(row.islands) else "no",
+          format_ms(row.wall_time_per_step_median),
           format_ms(row.solver_time_per_step_median),
           format_ratio(plots.as_float(row.step_over_solver_median))]
          for row in rows.itertuples()),
-        align="lllllrrrr")
+        align="lllllllrrr")
     return ("### Each grid point\n\nMedian whole-step and solver time per step of every "
             "completed grid point, and the median of their per-step ratio (*step / solver*).  "
             "Peer engines' *solver* is their own stepping function.\n\n" + table)
