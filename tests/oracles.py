@@ -1,5 +1,7 @@
-"""Reference implementations that only the tests use: slow, obvious forms of what the
-package computes in a faster or more specialised way.
+"""Reference implementations that only the tests use.
+
+They are slow, obvious forms of what the package computes in a faster or more specialised
+way.
 
 * :func:`penetration_depth`: depth of points inside a convex polygon, from the package's
   :func:`~wuerfel_cvx.geometry.edge_distances`.

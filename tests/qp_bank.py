@@ -1,5 +1,6 @@
-"""A bank of step QPs taken from library scenes, shared by the solver tests, and the bound
-:data:`AGREEMENT` within which two verified solutions of one of them agree.
+"""A bank of step QPs from library scenes, and the agreement bound of their solutions.
+
+:data:`AGREEMENT` bounds how far two verified solutions of one of these QPs may differ.
 
 Each entry is built from a state of a reference run (CLARABEL, tight tolerance) at a
 step where contacts are active, so the bank holds impacts, resting contacts,

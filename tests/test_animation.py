@@ -22,6 +22,8 @@ from wuerfel_cvx.animation import (  # noqa: E402
 )
 from wuerfel_cvx.cli import main  # noqa: E402
 
+pytestmark = pytest.mark.integration
+
 
 @pytest.fixture(scope="module")
 def falling() -> Trajectory:

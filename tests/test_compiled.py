@@ -10,6 +10,8 @@ from wuerfel_cvx import simulate
 from wuerfel_cvx.compiled import CompiledQPCache, structure_key
 from wuerfel_cvx.solve import solve_step_qp
 
+pytestmark = pytest.mark.integration
+
 CORE_SOLVERS = ["CLARABEL", "OSQP", "PIQP"]
 
 

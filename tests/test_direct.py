@@ -24,8 +24,8 @@ from wuerfel_cvx.solve import VERIFY_FACTOR, solve_step_qp
 from wuerfel_cvx.solvers import SOLVERS, TOLERANCE_PRESETS
 
 HIGH = TOLERANCE_PRESETS["high"]
-pytestmark = pytest.mark.filterwarnings(  # cvxpy reading its own sparse parameters
-    "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")
+pytestmark = [pytest.mark.integration, pytest.mark.filterwarnings(  # cvxpy reading its own
+    "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")]  # sparse parameters
 
 
 

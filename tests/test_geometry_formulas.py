@@ -45,6 +45,8 @@ from wuerfel_cvx.geometry import (
     square_corners,
 )
 
+pytestmark = pytest.mark.unit
+
 FloatArray = NDArray[np.float64]
 Points3 = tuple[FloatArray, FloatArray, FloatArray]
 

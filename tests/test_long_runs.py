@@ -24,6 +24,8 @@ from wuerfel_cvx.formulations import StepQP
 from wuerfel_cvx.robustness.properties import ROD_DRIFT_LIMIT
 from wuerfel_cvx.solve import StepSolution
 
+pytestmark = pytest.mark.integration
+
 #: The step loop's lists that hold the trajectory (local names in ``simulate``).
 TRAJECTORY_LISTS = ("points", "velocities", "times", "rows")
 

@@ -14,6 +14,8 @@ from wuerfel_cvx.formulations.rigid import body_rows, body_velocities
 from wuerfel_cvx.model import Model
 from wuerfel_cvx.solve import solve_step_qp
 
+pytestmark = pytest.mark.integration
+
 
 def test_corner_map_reproduces_a_rigid_motion() -> None:
     rng = np.random.default_rng(7)

@@ -9,6 +9,8 @@ from qp_bank import AGREEMENT, BANK_CASES, qp_bank
 from wuerfel_cvx.solve import solve_step_qp
 from wuerfel_cvx.solvers import available_solvers
 
+pytestmark = pytest.mark.integration
+
 
 def test_bank_covers_contacts_of_both_formulations() -> None:
     bank = qp_bank()

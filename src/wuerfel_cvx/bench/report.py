@@ -350,15 +350,15 @@ def point_time_table(results: pd.DataFrame) -> str:
     rows = rows.sort_values(["scene", "formulation", "solver", "tol", "dt", "sleep",
                              "islands"], kind="stable")
     table = markdown_table(
-        ["scene", "formulation", "solver", "tol", "dt (s)", "sleep", "islands", "wall (ms)",
-         "solver (ms)", "step / solver"],
+        ["scene", "formulation", "solver", "tol", "dt (s)", "sleep", "wall (ms)",
+         "solver (ms)", "step / solver", "islands"],
         ([row.scene, row.formulation, row.solver, row.tol, format_number(row.dt),
-          "yes" if bool(row.sleep) else "no", "yes" if bool(row.islands) else "no",
-          format_ms(row.wall_time_per_step_median),
+          "yes" if bool(row.sleep) else "no", format_ms(row.wall_time_per_step_median),
           format_ms(row.solver_time_per_step_median),
-          format_ratio(plots.as_float(row.step_over_solver_median))]
+          format_ratio(plots.as_float(row.step_over_solver_median)),
+          "yes" if bool(row.islands) else "no"]
          for row in rows.itertuples()),
-        align="lllllllrrr")
+        align="lllllrrrrl")
     return ("### Each grid point\n\nMedian whole-step and solver time per step of every "
             "completed grid point, and the median of their per-step ratio (*step / solver*).  "
             "Peer engines' *solver* is their own stepping function.\n\n" + table)
