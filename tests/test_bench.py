@@ -118,6 +118,13 @@ def test_results_of_schema_version_3_are_read_as_one_joint_qp(tmp_path: Path) ->
     assert not frame["islands"].any() and frame["islands"].notna().all()
     with pytest.raises(InputError, match="columns differ"):  # a sweep does not append to it
         schema.read_results(old, upgrade=False)
+    text = old.read_text()
+    assert "\n3," in text
+    mislabelled = tmp_path / "results.csv"  # version 3's columns, a row claiming version 2
+    mislabelled.write_text(text.replace("\n3,", "\n2,", 1))
+    with pytest.raises(InputError) as caught:
+        schema.read_results(mislabelled)
+    assert caught.value.field == "schema_version"
 
 
 def test_islands_expand_and_reach_simulate_and_the_row(

@@ -199,10 +199,16 @@ def read_results(path: str | Path, upgrade: bool = True) -> pd.DataFrame:
     if not text.strip():
         return pd.DataFrame({c.name: pd.Series(dtype=_PANDAS_DTYPES[c.type]) for c in COLUMNS})
     header = text.split("\n", 1)[0].split(",")
-    added = _added_since(tuple(header)) if upgrade else None
-    if added is not None:
+    older = _older_version(tuple(header)) if upgrade else None
+    if older is not None:
+        version, added = older
         frame = pd.read_csv(io.StringIO(text), dtype="string", keep_default_na=False,
                             na_values=[""])
+        claimed = set(frame["schema_version"].dropna())
+        if claimed - {str(version)}:
+            raise InputError(f"has the columns of schema version {version} but rows of "
+                             f"version {sorted(claimed)}", source=str(path),
+                             field="schema_version")
         frame = frame.assign(schema_version=str(SCHEMA_VERSION),
                              **{name: _cell(value, _BY_NAME[name])
                                 for name, value in added.items()})
@@ -217,16 +223,17 @@ def read_results(path: str | Path, upgrade: bool = True) -> pd.DataFrame:
     return validate(frame, source=str(path))
 
 
-def _added_since(header: tuple[str, ...]) -> dict[str, Any] | None:
-    """The columns (and their values) to add to a file of an older version with ``header``.
+def _older_version(header: tuple[str, ...]) -> tuple[int, dict[str, Any]] | None:
+    """The older schema version with the columns ``header``, and what was added since.
 
-    ``None`` if ``header`` is not the columns of an older version.
+    The columns added since, with their value in the older rows; ``None`` if ``header`` is
+    not the columns of an older version.
     """
     added: dict[str, Any] = {}
     for version in sorted(ADDED_COLUMNS, reverse=True):
         added.update(ADDED_COLUMNS[version])
         if header == tuple(name for name in COLUMN_NAMES if name not in added):
-            return added
+            return version - 1, added
     return None
 
 
