@@ -1,4 +1,6 @@
-"""A bank of step QPs taken from library scenes, shared by the solver tests.
+"""A bank of step QPs from library scenes, and the agreement bound of their solutions.
+
+:data:`AGREEMENT` bounds how far two verified solutions of one of these QPs may differ.
 
 Each entry is built from a state of a reference run (CLARABEL, tight tolerance) at a
 step where contacts are active, so the bank holds impacts, resting contacts,
@@ -13,8 +15,17 @@ from functools import cache
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.formulations import StepQP, get_formulation, step_qp
 from wuerfel_cvx.model import Model, State
+from wuerfel_cvx.solve import VERIFY_FACTOR
+from wuerfel_cvx.solvers import TOLERANCE_PRESETS
 
 DT = 0.01
+
+# Both solutions pass the residual check at VERIFY_FACTOR * eps (relative).  The QP is
+# strongly convex with Hessian 2 W, W >= m/4 = 0.25 kg per coordinate for the bank's
+# squares, and its right-hand sides and targets are below 5 m/s, so a residual r moves
+# the minimiser by at most about r (1 + 5 m/s) / (2 * 0.25 kg) = 12 r; two solutions
+# may differ by twice that.
+AGREEMENT = 2 * 12 * VERIFY_FACTOR * TOLERANCE_PRESETS["high"]  # m/s (2.4e-6)
 
 #: (scene, formulation, steps to run before taking the QP)
 BANK_CASES: tuple[tuple[str, str, int], ...] = (

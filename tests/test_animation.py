@@ -32,6 +32,8 @@ from wuerfel_cvx.cli import main  # noqa: E402
 from wuerfel_cvx.geometry import FloatArray, rectangle_corners  # noqa: E402
 from wuerfel_cvx.scene import Table  # noqa: E402
 
+pytestmark = pytest.mark.integration
+
 
 @pytest.fixture(scope="module")
 def falling() -> Trajectory:

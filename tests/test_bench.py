@@ -23,6 +23,8 @@ from wuerfel_cvx.errors import InputError, StepFailure
 from wuerfel_cvx.peers import PEER_ENGINES
 from wuerfel_cvx.solvers import available_solvers
 
+pytestmark = pytest.mark.integration
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -105,6 +107,50 @@ def test_every_column_is_documented() -> None:
     for column in schema.COLUMNS:
         assert column.description and column.type in ("str", "int", "float", "bool")
     assert len(set(schema.COLUMN_NAMES)) == len(schema.COLUMNS)
+
+
+def test_results_of_schema_version_3_are_read_as_one_joint_qp(tmp_path: Path) -> None:
+    old = REPO / "tests" / "fixtures" / "results-small.csv"  # written before `islands`
+    assert "islands" not in old.read_text().split("\n", 1)[0].split(",")
+    frame = schema.read_results(old)
+    assert list(frame.columns) == list(schema.COLUMN_NAMES) and len(frame) > 0
+    assert (frame["schema_version"] == schema.SCHEMA_VERSION).all()
+    assert not frame["islands"].any() and frame["islands"].notna().all()
+    with pytest.raises(InputError, match="columns differ"):  # a sweep does not append to it
+        schema.read_results(old, upgrade=False)
+    text = old.read_text()
+    assert "\n3," in text
+    mislabelled = tmp_path / "results.csv"  # version 3's columns, a row claiming version 2
+    mislabelled.write_text(text.replace("\n3,", "\n2,", 1))
+    with pytest.raises(InputError) as caught:
+        schema.read_results(mislabelled)
+    assert caught.value.field == "schema_version"
+
+
+def test_islands_expand_and_reach_simulate_and_the_row(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    suite = Suite.from_dict({"name": "tiny", "defaults": {"duration": 0.02, "reference": "none",
+                                                          "compare_every": 0}, "grid": [
+        {"scenes": [str(REPO / "benchmarks" / "scenes" / "two-stacks-10.toml")],
+         "solvers": ["CLARABEL", "PYMUNK"], "islands": [False, True]}]})
+    ours = [p for p in suite.points if p.solver == "CLARABEL"]
+    assert [p.islands for p in ours] == [False, True]
+    assert ours[1].point_id == ours[0].point_id + "|islands"
+    assert [p.islands for p in suite.points if p.solver == "PYMUNK"] == [False]  # once
+    asked: list[bool] = []
+
+    def recording(*args: Any, **kwargs: Any) -> Any:
+        asked.append(kwargs["islands"])
+        return simulate(*args, **kwargs)
+
+    monkeypatch.setattr(runner, "simulate", recording)
+    suite = Suite(suite.name, suite.description, tuple(ours))
+    frame = schema.read_results(run_sweep(suite, tmp_path, progress=False,
+                                          echo=lambda _: None).results)
+    assert asked == [False, True]
+    assert frame["islands"].tolist() == [False, True] and (frame["status"] == "ok").all()
+    # Two stacks, two QPs or one: the same rows in total, and the same (resting) answer.
+    assert frame["n_inequalities"].nunique() == 1 and frame["verified"].all()
 
 
 def test_failing_configurations_become_error_rows(tmp_path: Path) -> None:
@@ -204,6 +250,7 @@ def test_results_of_another_suite_are_not_mixed(tmp_path: Path) -> None:
         run_sweep(other, tmp_path, progress=False, echo=lambda _: None)
 
 
+@pytest.mark.subprocess
 def test_sweep_killed_midway_resumes_without_losing_or_repeating_rows(tmp_path: Path) -> None:
     suite_file = tmp_path / "killme.toml"
     suite_file.write_text(
@@ -236,6 +283,7 @@ def test_sweep_killed_midway_resumes_without_losing_or_repeating_rows(tmp_path: 
     pd.testing.assert_frame_equal(frame.iloc[:len(rows_before)], rows_before)
 
 
+@pytest.mark.subprocess  # worker processes
 def test_parallel_sweep_writes_the_same_rows(tmp_path: Path) -> None:
     suite = tiny_suite()
     summary = run_sweep(suite, tmp_path, jobs=2, progress=False, echo=lambda _: None)

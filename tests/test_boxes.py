@@ -32,6 +32,8 @@ from wuerfel_cvx.solve import VERIFY_FACTOR
 from wuerfel_cvx.solvers import TOLERANCE_PRESETS
 from wuerfel_cvx.trajectory import Trajectory
 
+pytestmark = pytest.mark.integration
+
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 DT = 0.01
 G = 9.81
@@ -311,6 +313,7 @@ def test_a_wrong_box_is_one_input_error_naming_file_and_field(
     assert captured.err == f"wuerfel-cvx: error: {caught.value}\n"
 
 
+@pytest.mark.subprocess
 def test_a_wrong_box_size_exits_2_in_a_real_process(tmp_path: Path) -> None:
     path = tmp_path / "plank.toml"
     path.write_text(f"{_BOX}size = [2.0, -0.5]\n", encoding="utf-8")

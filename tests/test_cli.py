@@ -19,6 +19,8 @@ from wuerfel_cvx.library import ENTRIES
 from wuerfel_cvx.solvers import available_solvers
 from wuerfel_cvx.trajectory import Trajectory
 
+pytestmark = pytest.mark.integration
+
 ERROR_PREFIX = "wuerfel-cvx: error:"
 
 
@@ -29,6 +31,7 @@ def run_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
 
 
 # ------------------------------------------------------------------ subprocess
+@pytest.mark.subprocess
 def test_simulate_prints_a_summary_and_writes_files(tmp_path: Path) -> None:
     result = run_cli("simulate", "tilted-drop", "--steps", "20", "--out",
                      str(tmp_path / "run"), cwd=tmp_path)
@@ -47,6 +50,7 @@ def test_simulate_prints_a_summary_and_writes_files(tmp_path: Path) -> None:
     assert len(loaded.metrics) == 20
 
 
+@pytest.mark.subprocess
 def test_scenes_lists_every_library_pattern(tmp_path: Path) -> None:
     result = run_cli("scenes", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
@@ -54,6 +58,7 @@ def test_scenes_lists_every_library_pattern(tmp_path: Path) -> None:
     assert listed == [entry.pattern for entry in ENTRIES]
 
 
+@pytest.mark.subprocess
 def test_unknown_scene_in_a_real_process(tmp_path: Path) -> None:
     result = run_cli("simulate", "no-such-scene", "--steps", "2", cwd=tmp_path)
     assert result.returncode == 2

@@ -5,11 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qp_bank import qp_bank
-from test_solver_agreement import AGREEMENT
+from qp_bank import AGREEMENT, qp_bank
 from wuerfel_cvx import simulate
 from wuerfel_cvx.compiled import CompiledQPCache, structure_key
 from wuerfel_cvx.solve import solve_step_qp
+
+pytestmark = pytest.mark.integration
 
 CORE_SOLVERS = ["CLARABEL", "OSQP", "PIQP"]
 

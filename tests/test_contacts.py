@@ -13,6 +13,8 @@ from wuerfel_cvx.formulations import get_formulation, step_qp
 from wuerfel_cvx.geometry import edge_distances, square_corners
 from wuerfel_cvx.model import Model, State
 
+pytestmark = pytest.mark.integration
+
 
 def seed_sector(point: np.ndarray, center: np.ndarray, angle: float) -> int:
     """Edge index by the seed's full-circle angle around the centre (section 2.3).

@@ -39,6 +39,8 @@ from wuerfel_cvx.metrics import deepest_penetration
 from wuerfel_cvx.model import IntArray, Model, State
 from wuerfel_cvx.scene import Square, Table
 
+pytestmark = pytest.mark.integration
+
 # --------------------------------------------------------------------------------------
 # Oracles: the implementations before vectorisation, verbatim.
 # --------------------------------------------------------------------------------------

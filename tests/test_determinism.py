@@ -33,6 +33,8 @@ from wuerfel_cvx.robustness.determinism import (
 )
 from wuerfel_cvx.trajectory import Trajectory
 
+pytestmark = pytest.mark.integration
+
 GOLDEN_FILE = Path(__file__).parent / "golden" / "trajectory_hashes.toml"
 
 #: A relative perturbation of the initial state the size of a few ulps (2.2e-16 each):
@@ -69,6 +71,7 @@ def fresh_interpreter_digests() -> dict[str, str]:
     return digests
 
 
+@pytest.mark.subprocess
 @pytest.mark.parametrize("solver", GOLDEN_SOLVERS)
 def test_a_fresh_interpreter_gives_the_same_bits(
         solver: str, fresh_interpreter_digests: dict[str, str]) -> None:

@@ -10,8 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from qp_bank import qp_bank
-from test_solver_agreement import AGREEMENT
+from qp_bank import AGREEMENT, qp_bank
 from wuerfel_cvx import simulate
 from wuerfel_cvx.backends import DirectPathWarning, DirectSolver, _cvxpy, build_direct
 from wuerfel_cvx.backends.clarabel import DirectClarabel
@@ -25,8 +24,8 @@ from wuerfel_cvx.solvers import SOLVERS, TOLERANCE_PRESETS
 
 HIGH = TOLERANCE_PRESETS["high"]
 DIRECT_SOLVERS = [name for name, spec in SOLVERS.items() if spec.backend is not None]
-pytestmark = pytest.mark.filterwarnings(  # cvxpy reading its own sparse parameters
-    "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")
+pytestmark = [pytest.mark.integration, pytest.mark.filterwarnings(  # cvxpy reading its own
+    "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")]  # sparse parameters
 
 
 def direct_for(solver: str, qp: StepQP, options: dict[str, Any],

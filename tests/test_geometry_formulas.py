@@ -28,11 +28,11 @@ import pytest
 import sympy as sp
 from numpy.typing import NDArray
 
+from oracles import penetration_depth
 from wuerfel_cvx.geometry import (
     cross,
     edge_distances,
     edge_parameter,
-    penetration_depth,
     polygon_overlap_depth,
     rectangle_corners,
     rot90,
@@ -44,6 +44,8 @@ from wuerfel_cvx.geometry import (
     side_velocity_product,
     square_corners,
 )
+
+pytestmark = pytest.mark.unit
 
 FloatArray = NDArray[np.float64]
 Points3 = tuple[FloatArray, FloatArray, FloatArray]

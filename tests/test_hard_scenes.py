@@ -11,6 +11,8 @@ from wuerfel_cvx import simulate
 from wuerfel_cvx.solvers import TOLERANCE_PRESETS
 from wuerfel_cvx.trajectory import Trajectory
 
+pytestmark = pytest.mark.integration
+
 DT = 0.01
 EPS_HIGH = TOLERANCE_PRESETS["high"]
 SETTLED = 1e-6  # m/s and m: tol=high gives residuals ~1e-7 relative; rest is exact to this

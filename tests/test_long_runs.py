@@ -26,6 +26,8 @@ from wuerfel_cvx.robustness.properties import ROD_DRIFT_LIMIT
 from wuerfel_cvx.simulation import Simulation
 from wuerfel_cvx.trajectory import Trajectory
 
+pytestmark = pytest.mark.integration
+
 #: The recorder's lists that hold the trajectory.
 TRAJECTORY_LISTS = ("points", "velocities", "times", "rows")
 

@@ -24,6 +24,8 @@ COMMITTED_SIZE_LIMIT_BYTES = 1_000_000
 """Committed notebooks hold small outputs only."""
 
 
+@pytest.mark.integration
+@pytest.mark.subprocess  # each notebook runs in its own kernel process
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[path.stem for path in NOTEBOOKS])
 def test_notebook_runs_in_smoke_mode(path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("WUERFEL_SMOKE", "1")  # the kernel inherits this environment
@@ -41,10 +43,12 @@ def test_notebook_runs_in_smoke_mode(path: Path, monkeypatch: pytest.MonkeyPatch
     assert not errors
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[path.stem for path in NOTEBOOKS])
 def test_committed_notebook_is_small(path: Path) -> None:
     assert path.stat().st_size < COMMITTED_SIZE_LIMIT_BYTES
 
 
+@pytest.mark.unit
 def test_notebooks_are_found() -> None:
     assert NOTEBOOKS, "no notebooks found in notebooks/"

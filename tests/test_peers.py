@@ -21,6 +21,8 @@ from wuerfel_cvx.peers._common import initial_poses, matched_moment, run_peer
 from wuerfel_cvx.simulate import METRIC_COLUMNS
 from wuerfel_cvx.trajectory import Trajectory
 
+pytestmark = pytest.mark.integration
+
 DT = 0.01
 G = 9.81
 ROUND_OFF = 1e-9  # float64 round-off over <= 200 steps of O(10) quantities

@@ -18,6 +18,8 @@ from wuerfel_cvx.solve import VERIFY_FACTOR
 from wuerfel_cvx.solvers import TOLERANCE_PRESETS
 from wuerfel_cvx.trajectory import Trajectory
 
+pytestmark = pytest.mark.integration
+
 DT = 0.01
 G = 9.81
 EPS_HIGH = TOLERANCE_PRESETS["high"]

@@ -45,6 +45,8 @@ from wuerfel_cvx.robustness.properties import (
 )
 from wuerfel_cvx.trajectory import Trajectory
 
+pytestmark = pytest.mark.integration
+
 settings.register_profile(
     "wuerfel-ci", max_examples=10, deadline=None, derandomize=True, database=None,
     suppress_health_check=[HealthCheck.too_slow])

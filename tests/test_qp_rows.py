@@ -14,6 +14,8 @@ from wuerfel_cvx.formulations import get_formulation, step_qp
 from wuerfel_cvx.geometry import side_acceleration, side_value
 from wuerfel_cvx.model import Model, State
 
+pytestmark = pytest.mark.integration
+
 H = 1e-6  # s; central differences of quadratics in t are exact up to round-off
 FD_TOLERANCE = 1e-7  # round-off of O(1) values divided by 2 H
 

@@ -21,6 +21,8 @@ from wuerfel_cvx.bench.report import markdown_table, write_report
 from wuerfel_cvx.bench.shgeom import DEFAULT_TIME_SHIFT, shifted_geometric_mean
 from wuerfel_cvx.errors import InputError
 
+pytestmark = pytest.mark.integration
+
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 RESULTS = FIXTURES / "results-small.csv"
 

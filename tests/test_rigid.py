@@ -5,14 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qp_bank import qp_bank
-from test_solver_agreement import AGREEMENT
+from oracles import corner_velocity_map, structural_product
+from qp_bank import AGREEMENT, qp_bank
 from wuerfel_cvx import simulate
 from wuerfel_cvx.errors import InputError
 from wuerfel_cvx.formulations import RigidFormulation, get_formulation, step_qp
-from wuerfel_cvx.formulations.rigid import body_velocities, corner_velocity_map
+from wuerfel_cvx.formulations.rigid import body_rows, body_velocities
 from wuerfel_cvx.model import Model
 from wuerfel_cvx.solve import solve_step_qp
+
+pytestmark = pytest.mark.integration
 
 
 def test_corner_map_reproduces_a_rigid_motion() -> None:
@@ -81,8 +83,6 @@ def test_rigid_formulation_refuses_the_heavy_table() -> None:
 def test_structural_product_keeps_cancelled_entries() -> None:
     import scipy.sparse as sp
 
-    from wuerfel_cvx.formulations.rigid import structural_product
-
     left = sp.csr_array(np.array([[1.0, 1.0, 0.0]]))
     right = sp.csr_array(np.array([[1.0, 2.0], [-1.0, 0.0], [5.0, 0.0]]))
     product = structural_product(left, right)
@@ -96,7 +96,6 @@ def test_body_rows_and_velocities_equal_the_corner_map_products(scene: str) -> N
     # sparse products with corner_velocity_map bit for bit (pattern, order and values), so
     # that trajectories do not change.
     from wuerfel_cvx.contacts import find_contacts
-    from wuerfel_cvx.formulations.rigid import body_rows, structural_product
     from wuerfel_cvx.model import State
     from wuerfel_cvx.scene import Scene
 
@@ -126,8 +125,6 @@ def test_body_rows_and_velocities_equal_the_corner_map_products(scene: str) -> N
 
 def test_body_rows_keep_a_cancelled_torque() -> None:
     # A contact whose two edge-corner torques cancel exactly keeps the omega entry (0.0).
-    from wuerfel_cvx.formulations.rigid import body_rows, structural_product
-
     points = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
     import scipy.sparse as sp
 

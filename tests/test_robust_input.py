@@ -38,6 +38,8 @@ from wuerfel_cvx.robustness.fuzz import (
 )
 from wuerfel_cvx.scene import LIMITS, Square, Table
 
+pytestmark = pytest.mark.integration
+
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "tilted-drop.toml"
 BASE = EXAMPLE.read_text(encoding="utf-8")
 
@@ -271,6 +273,7 @@ def cli_command() -> list[str]:
     return [str(script)] if script.is_file() else [sys.executable, "-m", "wuerfel_cvx.cli"]
 
 
+@pytest.mark.subprocess
 def test_fuzzed_rejections_exit_2_without_traceback_in_a_real_process(tmp_path: Path) -> None:
     picked: dict[str, bytes] = {}
     for item in generate_inputs(100, seed=2):

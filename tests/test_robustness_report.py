@@ -19,6 +19,8 @@ from wuerfel_cvx.robustness.report import (
     render,
 )
 
+pytestmark = pytest.mark.integration
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

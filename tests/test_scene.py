@@ -22,6 +22,8 @@ from wuerfel_cvx.geometry import FloatArray, polygon_overlap_depth, square_corne
 from wuerfel_cvx.library import FLOOR, scene_names
 from wuerfel_cvx.scene import DEFAULT_GRAVITY, OVERLAP_TOLERANCE, Scene, Square, Table
 
+pytestmark = pytest.mark.unit
+
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "tilted-drop.toml"
 
 #: A family number small enough to keep the library tests fast.

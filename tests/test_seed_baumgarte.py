@@ -12,6 +12,8 @@ from wuerfel_cvx.formulations import SEED_BAUMGARTE_RATE, SeedFormulation, get_f
 from wuerfel_cvx.geometry import side_value
 from wuerfel_cvx.model import Model, State
 
+pytestmark = pytest.mark.integration
+
 RATE = 7.0  # 1/s; any positive rate (not the default) so that the test is of the formula
 H = 1e-4  # s; central differences of a quadratic in t are exact up to round-off
 # Second differences of O(1) m^2 values divided by H^2 lose about 1e-16 / 1e-8 = 1e-8;

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from test_solver_agreement import AGREEMENT
+from qp_bank import AGREEMENT
 from wuerfel_cvx import Scene, Square, simulate
 from wuerfel_cvx.contacts import find_contacts
 from wuerfel_cvx.formulations import get_formulation, step_qp
@@ -14,21 +15,13 @@ from wuerfel_cvx.simulate import ASLEEP
 from wuerfel_cvx.sleep import SleepSettings, island_labels, island_members
 from wuerfel_cvx.solve import solve_step_qp
 
+pytestmark = pytest.mark.integration
+
 DT = 0.01
 
 
-def two_stacks_and_a_faller() -> Scene:
-    """Two 3-stacks 5 m apart, their tops tilted and moving, and a square in free flight."""
-    left = [Square(center=(-2.5, 0.5 + k)) for k in range(2)]
-    right = [Square(center=(2.5, 0.5 + k)) for k in range(2)]
-    tops = [Square(center=(-2.5, 2.56), angle=0.1, velocity=(0.3, -1.0)),
-            Square(center=(2.5, 2.6), angle=-0.2, velocity=(-0.2, -2.0), angular_velocity=1.0)]
-    faller = Square(center=(0.0, 6.0), velocity=(0.0, -1.0))
-    return Scene("two-stacks", (*left, tops[0], *right, tops[1], faller), (FLOOR,))
-
-
-def test_islands_are_the_connected_stacks() -> None:
-    scene = two_stacks_and_a_faller()
+def test_islands_are_the_connected_stacks(two_stacks_and_a_faller: Scene) -> None:
+    scene = two_stacks_and_a_faller
     model, state = Model.from_scene(scene), State.initial(scene)
     contacts = find_contacts(model, state.points, get_formulation("velocity").body_reach(
         model, state, DT))
@@ -37,8 +30,8 @@ def test_islands_are_the_connected_stacks() -> None:
     assert len({labels[0], labels[3], labels[6]}) == 3  # the floor does not connect
 
 
-def test_separate_islands_solve_to_the_joint_qps_answer() -> None:
-    scene = two_stacks_and_a_faller()
+def test_separate_islands_solve_to_the_joint_qps_answer(two_stacks_and_a_faller: Scene) -> None:
+    scene = two_stacks_and_a_faller
     model, state = Model.from_scene(scene), State.initial(scene)
     velocity = get_formulation("velocity")
     joint = solve_step_qp(step_qp(velocity, model, state, DT), "CLARABEL", "high")
@@ -64,8 +57,9 @@ def test_island_members_groups_squares_by_island() -> None:
     assert island_members(labels, np.zeros(6, dtype=bool)) == []
 
 
-def test_simulate_with_islands_solves_one_qp_per_island_with_the_joint_answer() -> None:
-    scene = two_stacks_and_a_faller()
+def test_simulate_with_islands_solves_one_qp_per_island_with_the_joint_answer(
+        two_stacks_and_a_faller: Scene) -> None:
+    scene = two_stacks_and_a_faller
     seen: list[tuple[int, int]] = []
     islands = simulate(scene, steps=1, tol="high", islands=True,
                        observer=lambda step, qp, solution: seen.append(

@@ -5,16 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qp_bank import BANK_CASES, qp_bank
-from wuerfel_cvx.solve import VERIFY_FACTOR, solve_step_qp
-from wuerfel_cvx.solvers import TOLERANCE_PRESETS, available_solvers
+from qp_bank import AGREEMENT, BANK_CASES, qp_bank
+from wuerfel_cvx.solve import solve_step_qp
+from wuerfel_cvx.solvers import available_solvers
 
-# Both solutions pass the residual check at VERIFY_FACTOR * eps (relative).  The QP is
-# strongly convex with Hessian 2 W, W >= m/4 = 0.25 kg per coordinate for the bank's
-# squares, and its right-hand sides and targets are below 5 m/s, so a residual r moves
-# the minimiser by at most about r (1 + 5 m/s) / (2 * 0.25 kg) = 12 r; two solutions
-# may differ by twice that.
-AGREEMENT = 2 * 12 * VERIFY_FACTOR * TOLERANCE_PRESETS["high"]  # m/s (2.4e-6)
+pytestmark = pytest.mark.integration
 
 
 def test_bank_covers_contacts_of_both_formulations() -> None:

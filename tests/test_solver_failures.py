@@ -28,6 +28,8 @@ from wuerfel_cvx.solve import kkt_residuals, solve_step_qp
 from wuerfel_cvx.solvers import _osqp_polish_option
 from wuerfel_cvx.trajectory import Trajectory
 
+pytestmark = pytest.mark.integration
+
 SCENE = "stack-3"  # every square touches its neighbour or the floor from step 1
 N_POINTS = 12
 

@@ -33,6 +33,8 @@ from wuerfel_cvx.solve import Residuals, solve_step_qp
 from wuerfel_cvx.solvers import available_solvers
 from wuerfel_cvx.trajectory import Trajectory
 
+pytestmark = pytest.mark.integration
+
 # the package exports the function simulate, which shadows the module's attribute name
 simulation_module = importlib.import_module("wuerfel_cvx.simulation")
 
@@ -354,15 +356,15 @@ def test_cli_fallback_completes_the_run_and_says_so(
     assert loaded.info["fallback"] == ["OSQP"]
 
 
-def test_fallback_takes_over_island_by_island(monkeypatch: pytest.MonkeyPatch) -> None:
-    from test_sleep import two_stacks_and_a_faller
+def test_fallback_takes_over_island_by_island(monkeypatch: pytest.MonkeyPatch,
+                                             two_stacks_and_a_faller: Scene) -> None:
     from wuerfel_cvx.backends.clarabel import DirectClarabel
 
     def explode(self: DirectClarabel, *args: Any, **kwargs: Any) -> Any:
         raise RuntimeError("direct solver exploded")
 
     monkeypatch.setattr(DirectClarabel, "solve", explode)
-    traj = simulate(two_stacks_and_a_faller(), steps=6, islands=True, fallback=("OSQP",))
+    traj = simulate(two_stacks_and_a_faller, steps=6, islands=True, fallback=("OSQP",))
     m = traj.metrics
     assert traj.n_steps == 6 and m["verified"].all()
     # An island QP on CLARABEL's direct path raises and OSQP solves it; islands still on

@@ -12,6 +12,8 @@ from wuerfel_cvx import versions
 from wuerfel_cvx.bench import plots
 from wuerfel_cvx.solvers import SOLVERS, Timing, available_solvers
 
+pytestmark = pytest.mark.unit
+
 
 @pytest.mark.parametrize("solver", available_solvers())
 def test_an_installed_solver_reports_its_distribution_version(solver: str) -> None:

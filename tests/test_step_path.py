@@ -22,6 +22,8 @@ from wuerfel_cvx.simulation import Simulation
 from wuerfel_cvx.sleep import SleepSettings
 from wuerfel_cvx.trajectory import Trajectory
 
+pytestmark = pytest.mark.integration
+
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 

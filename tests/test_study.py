@@ -24,6 +24,8 @@ from wuerfel_cvx.study import (
     trajectory_distance,
 )
 
+pytestmark = pytest.mark.integration
+
 G = 9.81  # m/s^2
 
 

@@ -18,6 +18,8 @@ from wuerfel_cvx.library import FLOOR
 from wuerfel_cvx.simulate import METRIC_COLUMNS
 from wuerfel_cvx.trajectory import Trajectory
 
+pytestmark = pytest.mark.integration
+
 DT = 0.01
 STEPS = 15
 ROUND_OFF = 1e-12  # relative float64 round-off of O(1) quantities over a few steps

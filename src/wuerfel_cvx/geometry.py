@@ -171,12 +171,6 @@ def edge_distances(points: FloatArray, polygon: FloatArray) -> FloatArray:
     return np.asarray(area / np.linalg.norm(head - tail, axis=-1)[None, :], dtype=np.float64)
 
 
-def penetration_depth(points: FloatArray, polygon: FloatArray) -> FloatArray:
-    """Depth (m, >= 0) of each point inside a convex polygon; zero outside."""
-    depth = np.maximum(0.0, -np.max(edge_distances(points, polygon), axis=1))
-    return np.asarray(depth, dtype=np.float64)
-
-
 def polygon_overlap_depth(poly_a: FloatArray, poly_b: FloatArray) -> float:
     """Penetration depth (m) of two convex polygons by the separating-axis test.
 

@@ -24,7 +24,7 @@ from .markdown import (
 )
 from .shgeom import DEFAULT_TIME_SHIFT, shifted_geometric_mean
 
-_POINT_KEY = ["scene", "tol", "dt", "duration", "table_mass", "extra_rod", "sleep"]
+_POINT_KEY = ["scene", "tol", "dt", "duration", "table_mass", "extra_rod", "sleep", "islands"]
 """Columns that identify a grid point apart from the solver (within one formulation)."""
 
 
@@ -153,17 +153,18 @@ def point_time_table(results: pd.DataFrame) -> str:
     if rows.empty or len(rows) > POINT_TABLE_LIMIT:
         return ""
     rows = rows.sort_values(["scene", "formulation", "solver", "tol", "dt", "table_mass",
-                             "sleep"], kind="stable", na_position="first")
+                             "sleep", "islands"], kind="stable", na_position="first")
     table = markdown_table(
         ["scene", "formulation", "solver", "tol", "dt (s)", "table mass (kg)", "sleep",
-         "wall (ms)", "solver (ms)", "step / solver"],
+         "wall (ms)", "solver (ms)", "step / solver", "islands"],
         ([row.scene, row.formulation, row.solver, row.tol, format_number(row.dt),
           table_mass_text(row.table_mass), "yes" if bool(row.sleep) else "no",
           format_ms(row.wall_time_per_step_median),
           format_ms(row.solver_time_per_step_median),
-          format_ratio(plots.as_float(row.step_over_solver_median))]
+          format_ratio(plots.as_float(row.step_over_solver_median)),
+          "yes" if bool(row.islands) else "no"]
          for row in rows.itertuples()),
-        align="llllllrrrr")
+        align="llllllrrrrl")
     return ("### Each grid point\n\nMedian whole-step and solver time per step of every "
             "completed grid point, and the median of their per-step ratio (*step / solver*).  "
             "*Table mass*: the seed's heavy-table variant (table corners as variables of "

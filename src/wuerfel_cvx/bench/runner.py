@@ -138,7 +138,8 @@ def _simulate(point: GridPoint) -> tuple[Trajectory, StepFailure | None, float |
                                   solver=point.solver, formulation=point.formulation,
                                   tol=point.tol, table_mass=point.table_mass,
                                   extra_rod=point.extra_rod, observer=compare,
-                                  sleep=SleepSettings() if point.sleep else None)
+                                  sleep=SleepSettings() if point.sleep else None,
+                                  islands=point.islands)
     except StepFailure as failure:
         if failure.trajectory is None:
             raise
@@ -152,6 +153,7 @@ def _configuration(point: GridPoint) -> dict[str, Any]:
         "engine": point.engine, "formulation": point.formulation, "solver": point.solver,
         "tol": point.tol, "dt": point.dt, "duration": point.duration, "steps": point.steps,
         "table_mass": point.table_mass, "extra_rod": point.extra_rod, "sleep": point.sleep,
+        "islands": point.islands,
         "solver_version": _solver_version(point.solver), **machine(),
         "finished_at": dt_module.datetime.now(dt_module.UTC).isoformat(timespec="seconds"),
         "reference_kind": point.reference,

@@ -4,6 +4,8 @@ The table is long-format CSV (one row per scene x formulation x solver x toleran
 variant).  Every column is declared once here with its type, unit and meaning; writing,
 reading, validating and the report all go through :data:`COLUMNS`.  Change the columns and
 you must bump :data:`SCHEMA_VERSION`: a sweep refuses to append to a file of another version.
+A file of an older version is still read (for the report) when the columns added since then
+have a value that says what the older rows meant (:data:`ADDED_COLUMNS`).
 """
 
 from __future__ import annotations
@@ -21,8 +23,12 @@ import pandas as pd
 
 from ..errors import InputError
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 """Version of :data:`COLUMNS`; stored in every row's ``schema_version``."""
+
+ADDED_COLUMNS: dict[int, dict[str, Any]] = {4: {"islands": False}}
+"""Per schema version, the columns it added and their value in the rows of older files
+(version 3 had no ``islands`` column: its runs solved one joint QP)."""
 
 ColumnType = Literal["str", "int", "float", "bool"]
 
@@ -59,6 +65,7 @@ COLUMNS: tuple[Column, ...] = (
     _c("table_mass", "float", "kg", "seed heavy-table corner mass; empty for fixed tables"),
     _c("extra_rod", "bool", "", "redundant sixth rod on every square"),
     _c("sleep", "bool", "", "islands at rest sleep (left out of the QP until touched)"),
+    _c("islands", "bool", "", "one QP per island instead of one joint QP per step"),
     _c("n_squares", "int", "1", "number of squares"),
     # environment
     _c("package_version", "str", "", "wuerfel_cvx version"),
@@ -178,10 +185,12 @@ def repair(path: Path) -> None:
             path.write_text(text, encoding="utf-8")
 
 
-def read_results(path: str | Path) -> pd.DataFrame:
+def read_results(path: str | Path, upgrade: bool = True) -> pd.DataFrame:
     """Read a results CSV with the schema's types; raises :class:`InputError` if it differs.
 
-    A trailing partial line (a sweep killed mid-write) is ignored.
+    A trailing partial line (a sweep killed mid-write) is ignored.  With ``upgrade``, a file
+    of an older schema version is read as the current one (see :data:`ADDED_COLUMNS`);
+    without, only the current version is accepted (a sweep appending to the file).
     """
     path = Path(path)
     if not path.is_file():
@@ -190,6 +199,20 @@ def read_results(path: str | Path) -> pd.DataFrame:
     if not text.strip():
         return pd.DataFrame({c.name: pd.Series(dtype=_PANDAS_DTYPES[c.type]) for c in COLUMNS})
     header = text.split("\n", 1)[0].split(",")
+    older = _older_version(tuple(header)) if upgrade else None
+    if older is not None:
+        version, added = older
+        frame = pd.read_csv(io.StringIO(text), dtype="string", keep_default_na=False,
+                            na_values=[""])
+        claimed = set(frame["schema_version"].dropna())
+        if claimed - {str(version)}:
+            raise InputError(f"has the columns of schema version {version} but rows of "
+                             f"version {sorted(claimed)}", source=str(path),
+                             field="schema_version")
+        frame = frame.assign(schema_version=str(SCHEMA_VERSION),
+                             **{name: _cell(value, _BY_NAME[name])
+                                for name, value in added.items()})
+        return validate(frame[list(COLUMN_NAMES)], source=str(path))
     if tuple(header) != COLUMN_NAMES:
         missing = [name for name in COLUMN_NAMES if name not in header]
         extra = [name for name in header if name not in COLUMN_NAMES]
@@ -198,6 +221,20 @@ def read_results(path: str | Path) -> pd.DataFrame:
     frame = pd.read_csv(io.StringIO(text), dtype="string", keep_default_na=False,
                         na_values=[""])
     return validate(frame, source=str(path))
+
+
+def _older_version(header: tuple[str, ...]) -> tuple[int, dict[str, Any]] | None:
+    """The older schema version with the columns ``header``, and what was added since.
+
+    The columns added since, with their value in the older rows; ``None`` if ``header`` is
+    not the columns of an older version.
+    """
+    added: dict[str, Any] = {}
+    for version in sorted(ADDED_COLUMNS, reverse=True):
+        added.update(ADDED_COLUMNS[version])
+        if header == tuple(name for name in COLUMN_NAMES if name not in added):
+            return version - 1, added
+    return None
 
 
 def validate(frame: pd.DataFrame, source: str = "results") -> pd.DataFrame:

@@ -90,20 +90,22 @@ def is_value(column: pd.Series, value: str) -> pd.Series:
 
 
 def plain_variant(results: pd.DataFrame) -> pd.Series:
-    """Mask of rows without a variant: fixed tables (no ``table_mass``), five rods, no sleep."""
+    """Mask of rows without a variant: fixed tables, five rods, no sleep, one joint QP."""
     return (results["table_mass"].isna() & ~results["extra_rod"].fillna(False).astype(bool)
-            & ~results["sleep"].fillna(False).astype(bool))
+            & ~results["sleep"].fillna(False).astype(bool)
+            & ~results["islands"].fillna(False).astype(bool))
 
 
 def variant_labels(results: pd.DataFrame) -> pd.Series:
-    """Short text per row naming its variant (``table 1e+06 kg``, ``extra rod``, ``sleep``)."""
+    """Short text per row naming its variant (``table 1e+06 kg``, ``sleep``, ``islands``...)."""
     masses = results["table_mass"]
     rods = results["extra_rod"].fillna(False).astype(bool)
     sleeps = results["sleep"].fillna(False).astype(bool)
+    islands = results["islands"].fillna(False).astype(bool)
     labels = [" ".join(part for part in (
         f"table {mass:.0e} kg" if pd.notna(mass) else "", "extra rod" if rod else "",
-        "sleep" if sleep else "") if part)
-        for mass, rod, sleep in zip(masses, rods, sleeps, strict=True)]
+        "sleep" if sleep else "", "islands" if island else "") if part)
+        for mass, rod, sleep, island in zip(masses, rods, sleeps, islands, strict=True)]
     return pd.Series(labels, index=results.index, dtype=object)
 
 

@@ -16,6 +16,7 @@ Cartesian product of its lists::
     table_masses = ["fixed"]            # "fixed" or a heavy-table corner mass (kg)
     extra_rods = [false]
     sleeps = [false]                    # true: islands at rest sleep
+    islands = [false]                   # true: one QP per island instead of one joint QP
     reference = "dt/8"                  # "dt/8", "rest" or "none"
     compare_every = 1                   # steps between re-solves by the reference solver
     time_limit = 600.0                  # wall seconds per grid point before it is stopped
@@ -53,13 +54,13 @@ REFERENCE_TOL = "high"
 
 _LIST_KEYS = {"scenes": str, "formulations": str, "solvers": str, "tols": str,
               "dts": float, "table_masses": (str, float), "extra_rods": bool,
-              "sleeps": bool}
+              "sleeps": bool, "islands": bool}
 _SCALAR_KEYS = {"duration": float, "reference": str, "compare_every": int,
                 "time_limit": float}
 _DEFAULTS: dict[str, Any] = {
     "formulations": ["velocity"], "solvers": ["CLARABEL"], "tols": ["default"],
     "dts": [0.01], "table_masses": ["fixed"], "extra_rods": [False], "sleeps": [False],
-    "reference": "dt/8",
+    "islands": [False], "reference": "dt/8",
     "compare_every": 1, "time_limit": 600.0,
 }
 
@@ -90,6 +91,8 @@ class GridPoint:
     """Re-solve every ``compare_every``-th step's QP with the reference solver; 0: never."""
     time_limit: float = 600.0
     """Wall time (s) after which a grid point is stopped and reported as failed."""
+    islands: bool = False
+    """One QP per island instead of one joint QP (``simulate(..., islands=True)``)."""
 
     @property
     def engine(self) -> str:
@@ -112,6 +115,8 @@ class GridPoint:
             parts.append("extra_rod")
         if self.sleep:
             parts.append("sleep")
+        if self.islands:
+            parts.append("islands")
         return "|".join(parts)
 
     @property
@@ -248,16 +253,17 @@ def _expand(suite: str, s: dict[str, Any], source: str, where: str) -> list[Grid
                              field=f"{where}.dts")
     masses = [_table_mass(m, source, f"{where}.table_masses") for m in s["table_masses"]]
     points = []
-    for scene, formulation, solver, tol, dt, mass, rod, sleep in itertools.product(
+    for scene, formulation, solver, tol, dt, mass, rod, sleep, islands in itertools.product(
             s["scenes"], s["formulations"], s["solvers"], s["tols"], s["dts"], masses,
-            s["extra_rods"], s["sleeps"]):
+            s["extra_rods"], s["sleeps"], s["islands"]):
         solver = solver.upper()
         if solver in PEER_ENGINES:
-            formulation, tol, mass, rod, sleep = "peer", "native", None, False, False
+            formulation, tol, mass, rod, sleep, islands = ("peer", "native", None, False,
+                                                           False, False)
         points.append(GridPoint(suite, scene, formulation, solver, str(tol), float(dt),
                                 float(duration), mass, bool(rod), bool(sleep),
                                 s["reference"], s["compare_every"],
-                                float(s["time_limit"])))
+                                float(s["time_limit"]), islands=bool(islands)))
     return points
 
 

@@ -95,7 +95,7 @@ def _finished_ids(results: Path, suite: str) -> set[str]:
     if not results.exists():
         return set()
     schema.repair(results)
-    frame = schema.read_results(results)
+    frame = schema.read_results(results, upgrade=False)
     suites = set(frame["suite"].dropna().unique())
     if suites - {suite}:
         raise InputError(f"holds results of suite(s) {sorted(suites)}, not '{suite}'; "

@@ -71,7 +71,7 @@ class RigidFormulation:
         """The corner velocities ``(4 n, 2)`` (m/s) of the new body velocities."""
         body = solution.reshape(-1, 3)
         turned = rot90(_offsets(state.points))  # (n, 4, 2)
-        # u + omega rot90(r), summed as corner_velocity_map(points) @ solution would be
+        # u + omega rot90(r), summed as the sparse corner map (8 n x 3 n) times solution would be
         corners = (0.0 + body[:, None, :2]) + turned * body[:, None, 2:]
         return np.asarray(corners.reshape(-1, 2), dtype=np.float64)
 
@@ -81,31 +81,18 @@ class RigidFormulation:
                           self.new_velocities(state, solution, dt), dt)
 
 
-def corner_velocity_map(points: FloatArray) -> sp.csr_array:
-    """Sparse ``(8 n, 3 n)`` map from ``(u_x, u_y, omega)`` per square to corner velocities.
-
-    ``v_i = u + omega rot90(r_i)`` with ``r_i`` the corner's offset from its square's centre.
-    """
-    turned = rot90(_offsets(points)).reshape(-1, 2)  # (4n, 2)
-    n_corners = turned.shape[0]
-    body = np.arange(n_corners) // 4
-    rows = np.concatenate([2 * np.arange(n_corners), 2 * np.arange(n_corners) + 1,
-                           2 * np.arange(n_corners), 2 * np.arange(n_corners) + 1])
-    cols = np.concatenate([3 * body, 3 * body + 1, 3 * body + 2, 3 * body + 2])
-    values = np.concatenate([np.ones(n_corners), np.ones(n_corners), turned[:, 0],
-                             turned[:, 1]])
-    return sp.csr_array((values, (rows, cols)), shape=(2 * n_corners, 3 * (n_corners // 4)))
-
-
 def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
-    """``corner_rows @ corner_velocity_map(points)`` as :func:`structural_product` gives it.
+    """``corner_rows`` times the corner map ``v_i = u + omega rot90(r_i)``, written directly.
 
     ``corner_rows`` (canonical CSR, one column per square-corner coordinate) in the
     unknowns ``(u_x, u_y, omega)`` of each square: an entry ``v`` in the column of corner
     ``c`` (axis ``a``) of square ``b`` adds ``v`` to column ``3 b + a`` and
     ``v rot90(r_c)_a`` to column ``3 b + 2``.  The entries of a cell are summed from 0 in
     the row's column order, as scipy's sparse product sums them, so the values are bit
-    for bit those of the product; no entry that cancels to 0.0 is dropped.
+    for bit those of the sparse product with the ``(8 n, 3 n)`` corner map.  Unlike that
+    product, no entry that cancels to 0.0 is dropped (a contact normal through a square's
+    centre has no torque): the sparsity pattern, and with it the compiled-problem cache's
+    key, stays the same from step to step.
     """
     n_rows = corner_rows.shape[0]
     turned = rot90(_offsets(points)).reshape(-1)  # per corner coordinate (4 n * 2,)
@@ -138,26 +125,6 @@ def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
     matrix = sp.csr_array((sums, columns, indptr), shape=(n_rows, n_cols))
     matrix.has_canonical_format = True  # sorted by column, one entry per cell
     return matrix
-
-
-def structural_product(left: sp.csr_array, right: sp.csr_array) -> sp.csr_array:
-    """``left @ right`` keeping every structurally nonzero entry, even one that is 0.0.
-
-    scipy drops products that cancel to exactly zero (a contact normal through a square's
-    centre has no torque), which would change the sparsity pattern from step to step and
-    defeat the compiled-problem cache.
-    """
-    left_ones, right_ones = sp.csr_array(left, copy=True), sp.csr_array(right, copy=True)
-    left_ones.data[:] = 1.0
-    right_ones.data[:] = 1.0
-    pattern = sp.csr_array(left_ones @ right_ones)  # positive counts: nothing cancels
-    pattern.sort_indices()
-    if pattern.nnz == 0:
-        return pattern
-    rows = np.repeat(np.arange(pattern.shape[0]), np.diff(pattern.indptr))
-    product = sp.csr_array(left @ right)
-    pattern.data = np.asarray(product[rows, pattern.indices], dtype=np.float64).ravel()
-    return pattern
 
 
 def body_velocities(points: FloatArray, velocities: FloatArray,
