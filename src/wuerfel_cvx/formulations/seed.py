@@ -24,6 +24,15 @@ penetrating point with time constant 1/alpha (s).  With the seed's update the di
 feedback is stable for ``alpha dt < 1`` (errors shrink by about 0.85 per step at
 ``alpha dt = 0.2``).  A side constraint is then applied whenever ``A <= 0``, whether the
 point approaches or leaves: the feedback, not the rate rule, decides how it leaves.
+Two contact rules change with it, because the feedback lets points sink in by
+centimetres (``docs/seed-baumgarte-infeasible.md``):
+
+* A point within :data:`~wuerfel_cvx.contacts.TIE_TOLERANCE` (m) of an edge counts as
+  touching it, so that a resting contact left a round-off gap by the solver still holds.
+* All points of one body inside another are pushed out through the same face: the face
+  of the edge body along whose normal the pair is best separated (the separating-axis
+  choice).  The sector rule would send a sunk corner near a corner out through the
+  adjacent side, and two corners of one edge out through opposite faces.
 """
 
 from __future__ import annotations
@@ -33,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..contacts import Contacts
+from ..contacts import TIE_TOLERANCE, Contacts, pair_distances
 from ..geometry import FloatArray, side_rate, side_value, side_velocity_product
 from ..model import Model, State
 from .qp import StepQP, declare_qp, point_rows
@@ -48,9 +57,18 @@ class SeedFormulation:
     baumgarte_rate: float = 0.0
     """Baumgarte feedback rate alpha (1/s) on rods and sides; 0 is the paper's model."""
 
+    @property
+    def touching_distance(self) -> float:
+        """Largest signed distance (m) at which a point's side constraint applies."""
+        return TIE_TOLERANCE if self.baumgarte_rate else 0.0
+
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
-        """Zero (m) for every body: the seed constrains only points on or behind an edge."""
-        return np.zeros(model.n_bodies)
+        """Half the touching distance (m) for every body (a pair's margin is the sum).
+
+        The seed constrains only points on or behind an edge; with Baumgarte feedback a
+        point within :attr:`touching_distance` of it counts as touching.
+        """
+        return np.full(model.n_bodies, 0.5 * self.touching_distance)
 
     def build(self, model: Model, state: State, contacts: Contacts, dt: float) -> StepQP:
         """The step QP in the corner accelerations (pure function of its arguments).
@@ -62,8 +80,11 @@ class SeedFormulation:
         all_points = model.all_points(points)
         all_velocities = np.concatenate([velocities, np.zeros_like(model.table_points)])
         contacts = _active(contacts, all_points, all_velocities,
-                           require_approach=self.baumgarte_rate == 0.0)
+                           require_approach=self.baumgarte_rate == 0.0,
+                           touching=self.touching_distance)
         rate = self.baumgarte_rate
+        if rate:
+            contacts = _pair_faces(contacts, all_points)
         n_unknown = n_unknown_points(model)
 
         weights = unknown_masses(model)
@@ -109,11 +130,36 @@ class SeedFormulation:
 
 
 def _active(contacts: Contacts, all_points: FloatArray, all_velocities: FloatArray,
-            require_approach: bool = True) -> Contacts:
-    """Keep the contacts with ``A <= 0`` and, if ``require_approach``, ``dA/dt <= 0`` (2.2)."""
+            require_approach: bool = True, touching: float = 0.0) -> Contacts:
+    """Keep the contacts with ``A <= 0`` and, if ``require_approach``, ``dA/dt <= 0`` (2.2).
+
+    ``touching`` (m): the signed distance up to which ``A`` counts as zero.
+    """
     rate = side_rate(all_points[contacts.edge_i], all_points[contacts.edge_j],
                      all_points[contacts.point], all_velocities[contacts.edge_i],
                      all_velocities[contacts.edge_j], all_velocities[contacts.point])
-    keep = (contacts.distance <= 0.0) & ((rate <= 0.0) | (not require_approach))
+    keep = (contacts.distance <= touching) & ((rate <= 0.0) | (not require_approach))
     return Contacts(*(getattr(contacts, f)[keep] for f in
                       ("point", "edge_i", "edge_j", "point_body", "edge_body", "distance")))
+
+
+def _pair_faces(contacts: Contacts, all_points: FloatArray) -> Contacts:
+    """The contacts with each pair's points on the edge body's best-separating face.
+
+    For each (edge body, point body) pair the face is the edge whose outward normal
+    separates the pair best: the largest, over the edge body's four edges, of the
+    smallest signed distance (m) of the point body's corners (the separating-axis test,
+    as :func:`~wuerfel_cvx.contacts.choose_edges` uses it to break ties).  For a point on
+    the boundary this is the sector rule's edge unless the point is at a corner.
+    """
+    if len(contacts) == 0:
+        return contacts
+    pairs, pair_of = np.unique(np.stack([contacts.edge_body, contacts.point_body], axis=1),
+                               axis=0, return_inverse=True)
+    pair_of = pair_of.reshape(-1)
+    distances = pair_distances(all_points.reshape(-1, 4, 2), pairs[:, 0], pairs[:, 1])
+    face = np.argmax(distances.min(axis=0), axis=0)[pair_of]  # (contacts,) edge 0..3
+    body = contacts.edge_body
+    return Contacts(point=contacts.point, edge_i=4 * body + (face + 1) % 4,
+                    edge_j=4 * body + face, point_body=contacts.point_body, edge_body=body,
+                    distance=distances[contacts.point % 4, face, pair_of])
