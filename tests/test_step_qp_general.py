@@ -21,8 +21,8 @@ from wuerfel_cvx.solvers import SOLVERS, TOLERANCE_PRESETS, available_solvers
 
 HIGH = TOLERANCE_PRESETS["high"]
 DIRECT_SOLVERS = [name for name, spec in SOLVERS.items() if spec.backend is not None]
-pytestmark = pytest.mark.filterwarnings(  # cvxpy reading its own sparse parameters
-    "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")
+pytestmark = [pytest.mark.integration, pytest.mark.filterwarnings(  # cvxpy reading its own
+    "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")]  # sparse parameters
 
 
 def wide_qp() -> StepQP:
