@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import os
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -10,11 +12,12 @@ import pytest
 
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx import contacts as contacts_module
+from wuerfel_cvx import simulation as simulation_module
 from wuerfel_cvx.bench.schema import read_results
 from wuerfel_cvx.bench.suite import Suite
 from wuerfel_cvx.bench.sweep import run_sweep
 from wuerfel_cvx.contacts import Contacts, find_contacts
-from wuerfel_cvx.errors import Interrupted
+from wuerfel_cvx.errors import Interrupted, StepFailure
 from wuerfel_cvx.formulations import StepQP, VelocityFormulation
 from wuerfel_cvx.metrics import deepest_penetration
 from wuerfel_cvx.model import Model, State
@@ -172,3 +175,34 @@ def test_frozen_formulation_options_reach_the_reach() -> None:
     narrow = simulate("tilted-drop", dt=0.01, steps=1)
     widened = simulate("tilted-drop", dt=0.01, steps=1, formulation=wide)
     assert widened.metrics["n_contacts"].iloc[0] > narrow.metrics["n_contacts"].iloc[0]
+
+
+def test_a_ctrl_c_that_a_solver_takes_still_stops_the_run(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A Ctrl-C that a solver turns into a failed status still stops the run as interrupted.
+
+    A solver library that checks for signals itself may do that; the run must not then
+    report a solver failure.
+    """
+    real = simulation_module.solve_with_fallback
+
+    def solver_taking_ctrl_c(qp: StepQP, solvers: list[str], tol: str, step: int,
+                             cache: object) -> object:
+        if step == 5:
+            try:
+                os.kill(os.getpid(), signal.SIGINT)  # the user presses Ctrl-C ...
+                signal.pthread_sigmask(signal.SIG_BLOCK, [])  # (let the handler run)
+            except KeyboardInterrupt:
+                pass  # ... and the solver takes it
+            raise StepFailure(step, solvers[0], "solver_error")
+        return real(qp, solvers, tol, step, cache)  # type: ignore[arg-type]
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal
+    try:
+        monkeypatch.setattr(simulation_module, "solve_with_fallback", solver_taking_ctrl_c)
+        with pytest.raises(Interrupted) as caught:
+            simulate("tilted-drop", dt=0.01, steps=20)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert caught.value.step == 5 and caught.value.trajectory.n_steps == 4
+    assert signal.getsignal(signal.SIGINT) is previous  # the handler is put back

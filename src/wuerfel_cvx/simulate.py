@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import signal
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
+from types import FrameType
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -94,17 +98,54 @@ def simulate(
     simulation = Simulation(scene, dt, solver, formulation, tol, table_mass=table_mass,
                             extra_rod=extra_rod, compiled=compiled, sleep=sleep,
                             islands=islands, fallback=fallback)
-    try:
-        for _ in tqdm(range(int(steps)), disable=not progress, unit="step", desc=scene.name):
-            record = simulation.step()
-            if observer is not None:
-                for qp, solution in zip(record.qps, record.solutions, strict=True):
-                    observer(record.step, qp, solution)
-    except StepFailure as failure:  # from a step, or an observer ending the run
-        failure.trajectory = simulation.trajectory()
-        raise
-    except KeyboardInterrupt as stop:
-        interrupted = Interrupted(simulation.step_index + 1)
-        interrupted.trajectory = simulation.trajectory()
-        raise interrupted from stop
+    with _noticing_ctrl_c() as ctrl_c:
+        try:
+            for _ in tqdm(range(int(steps)), disable=not progress, unit="step",
+                          desc=scene.name):
+                record = simulation.step()
+                if ctrl_c.is_set():  # a solver took the Ctrl-C and still answered
+                    raise KeyboardInterrupt
+                if observer is not None:
+                    for qp, solution in zip(record.qps, record.solutions, strict=True):
+                        observer(record.step, qp, solution)
+        except StepFailure as failure:  # from a step, or an observer ending the run
+            if ctrl_c.is_set():  # a solver gave up because of the Ctrl-C: not a failure
+                raise _interrupted(simulation) from failure
+            failure.trajectory = simulation.trajectory()
+            raise
+        except KeyboardInterrupt as stop:
+            raise _interrupted(simulation) from stop
     return simulation.trajectory()
+
+
+def _interrupted(simulation: Simulation) -> Interrupted:
+    """The :class:`Interrupted` of a run stopped during its next step."""
+    interrupted = Interrupted(simulation.step_index + 1)
+    interrupted.trajectory = simulation.trajectory()
+    return interrupted
+
+
+@contextmanager
+def _noticing_ctrl_c() -> Iterator[threading.Event]:
+    """An event set by Ctrl-C (SIGINT) within the block, which still raises as usual.
+
+    A solver library that checks for signals while it iterates may take the
+    :class:`KeyboardInterrupt` and return a failed status instead; the event tells the loop
+    that the user, not the solver, stopped the step.  Only the main thread can handle
+    signals, and a handler someone else installed is left in place.
+    """
+    noticed = threading.Event()
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield noticed
+        return
+
+    def note_and_raise(signum: int, frame: FrameType | None) -> None:
+        noticed.set()
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, note_and_raise)
+    try:
+        yield noticed
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
