@@ -126,7 +126,7 @@ class Trajectory:
         """A few lines on the run: duration, extremes of the metrics, timing."""
         m = self.metrics
         lines = [
-            f"scene {self.info.get('scene', '?')}: {self.points.shape[1] // 4} boxes, "
+            f"scene {self.info.get('scene', '?')}: {_count(self.points.shape[1] // 4, 'box')}, "
             f"{self.n_steps} steps of {self.info.get('dt', float('nan')):g} s "
             f"({self.times[-1]:g} s simulated)",
             f"formulation {self.info.get('formulation')}, solver {self.info.get('solver')}, "
@@ -148,3 +148,8 @@ class Trajectory:
                 f"(solver's own {1e3 * solved['solver_time_s'].median():.3f} ms)",
             ]
         return "\n".join(lines)
+
+
+def _count(number: int, noun: str) -> str:
+    """``"1 box"``, ``"3 boxes"``."""
+    return f"{number} {noun}" if number == 1 else f"{number} {noun}es"
