@@ -204,8 +204,9 @@ def _stamp(run: RobustnessRun) -> list[str]:
 
 def _properties_section(sweep: PropertySweepResult) -> list[str]:
     lines = ["## Generated scenes", "",
-             f"{sweep.tried} random valid scenes (seed {sweep.seed}; 1 to 8 squares of random "
-             "size, mass, angle, velocity and spin above a table), each simulated for "
+             f"{sweep.tried} random valid scenes (seed {sweep.seed}; 1 to 8 squares and boxes of "
+             "random size, aspect, mass, angle, velocity and spin above a table), each "
+             "simulated for "
              f"{sweep.steps} steps with CLARABEL and checked for NaN, rod drift, "
              "penetration and energy against the bounds derived in "
              "`wuerfel_cvx.robustness.properties`.", ""]
@@ -223,7 +224,7 @@ def _fuzz_section(fuzz: FuzzResult) -> list[str]:
         "## Fuzzed scene files", "",
         f"{fuzz.tried} mutations of library scene files (wrong types, missing and unknown "
         "keys, huge, tiny, infinite and NaN numbers, big integers, unicode, deep nesting, "
-        "flipped bytes, truncation, megabytes of comments, hundreds of squares), each "
+        "flipped bytes, truncation, megabytes of comments, hundreds of squares or boxes), each "
         "loaded and, if it loads, simulated for one step.", "",
         "| outcome | files |", "|---|---:|",
         f"| valid scene, stepped to a finite state | {fuzz.accepted} |",
