@@ -9,14 +9,13 @@ from contextlib import contextmanager
 from pathlib import Path
 from types import FrameType
 
-import numpy as np
 from tqdm.auto import tqdm
 
 from .errors import InputError, Interrupted, StepFailure
 from .formulations import Formulation, StepQP
 from .recorder import METRIC_COLUMNS
 from .scene import Scene
-from .simulation import ASLEEP, DT_RANGE, Simulation
+from .simulation import ASLEEP, DT_RANGE, Simulation, checked_steps
 from .sleep import SleepSettings
 from .solve import StepSolution
 from .trajectory import Trajectory
@@ -92,8 +91,7 @@ def simulate(
         completed before it.
 
     """
-    if isinstance(steps, bool) or not isinstance(steps, int | np.integer) or steps < 0:
-        raise InputError(f"must be a non-negative integer, got {steps}", field="steps")
+    steps = checked_steps(steps)
     scene = resolve_scene(scene)
     simulation = Simulation(scene, dt, solver, formulation, tol, table_mass=table_mass,
                             extra_rod=extra_rod, compiled=compiled, sleep=sleep,

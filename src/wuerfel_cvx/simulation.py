@@ -115,7 +115,7 @@ class Simulation:
                  *, table_mass: float | None = None, extra_rod: bool = False,
                  compiled: bool = True, sleep: SleepSettings | None = None,
                  islands: bool = False, fallback: Sequence[str] = ()):
-        self.dt = _checked_dt(dt)
+        self.dt = checked_dt(dt)
         self.solvers = [get_solver(name).name for name in (solver, *fallback)]
         tolerance_value(tol)
         self.tol = tol
@@ -233,7 +233,14 @@ def _asleep_row(step_time: float) -> dict[str, Any]:
     return _solved_row([], nothing_solved, ASLEEP, step_time, step_time)
 
 
-def _checked_dt(dt: float) -> float:
+def checked_steps(steps: int) -> int:
+    """``steps`` as an int, or :class:`InputError` if it is not a non-negative integer."""
+    if isinstance(steps, bool) or not isinstance(steps, int | np.integer) or steps < 0:
+        raise InputError(f"must be a non-negative integer, got {steps}", field="steps")
+    return int(steps)
+
+
+def checked_dt(dt: float) -> float:
     """``dt`` (s) as a float, or :class:`InputError` if it is not within :data:`DT_RANGE`."""
     if isinstance(dt, bool) or not (isinstance(dt, int | float) and math.isfinite(dt)
                                     and dt > 0):

@@ -13,7 +13,6 @@ functions of :mod:`wuerfel_cvx.metrics` as for the package's own simulator.
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Any, Protocol
 
@@ -21,12 +20,13 @@ import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
-from ..errors import InputError, StepFailure
+from ..errors import StepFailure
 from ..geometry import FloatArray, rectangle_corners, rot90
 from ..metrics import deepest_penetration
 from ..model import Model, State
 from ..recorder import TrajectoryRecorder, physical_metrics, run_info
 from ..scene import Scene
+from ..simulation import checked_dt, checked_steps
 from ..trajectory import Trajectory
 from ..versions import package_version as package_version  # re-exported by peers
 
@@ -91,12 +91,9 @@ def corners_from_poses(sizes: FloatArray, poses: FloatArray) -> tuple[FloatArray
 
 
 def check_run_arguments(dt: float, steps: int) -> None:
-    """Reject a non-positive or non-finite ``dt`` (s) or a negative ``steps`` like ``simulate``."""
-    if isinstance(dt, bool) or not (isinstance(dt, int | float) and math.isfinite(dt)
-                                    and dt > 0):
-        raise InputError(f"must be a positive finite number of seconds, got {dt}", field="dt")
-    if isinstance(steps, bool) or not isinstance(steps, int | np.integer) or steps < 0:
-        raise InputError(f"must be a non-negative integer, got {steps}", field="steps")
+    """Reject a ``dt`` (s) or ``steps`` that ``simulate`` would reject, with its message."""
+    checked_dt(dt)
+    checked_steps(steps)
 
 
 def run_peer(engine: str, package: str, scene: Scene, world: PeerWorld, dt: float,
