@@ -35,6 +35,8 @@ class StalledCase:
     solver: str
     step: int
     status: str
+    reference: str
+    """A solver that solves this QP at tol ``high`` with verified residuals."""
 
     @property
     def path(self) -> Path:
@@ -43,10 +45,10 @@ class StalledCase:
 
 
 STALLED_CASES: tuple[StalledCase, ...] = (
-    StalledCase("rain-20", "OSQP", 103, "user_limit"),
-    StalledCase("rain-20", "PIQP", 197, "user_limit"),
-    StalledCase("rain-20", "CLARABEL", 353, "solver_error"),
-    StalledCase("rain-50", "CLARABEL", 737, "solver_error"),
+    StalledCase("rain-20", "OSQP", 103, "user_limit", "CLARABEL"),
+    StalledCase("rain-20", "PIQP", 197, "user_limit", "CLARABEL"),
+    StalledCase("rain-20", "CLARABEL", 353, "solver_error", "PIQP"),
+    StalledCase("rain-50", "CLARABEL", 737, "solver_error", "PIQP"),
 )
 """The stalls of the velocity formulation at dt 0.01 s and tol ``default``."""
 
@@ -84,3 +86,28 @@ def load_step_qp(path: Path) -> tuple[StepQP, State]:
         qp = declare_qp(arrays["weights"], arrays["target"], _csr(arrays, "eq"),
                         arrays["eq_rhs"], _csr(arrays, "ineq"), arrays["ineq_rhs"], contacts)
         return qp, State(arrays["points"], arrays["velocities"])
+
+
+def rigid_basis(state: State) -> np.ndarray:
+    """``T`` (8 n, 3 n): corner velocities of each square's rigid motion (vx, vy, omega)."""
+    corners = state.points.reshape(-1, 4, 2)
+    n = corners.shape[0]
+    basis = np.zeros((8 * n, 3 * n))
+    for k in range(n):
+        arm = corners[k] - corners[k].mean(axis=0)
+        for c in range(4):
+            row = 8 * k + 2 * c
+            basis[row, 3 * k], basis[row + 1, 3 * k + 1] = 1.0, 1.0
+            basis[row, 3 * k + 2], basis[row + 1, 3 * k + 2] = -arm[c, 1], arm[c, 0]
+    return basis
+
+
+def opposed_pairs(qp: StepQP, state: State, closeness: float = 1e-4) -> np.ndarray:
+    """(pairs, 2) contact rows whose rigid rows ``g T`` point in opposite directions.
+
+    Rows ``i < j`` with ``1 + cos(g_i T, g_j T) < closeness``: two point-edge rows that
+    push the same relative motion of two bodies in opposite senses.
+    """
+    rigid = qp.ineq_matrix.toarray() @ rigid_basis(state)
+    unit = rigid / np.linalg.norm(rigid, axis=1)[:, None]
+    return np.argwhere(np.triu(unit @ unit.T < -1.0 + closeness, 1))
