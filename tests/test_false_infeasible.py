@@ -12,7 +12,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import proxsuite
 import pytest
 import scipy.sparse as sp
 from scipy.optimize import linprog
@@ -84,6 +83,7 @@ def test_proxqp_solves_the_stack_qp_with_a_primal_infeasibility_tolerance_of_1e_
     (``H x + g + E'y - G'z = 0``), so the KKT check applies as it is.  Repeated: the
     dense backend's round-off depends on where its input arrays lie in memory.
     """
+    proxsuite = pytest.importorskip("proxsuite")  # an extra solver, not a dependency
     qp = saved_qp("proxqp-stack-10")
     hessian = sp.diags_array(2.0 * qp.weights).tocsc()
     gradient = -2.0 * qp.weights * qp.target
