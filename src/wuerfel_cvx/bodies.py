@@ -14,13 +14,45 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import FloatArray, rectangle_corners, rot90, square_corners
+from .geometry import FloatArray, rectangle_corners, rot90
 
 Vec2 = tuple[float, float]
 
 
+class _RigidRectangle:
+    """What a square and a box share: corners and their rigid velocities from the pose.
+
+    The subclass holds the pose fields (``center``, ``angle``, ``velocity``,
+    ``angular_velocity``) and says its ``width`` and ``height``.
+    """
+
+    center: Vec2
+    angle: float
+    velocity: Vec2
+    angular_velocity: float
+
+    @property
+    def width(self) -> float:
+        """Extent (m) along the body's own x axis."""
+        raise NotImplementedError
+
+    @property
+    def height(self) -> float:
+        """Extent (m) along the body's own y axis."""
+        raise NotImplementedError
+
+    def corners(self) -> FloatArray:
+        """Corner positions ``(4, 2)`` (m), counter-clockwise from the lower-left one."""
+        return rectangle_corners(self.center, self.width, self.height, self.angle)
+
+    def corner_velocities(self) -> FloatArray:
+        """Corner velocities ``(4, 2)`` (m/s) of the rigid motion: ``v + omega rot90(r)``."""
+        offsets = self.corners() - np.asarray(self.center)
+        return np.asarray(self.velocity) + self.angular_velocity * rot90(offsets)
+
+
 @dataclass(frozen=True)
-class Square:
+class Square(_RigidRectangle):
     """A rigid square: 4 corner masses joined by 5 rods."""
 
     center: Vec2
@@ -46,18 +78,9 @@ class Square:
         """Extent (m) along the body's own y axis: the side length."""
         return self.size
 
-    def corners(self) -> FloatArray:
-        """Corner positions ``(4, 2)`` (m), counter-clockwise."""
-        return square_corners(self.center, self.size, self.angle)
-
-    def corner_velocities(self) -> FloatArray:
-        """Corner velocities ``(4, 2)`` (m/s) of the rigid motion."""
-        return _rigid_corner_velocities(self.corners(), self.center, self.velocity,
-                                        self.angular_velocity)
-
 
 @dataclass(frozen=True)
-class Box:
+class Box(_RigidRectangle):
     """A rigid rectangle of any width and height: 4 corner masses joined by 5 rods."""
 
     center: Vec2
@@ -83,15 +106,6 @@ class Box:
         """Extent (m) along the box's own y axis."""
         return self.size[1]
 
-    def corners(self) -> FloatArray:
-        """Corner positions ``(4, 2)`` (m), counter-clockwise from the lower-left one."""
-        return rectangle_corners(self.center, self.width, self.height, self.angle)
-
-    def corner_velocities(self) -> FloatArray:
-        """Corner velocities ``(4, 2)`` (m/s) of the rigid motion."""
-        return _rigid_corner_velocities(self.corners(), self.center, self.velocity,
-                                        self.angular_velocity)
-
 
 MovingBody = Square | Box
 """A body the step moves: a square or a box."""
@@ -116,10 +130,3 @@ class Table:
     def corners(self) -> FloatArray:
         """Corner positions ``(4, 2)`` (m), counter-clockwise."""
         return rectangle_corners(self.center, self.size[0], self.size[1], self.angle)
-
-
-def _rigid_corner_velocities(corners: FloatArray, center: Vec2, velocity: Vec2,
-                             angular_velocity: float) -> FloatArray:
-    """``v + omega rot90(r)`` (m/s) for each corner, ``r`` its offset from ``center``."""
-    offsets = corners - np.asarray(center)
-    return np.asarray(velocity) + angular_velocity * rot90(offsets)

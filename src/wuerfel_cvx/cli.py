@@ -182,8 +182,8 @@ INTERRUPTED = 130
 def _check_outputs(args: argparse.Namespace) -> None:
     """Raise :class:`InputError` now for outputs that could only fail after the run."""
     if args.out:
-        npz = _npz_path(args.out)
-        for path in (npz, npz.with_name(npz.stem + ".metrics.csv")):
+        npz = Trajectory.npz_path(args.out)
+        for path in (npz, Trajectory.metrics_path(npz)):
             _check_writable(path, source=args.out, field="--out")
     if args.animate:
         from .animation import animation_writer, check_frame_rate
@@ -191,12 +191,6 @@ def _check_outputs(args: argparse.Namespace) -> None:
         check_frame_rate(args.fps, field="--fps")
         animation_writer(args.animate)  # a bad suffix or a missing ffmpeg
         _check_writable(Path(args.animate), source=args.animate, field="--animate")
-
-
-def _npz_path(out: str) -> Path:
-    """Where :meth:`Trajectory.save` writes for ``--out`` (``.npz`` appended if absent)."""
-    path = Path(out)
-    return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
 
 
 def _check_writable(path: Path, source: str, field: str) -> None:

@@ -132,9 +132,13 @@ class CompiledQPCache:
         """A cvxpy problem holding ``qp``'s numbers: a compiled one if its structure repeats."""
         return self.prepare(qp)[0]
 
-    def prepare(self, qp: StepQP) -> tuple[DeclaredQP, str]:
-        """:meth:`declared_for` and how: :data:`COMPILED` or :data:`DECLARED` afresh."""
-        key = structure_key(qp)
+    def prepare(self, qp: StepQP,
+                key: StructureKey | None = None) -> tuple[DeclaredQP, str]:
+        """:meth:`declared_for` and how: :data:`COMPILED` or :data:`DECLARED` afresh.
+
+        ``key``: ``qp``'s :func:`structure_key` if the caller has it already.
+        """
+        key = structure_key(qp) if key is None else key
         compiled = self._problems.get(key)
         if compiled is not None:
             self._problems.move_to_end(key)
@@ -154,18 +158,21 @@ class CompiledQPCache:
         self.compiled += 1
         return compiled.load(qp), COMPILED
 
-    def direct_solver(self, qp: StepQP, solver: str,
-                      options: dict[str, Any]) -> DirectSolver | None:
+    def direct_solver(self, qp: StepQP, solver: str, options: dict[str, Any],
+                      key: StructureKey | None = None) -> DirectSolver | None:
         """The direct path of ``solver`` for ``qp``'s compiled structure.
 
         ``None`` means: solve through cvxpy (not compiled yet, a solver without a direct
         backend, or the path does not apply).  A structure's path is set up with the
-        options of its first use.
+        options of its first use.  ``key``: ``qp``'s :func:`structure_key` if the caller has
+        it already.
         """
-        key = structure_key(qp)
-        compiled = self._problems.get(key)
         backend = SOLVERS[solver].backend
-        if compiled is None or backend is None:
+        if backend is None:
+            return None
+        key = structure_key(qp) if key is None else key
+        compiled = self._problems.get(key)
+        if compiled is None:
             return None
         self._problems.move_to_end(key)
         if solver not in compiled.direct:

@@ -17,11 +17,12 @@ def rod_length_drift(model: Model, points: FloatArray) -> float:
 
 
 def deepest_penetration(model: Model, points: FloatArray) -> float:
-    """Depth (m) of the deepest corner inside a foreign body (square or table); 0 if none."""
-    contacts = find_contacts(model, points, 0.0)
-    if len(contacts) == 0:
-        return 0.0
-    return float(max(0.0, -np.min(contacts.distance)))
+    """Depth (m) of the deepest corner inside a foreign body (box or table); 0 if none.
+
+    A search of its own (margin 0); a step's row takes it from the step's contacts instead
+    (:meth:`~wuerfel_cvx.contacts.Contacts.deepest_penetration`).
+    """
+    return find_contacts(model, points, 0.0).deepest_penetration()
 
 
 def kinetic_energy(model: Model, state: State) -> float:

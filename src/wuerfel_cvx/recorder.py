@@ -107,11 +107,6 @@ class TrajectoryRecorder:
         self.velocities.append(state.velocities)
         self.rows.append(row)
 
-    @property
-    def n_steps(self) -> int:
-        """Steps recorded so far."""
-        return len(self.rows)
-
     def trajectory(self) -> Trajectory:
         """The trajectory recorded so far (a copy of the lists' current contents)."""
         metrics = pd.DataFrame(self.rows, columns=list(METRIC_COLUMNS))

@@ -125,8 +125,6 @@ class Simulation:
         self.planner = IslandPlanner(self.model.n_boxes, sleep, islands)
         self.state = State.initial(scene)
         self.step_index = 0
-        self.contact_searches = 0
-        """Contact searches so far: one per state reached (the initial one included)."""
         self.contacts, self._search_time = self._search(self.state)
         self.recorder = TrajectoryRecorder.start(self.model, run_info(
             scene, formulation=self.formulation.name, solver=self.solvers[0], tol=str(tol),
@@ -183,7 +181,6 @@ class Simulation:
         started = time.perf_counter()
         contacts = find_contacts(self.model, state.points,
                                  self.formulation.body_reach(self.model, state, self.dt))
-        self.contact_searches += 1
         return contacts, time.perf_counter() - started
 
     def _advance_to(self, step: int, state: State, timing_row: dict[str, Any]) -> None:

@@ -116,6 +116,10 @@ class StepPlan:
     """Every island sleeps: no QP at all, nothing moves."""
 
 
+ONE_QP = StepPlan((None,))
+"""The plan of a step in which every box takes part in one QP."""
+
+
 class IslandPlanner:
     """Plans each step's QPs from the state's contacts: sleep and islands.
 
@@ -134,7 +138,7 @@ class IslandPlanner:
     def plan(self, contacts: Contacts) -> StepPlan:
         """The QPs of the step whose state has ``contacts``."""
         if self.tracker is None and not self.islands:
-            return StepPlan((None,))
+            return ONE_QP
         if self._all_asleep:  # nothing moved in the last step: it all sleeps still
             return StepPlan((), all_asleep=True)
         labels = island_labels(self.n_boxes, contacts)
@@ -144,10 +148,10 @@ class IslandPlanner:
             self._all_asleep = True
             return StepPlan((), all_asleep=True)
         if self.islands:
-            return StepPlan(tuple(island_members(labels, ~asleep)) or (None,))
+            return StepPlan(tuple(island_members(labels, ~asleep)))  # some are awake
         if asleep.any():
             return StepPlan((np.flatnonzero(~asleep),))
-        return StepPlan((None,))
+        return ONE_QP
 
     def record(self, velocities: FloatArray, dt: float) -> None:
         """Update stillness after a step (corner velocities ``(4 n, 2)``, m/s; ``dt`` s)."""

@@ -27,7 +27,7 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
-from .compiled import COMPILED, DECLARED, DIRECT, CompiledQPCache
+from .compiled import COMPILED, DECLARED, DIRECT, CompiledQPCache, structure_key
 from .errors import StepFailure
 from .formulations.qp import DeclaredQP, StepQP
 from .geometry import FloatArray
@@ -169,12 +169,16 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
 def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
            cache: CompiledQPCache | None) -> _Answer:
     """Solve on the direct path if the cache has one for ``qp``, else through cvxpy."""
-    direct = cache.direct_solver(qp, spec.name, options) if cache is not None else None
-    if direct is not None:  # OSQP warm-starts from the structure's last solution
-        raw = direct.solve(qp, options)
-        return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
-                       raw.iterations, DIRECT, raw.native_time)
-    declared, path = cache.prepare(qp) if cache is not None else (qp.declared(), DECLARED)
+    if cache is None:
+        declared, path = qp.declared(), DECLARED
+    else:
+        key = structure_key(qp)  # once per solve: both look-ups below take it
+        direct = cache.direct_solver(qp, spec.name, options, key)
+        if direct is not None:  # OSQP warm-starts from the structure's last solution
+            raw = direct.solve(qp, options)
+            return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
+                           raw.iterations, DIRECT, raw.native_time)
+        declared, path = cache.prepare(qp, key)
     return _solve_with_cvxpy(qp, declared, spec.cvxpy_name, {"warm_start": False, **options},
                              path)
 

@@ -68,7 +68,14 @@ class Trajectory:
         """Number of completed steps."""
         return int(self.times.shape[0]) - 1
 
-    def metrics_path(self, path: str | Path) -> Path:
+    @staticmethod
+    def npz_path(path: str | Path) -> Path:
+        """Where :meth:`save` writes for ``path``: it, with ``.npz`` appended if absent."""
+        path = Path(path)
+        return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+
+    @staticmethod
+    def metrics_path(path: str | Path) -> Path:
         """Where :meth:`save` puts the metrics CSV for a given ``.npz`` path."""
         path = Path(path)
         return path.with_name(path.stem + ".metrics.csv")
@@ -78,9 +85,7 @@ class Trajectory:
 
         The metrics go to ``<stem>.metrics.csv`` beside it.  Returns the ``.npz`` path.
         """
-        path = Path(path)
-        if path.suffix != ".npz":
-            path = path.with_name(path.name + ".npz")
+        path = self.npz_path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez(path, times=self.times, points=self.points, velocities=self.velocities,
                  table_points=self.table_points, info=np.array(json.dumps(self.info)))
@@ -93,7 +98,7 @@ class Trajectory:
         path = Path(path)
         with np.load(path, allow_pickle=False) as data:
             arrays = {key: data[key] for key in data.files}
-        metrics_file = path.with_name(path.stem + ".metrics.csv")
+        metrics_file = cls.metrics_path(path)
         metrics = pd.read_csv(metrics_file) if metrics_file.exists() else pd.DataFrame()
         return cls(times=arrays["times"], points=arrays["points"],
                    velocities=arrays["velocities"], metrics=metrics,

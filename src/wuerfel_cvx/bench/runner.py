@@ -25,6 +25,7 @@ from ..geometry import FloatArray
 from ..metrics import largest_corner_distance, total_energy
 from ..model import State
 from ..peers import peer_version, simulate_peer
+from ..scene import Scene
 from ..simulate import ASLEEP, resolve_scene, simulate
 from ..sleep import SleepSettings
 from ..solve import StepSolution, solve_step_qp
@@ -99,8 +100,9 @@ def run_point(point: GridPoint, reference: Reference | None,
     """Run one grid point and return its results row (never raises for a bad config)."""
     base = _configuration(point)
     try:
-        base["n_squares"] = _n_boxes(point.scene)
-        trajectory, failure, disagreement = _simulate(point)
+        scene = resolve_scene(point.scene)  # loaded once, for the row and the run
+        base["n_squares"] = scene.n_boxes
+        trajectory, failure, disagreement = _simulate(point, scene)
     except Exception as exc:  # any configuration error becomes an error row
         return schema.new_row(**base, status="error", error=_message(exc), success=False,
                               verified=False, steps_completed=0)
@@ -112,8 +114,12 @@ def run_point(point: GridPoint, reference: Reference | None,
     return schema.new_row(**row)
 
 
-def _simulate(point: GridPoint) -> tuple[Trajectory, StepFailure | None, float | None]:
-    """Run the point; a failed step returns the partial trajectory and the failure."""
+def _simulate(point: GridPoint,
+              scene: Scene) -> tuple[Trajectory, StepFailure | None, float | None]:
+    """Run the point on ``scene``, its loaded scene.
+
+    A failed step returns the partial trajectory and the failure.
+    """
     worst = [0.0]
     compared = [0]
     started = time.perf_counter()
@@ -132,9 +138,9 @@ def _simulate(point: GridPoint) -> tuple[Trajectory, StepFailure | None, float |
 
     try:
         if point.engine != "wuerfel_cvx":
-            trajectory = simulate_peer(point.solver, point.scene, point.dt, point.steps)
+            trajectory = simulate_peer(point.solver, scene, point.dt, point.steps)
         else:
-            trajectory = simulate(point.scene, dt=point.dt, steps=point.steps,
+            trajectory = simulate(scene, dt=point.dt, steps=point.steps,
                                   solver=point.solver, formulation=point.formulation,
                                   tol=point.tol, table_mass=point.table_mass,
                                   extra_rod=point.extra_rod, observer=compare,
@@ -239,10 +245,6 @@ def _initial_energy(trajectory: Trajectory) -> float:
 def _write_series(trajectory: Trajectory, path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     trajectory.metrics.reindex(columns=list(schema.SERIES_COLUMNS)).to_csv(path, index=False)
-
-
-def _n_boxes(scene: str) -> int:
-    return resolve_scene(scene).n_boxes
 
 
 def _nan_median(values: FloatArray) -> float | None:
