@@ -1,9 +1,9 @@
 """Named scenes, defined once and shared by tests, benchmarks and notebooks.
 
 Each entry is a builder; families take a number after a dash (``stack-10``,
-``pyramid-4``, ``rain-50``, ``heavy-on-light-1000``).  Every scene has a floor whose
-top face is at ``y = 0``; unit squares unless stated otherwise (``plank-drop`` and
-``domino-row`` are boxes).
+``pyramid-4``, ``rain-50``, ``heavy-on-light-1000``, ``spinning-pile-12``).  Every scene
+has a floor whose top face is at ``y = 0``; unit squares unless stated otherwise
+(``plank-drop`` and ``domino-row`` are boxes).
 """
 
 from __future__ import annotations
@@ -177,6 +177,80 @@ def _domino_row(_: int | None) -> Scene:
     return Scene("domino-row", boxes=tuple(dominoes), tables=(FLOOR, *curbs))
 
 
+SPIN_RANGE = (8.0, 15.0)
+"""Spin magnitudes (rad/s) of the squares of ``spinning-pile-N``; the sign is random."""
+SPINNING_PILE_SIZES = (0.5, 1.0)
+"""Side lengths (m) of the squares of ``spinning-pile-N``."""
+
+
+def _spinning_pile(n: int | None) -> Scene:
+    # A rain of squares that spin at 8 to 15 rad/s: a corner at r = 0.35..0.71 m from its
+    # centre moves 0.04..0.15 rad about it in one step of 0.01 s, so the contacts,
+    # linearised in the velocities, are least accurate here.  Frictionless, nothing slows
+    # the spins before the squares meet the floor, the walls and each other.
+    count = _require(n, "spinning-pile")
+    rng = np.random.default_rng(20261201 + count)
+    columns = max(3, math.ceil(math.sqrt(count)))
+    rows = math.ceil(count / columns)
+    # a cell wider than the largest square's swept circle (diameter sqrt(2) m) with its
+    # jitter: the squares start apart from each other and from the walls, whatever angle
+    cell = 1.6
+    width = columns * cell
+    height = rows * cell + 2.0
+    floor = Table(center=(0.0, -0.5), size=(width + 2.0, 1.0))
+    left = Table(center=(-width / 2 - 0.5, height / 2), size=(1.0, height))
+    right = Table(center=(width / 2 + 0.5, height / 2), size=(1.0, height))
+    squares = []
+    for k in range(count):
+        row, col = divmod(k, columns)
+        size = float(rng.uniform(*SPINNING_PILE_SIZES))
+        jitter = rng.uniform(-0.05, 0.05, size=2)
+        center = (-width / 2 + (col + 0.5) * cell + float(jitter[0]),
+                  1.0 + (row + 0.5) * cell + float(jitter[1]))
+        spin = float(rng.uniform(*SPIN_RANGE)) * float(rng.choice((-1.0, 1.0)))
+        squares.append(Square(center=center, size=size, angle=float(rng.uniform(0, math.pi / 2)),
+                              mass=size * size, angular_velocity=spin))
+    return Scene(f"spinning-pile-{count}", tuple(squares), (floor, left, right))
+
+
+# Two squares as the property checks found them: the upper one stands on the lower with
+# a side face flush to the lower one's and is tilted by under 1e-3 rad, so that at that
+# side a corner of each lies inside the other.  Each such corner is 3e-8 to 4e-7 m inside
+# the other square's side face but 2e-4 to 5e-4 m beyond its top (or bottom) face: the
+# two squares overlap by that much (the separating-axis depth), which is why the scenes
+# allow overlap, while the corners' own depth, the penetration metric, is the side-face
+# distance.  Both slide together on the frictionless floor.  Each is the state of the
+# pinned run (tests/test_properties.py, 200 steps of 0.01 s with CLARABEL at `default`)
+# one step before its energy first rose by over 1e-5 J, as a rigid fit of the pair's
+# corners: centre, angle (edge from corner 0 to 1), centre velocity and spin.
+def _corner_overlap(_: int | None) -> Scene:
+    # corner-on-corner (hypothesis), bodies 3 and 4, after 162 steps: two equal squares
+    side, mass = 0.2558948352610064, 2.001306845030394
+    lower = Square(center=(-4.286908386868901, 0.12794741764030762), size=side,
+                   angle=-2.356657542603048e-11, mass=mass,
+                   velocity=(-3.6686453603102387, -8.480040555595423e-10),
+                   angular_velocity=2.115271348572556e-09)
+    upper = Square(center=(-4.2868107069602726, 0.383744536188964), size=side,
+                   angle=-0.0007634379550096703, mass=mass,
+                   velocity=(-3.669730708225151, 0.001086209007331871),
+                   angular_velocity=0.008482766167282975)
+    return Scene("corner-overlap", (lower, upper), (FLOOR,), allow_overlap=True)
+
+
+def _corner_overlap_wedged(_: int | None) -> Scene:
+    # wedged-corner (run_property_sweep(200, seed=100), scene 186), bodies 2 and 4, after
+    # 113 steps: a heavy 0.56 m square (6.5 kg) on a light 0.69 m one (1.7 kg)
+    lower = Square(center=(-2.4579960978910957, 0.3432238974190768), size=0.6864477947718535,
+                   angle=-5.348948636628146e-11, mass=1.7057198309492716,
+                   velocity=(0.6402940134933637, 3.022853949483767e-09),
+                   angular_velocity=-5.897104130841979e-09)
+    upper = Square(center=(-2.3947114833611782, 0.9663869678086059), size=0.5603781208738501,
+                   angle=1.5699048660875181, mass=6.547215546607483,
+                   velocity=(0.6375152669240375, 0.0027677586318652298),
+                   angular_velocity=0.009917391911289172)
+    return Scene("corner-overlap-wedged", (lower, upper), (FLOOR,), allow_overlap=True)
+
+
 def _require(n: int | None, family: str) -> int:
     if n is None or n < 1:
         raise InputError(f"'{family}-N' needs a positive integer N", source=family)
@@ -211,6 +285,13 @@ ENTRIES: tuple[SceneEntry, ...] = (
                "a corner, settles flat", _plank_drop),
     SceneEntry("domino-row", "six 0.1 x 1 m dominoes, curbs at their feet; the first, "
                "tipped 0.2 rad, knocks them over", _domino_row),
+    SceneEntry("spinning-pile-N", "N squares of mixed size spinning at 8-15 rad/s, falling "
+               "into a box of tables", _spinning_pile, 20),
+    SceneEntry("corner-overlap", "two equal squares sliding stacked, a corner of each 4e-8 "
+               "and 1.1e-7 m inside the other (found by the property tests)", _corner_overlap),
+    SceneEntry("corner-overlap-wedged", "a heavy square on a light one, sliding, a corner of "
+               "each 1.1e-7 and 3.3e-7 m inside the other (found by a property sweep)",
+               _corner_overlap_wedged),
 )
 
 _NAME = re.compile(r"^(?P<base>[a-z][a-z-]*?)(?:-(?P<number>\d+))?$")
