@@ -413,10 +413,11 @@ def test_library_tables_have_their_top_face_at_y_zero(name: str) -> None:
     assert float(np.min(scene.initial_points()[:, 1])) >= -OVERLAP_TOLERANCE
 
 
-def test_only_overlap_recovery_allows_overlap_and_needs_it() -> None:
+@pytest.mark.parametrize("name", ["overlap-recovery", "corner-overlap", "corner-overlap-wedged"])
+def test_only_the_overlap_scenes_allow_overlap_and_need_it(name: str) -> None:
     allowing = {name for name in _library_names() if Scene.named(name).allow_overlap}
-    assert allowing == {"overlap-recovery"}
-    scene = Scene.named("overlap-recovery")
+    assert allowing == {"overlap-recovery", "corner-overlap", "corner-overlap-wedged"}
+    scene = Scene.named(name)
     with pytest.raises(InputError, match="overlaps squares\\[1\\]") as info:
         dataclasses.replace(scene, allow_overlap=False)
     assert info.value.field == "squares[0]"
