@@ -55,7 +55,8 @@ def _row(scene: str, solver: str, penetration: float, rise: float, **outcome: An
     values = {"suite": "hard-targets", "point_id": f"{scene}|{solver}", "scene": scene,
               "solver": solver, "formulation": "velocity", "tol": "default", "dt": 0.01,
               "steps": 400, "steps_completed": 400, "status": "ok", "verified_fraction": 1.0,
-              "max_penetration": penetration, "max_step_energy_rise": rise,
+              "max_penetration": penetration, "max_overlap_depth": 2 * penetration,
+              "max_step_energy_rise": rise,
               "finished_at": "2026-12-01T19:00:00+00:00", "cpu": "test cpu",
               "package_version": "0.1.0", "cvxpy_version": "1.9.3",
               "solver_version": "1.0"} | outcome
@@ -75,7 +76,7 @@ def results(tmp_path: Path) -> pd.DataFrame:
     stalled = {"status": "failed", "failed_step": 103, "steps_completed": 102,
                "error": "StepFailure: step 103: solver OSQP failed with status 'user_limit'"}
     return _results(tmp_path, [
-        _row("rain-20", "CLARABEL", 5e-5, 5e-7),
+        _row("rain-20", "CLARABEL", 6e-5, 5e-7),
         _row("rain-20", "OSQP", 2e-3, 3e-4, **stalled),
         _row("corner-overlap", "PIQP", 4e-7, 2e-6, verified_fraction=0.5),
     ])
@@ -92,17 +93,19 @@ def test_target_rows_show_the_stop_and_the_share_of_all_steps(results: pd.DataFr
 
 
 def test_verdicts_name_what_misses_each_target(results: pd.DataFrame) -> None:
-    penetration, energy, completion = verdicts(target_rows(results))
+    penetration, overlap, energy, completion = verdicts(target_rows(results))
     # penetration: judged on rain-20 (and rain-50, the pile) only, OSQP's 2 mm misses
     assert "**not met**" in penetration and "rain-20 OSQP" in penetration
     assert "corner-overlap" not in penetration and f"{PENETRATION.limit:g}" in penetration
+    assert "largest 0.004 m" in overlap and "rain-20 OSQP" in overlap  # twice 2 mm
     # energy: every scene; 3e-4 J misses, 2e-6 J keeps the limit but not the goal
     assert "**not met**" in energy and "rain-20 OSQP" in energy
     assert "corner-overlap PIQP" not in energy and "goal not met" in energy
     assert "rain-20 OSQP (102/400 steps, 25.5 % verified)" in completion
     met = target_rows(results).query("solver == 'CLARABEL'")
-    penetration, energy, _ = verdicts(met)
+    penetration, overlap, energy, _ = verdicts(met)
     assert "**met**" in penetration and "goal met" in penetration
+    assert "**met**" in overlap and "goal not met" in overlap  # 1.2e-4 m: above the goal
     assert "**met**" in energy and "goal met" in energy  # 5e-7 J <= 1e-6 J
 
 
@@ -138,7 +141,7 @@ def test_report_shows_before_and_after_and_how_to_regenerate(results: pd.DataFra
     after = results.assign(max_penetration=1e-5)
     both = render(results, generated, after, generated)
     assert "| rain-20 | CLARABEL | 400/400 (ok) → 400/400 (ok) | 100.0 % → 100.0 % | " \
-           "5e-05 → 1e-05 |" in both
+           "6e-05 → 1e-05 | 0.00012 → 0.00012 |" in both
     assert "python -m wuerfel_cvx.bench.targets report" in both
     # the command line writes the same report from the files
     results_csv, generated_csv = tmp_path / "results.csv", tmp_path / "generated.csv"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .contacts import find_contacts
 from .geometry import FloatArray
@@ -51,3 +52,51 @@ def largest_corner_distance(points: FloatArray, reference: FloatArray) -> float:
         common = min(points.shape[0], reference.shape[0])
         difference = points[:common] - reference[:common]
     return float(np.max(np.linalg.norm(difference, axis=-1)))
+
+
+def deepest_overlap(model: Model, points: FloatArray) -> float:
+    """Largest overlap depth (m) of two bodies, or of a body and a table; 0 if none overlap.
+
+    The separating-axis depth (as :func:`~wuerfel_cvx.geometry.polygon_overlap_depth`):
+    the shortest translation along an edge normal of either body that separates them.
+    Unlike :func:`deepest_penetration` it does not depend on the edge a corner is matched
+    to, so it also sees a corner sunk through a face but lying just inside another face's
+    line, and two bodies whose corners are each inside the other.  Only pairs whose
+    bounding circles meet are tested (a k-d tree on the centres finds them).
+    """
+    corners = points.reshape(-1, 4, 2)
+    tables = model.table_points.reshape(-1, 4, 2)
+    centres = corners.mean(axis=1)
+    radii = np.hypot(model.box_sizes[:, 0], model.box_sizes[:, 1]) / 2.0
+    found = cKDTree(centres).query_pairs(2.0 * float(radii.max()), output_type="ndarray")
+    first, second = found[:, 0], found[:, 1]
+    near = np.linalg.norm(centres[first] - centres[second], axis=1) <= radii[first] + radii[
+        second]
+    depth = _overlap_depths(corners[first[near]], corners[second[near]])
+    if len(tables):
+        table_centres = tables.mean(axis=1)
+        table_radii = np.linalg.norm(tables - table_centres[:, None, :], axis=2).max(axis=1)
+        body, table = np.nonzero(np.linalg.norm(centres[:, None] - table_centres[None], axis=2)
+                                 <= radii[:, None] + table_radii[None])
+        depth = np.concatenate([depth, _overlap_depths(corners[body], tables[table])])
+    return float(depth.max()) if depth.size else 0.0
+
+
+def _overlap_depths(first: FloatArray, second: FloatArray) -> FloatArray:
+    """Separating-axis depths (m) of pairs of counter-clockwise quadrilaterals ``(P, 4, 2)``."""
+    separation = np.maximum(_separations(first, second), _separations(second, first))
+    return np.maximum(0.0, -separation)
+
+
+def _separations(polygons: FloatArray, others: FloatArray) -> FloatArray:
+    """Per pair, the separation (m) of ``others`` along the edge normals of ``polygons``.
+
+    The largest over the edges of the smallest signed distance of the other's corners
+    from that edge's line (positive outside); negative when no edge separates them.
+    """
+    edges = np.roll(polygons, -1, axis=1) - polygons
+    normals = np.stack([edges[..., 1], -edges[..., 0]], axis=-1)  # outward for ccw
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    offsets = others[:, None, :, :] - polygons[:, :, None, :]  # (P, edge, corner, 2)
+    distances = np.einsum("pekd,ped->pek", offsets, normals)
+    return np.asarray(distances.min(axis=2).max(axis=1), dtype=np.float64)

@@ -22,7 +22,7 @@ import pandas as pd
 from ..errors import StepFailure
 from ..formulations import StepQP
 from ..geometry import FloatArray
-from ..metrics import largest_corner_distance, total_energy
+from ..metrics import deepest_overlap, largest_corner_distance, total_energy
 from ..model import State
 from ..peers import peer_version, simulate_peer
 from ..scene import Scene
@@ -217,9 +217,13 @@ def _accuracy(trajectory: Trajectory, point: GridPoint,
         energy = metrics["total_energy_J"].to_numpy(dtype=float)
         initial = _initial_energy(trajectory)
         with_start = np.concatenate([[initial], energy])
+        model = trajectory.model()
+        assert model is not None, "every run records its scene"
         accuracy |= {
             "max_rod_drift": float(metrics["rod_drift"].max()),
             "max_penetration": float(metrics["penetration_m"].max()),
+            "max_overlap_depth": max(deepest_overlap(model, points)
+                                     for points in trajectory.points[1:len(metrics) + 1]),
             "energy_gain": float(np.max(energy) - initial),
             "max_step_energy_rise": float(np.max(np.diff(with_start))),
         }

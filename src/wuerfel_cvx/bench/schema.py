@@ -23,12 +23,14 @@ import pandas as pd
 
 from ..errors import InputError
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 """Version of :data:`COLUMNS`; stored in every row's ``schema_version``."""
 
-ADDED_COLUMNS: dict[int, dict[str, Any]] = {4: {"islands": False}}
+ADDED_COLUMNS: dict[int, dict[str, Any]] = {4: {"islands": False},
+                                            5: {"max_overlap_depth": None}}
 """Per schema version, the columns it added and their value in the rows of older files
-(version 3 had no ``islands`` column: its runs solved one joint QP)."""
+(version 3 had no ``islands`` column: its runs solved one joint QP; version 4 did not
+measure ``max_overlap_depth``, so it is missing there)."""
 
 ColumnType = Literal["str", "int", "float", "bool"]
 
@@ -102,6 +104,9 @@ COLUMNS: tuple[Column, ...] = (
     # accuracy
     _c("max_rod_drift", "float", "1", "largest relative rod-length error"),
     _c("max_penetration", "float", "m", "deepest penetration of a corner into a body"),
+    _c("max_overlap_depth", "float", "m",
+       "largest separating-axis overlap of two bodies (or a body and a table) after a step: "
+       "independent of the edge each corner is matched to"),
     _c("energy_gain", "float", "J", "max over the run of E(t) - E(0); > 0 means energy made"),
     _c("max_step_energy_rise", "float", "J", "largest rise of total energy in one step"),
     _c("reference_kind", "str", "",
@@ -210,7 +215,7 @@ def read_results(path: str | Path, upgrade: bool = True) -> pd.DataFrame:
                              f"version {sorted(claimed)}", source=str(path),
                              field="schema_version")
         frame = frame.assign(schema_version=str(SCHEMA_VERSION),
-                             **{name: _cell(value, _BY_NAME[name])
+                             **{name: None if value is None else _cell(value, _BY_NAME[name])
                                 for name, value in added.items()})
         return validate(frame[list(COLUMN_NAMES)], source=str(path))
     if tuple(header) != COLUMN_NAMES:
