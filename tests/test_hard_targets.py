@@ -101,6 +101,7 @@ def test_verdicts_name_what_misses_each_target(results: pd.DataFrame) -> None:
     # energy: every scene; 3e-4 J misses, 2e-6 J keeps the limit but not the goal
     assert "**not met**" in energy and "rain-20 OSQP" in energy
     assert "corner-overlap PIQP" not in energy and "goal not met" in energy
+    assert energy.endswith("measured only up to a failed step: rain-20 OSQP")
     assert "rain-20 OSQP (102/400 steps, 25.5 % verified)" in completion
     met = target_rows(results).query("solver == 'CLARABEL'")
     penetration, overlap, energy, _ = verdicts(met)

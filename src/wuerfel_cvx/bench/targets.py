@@ -171,12 +171,15 @@ def _verdict(target: Target, rows: pd.DataFrame, column: str, where: str) -> str
     worst = float(np.nanmax(values)) if np.isfinite(values).any() else float("nan")
     over = [f"{r['scene']} {r['solver']}" for r in _records(rows)
             if not _meets(float(r[column]), target.limit)]
+    short = [f"{r['scene']} {r['solver']}" for r in _records(rows)
+             if r["steps_completed"] < r["steps"]]
     goal = "goal met" if _meets(worst, target.goal) else "goal not met"
     state = "**met**" if rows.size and not over else "**not met**"
     text = (f"- {target.label} <= {target.limit:g} {target.unit} ({where}; goal "
             f"{target.goal:g} {target.unit}): {state}, largest "
             f"{format_number(worst)} {target.unit}, {goal}")
-    return text + (f"; over the limit: {', '.join(over)}" if over else "")
+    return (text + (f"; over the limit: {', '.join(over)}" if over else "")
+            + (f"; measured only up to a failed step: {', '.join(short)}" if short else ""))
 
 
 def scene_table(before: pd.DataFrame, after: pd.DataFrame | None) -> str:
