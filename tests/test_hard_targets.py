@@ -133,12 +133,17 @@ def test_report_shows_before_and_after_and_how_to_regenerate(results: pd.DataFra
     generated = pd.DataFrame([{"index": 0, "n_bodies": 3, "steps": 200,
                                "steps_completed": 200, "status": "ok",
                                "max_step_energy_rise": 3e-5, "rise_step": 17,
+                               "verified_fraction": 1.0},
+                              {"index": 1, "n_bodies": 6, "steps": 200,
+                               "steps_completed": 39, "status": "user_limit",
+                               "max_step_energy_rise": -0.05, "rise_step": 29,
                                "verified_fraction": 1.0}])
     before_only = render(results, generated)
     assert "→" not in before_only and "| rain-20 | OSQP | 102/400 (step 103: user_limit)" \
         in before_only
-    assert (f"largest one-step rise 3e-05 J (scene 0, step 17); 1 scene above "
-            f"{ENERGY_RISE.limit:g} J") in before_only
+    assert (f"2 scenes (seed 0), 200 steps each: largest one-step rise 3e-05 J (scene 0, "
+            f"step 17); 1 scene above {ENERGY_RISE.limit:g} J, 1 above 1e-06 J; 1 run "
+            "stopped by a failed step: scene 1 at step 40 (user_limit).") in before_only
     after = results.assign(max_penetration=1e-5)
     both = render(results, generated, after, generated)
     assert "| rain-20 | CLARABEL | 400/400 (ok) → 400/400 (ok) | 100.0 % → 100.0 % | " \

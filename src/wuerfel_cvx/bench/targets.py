@@ -238,18 +238,20 @@ _SHOWN: tuple[tuple[str, Callable[[dict[str, Any], str], str]], ...] = (
 """The quantity columns of :func:`scene_table`: header and cell text of a merged row."""
 
 
-def generated_summary(frame: pd.DataFrame) -> str:
-    """One paragraph on a generated-energy table: the largest rise and how many exceed."""
+def generated_summary(frame: pd.DataFrame, seed: int = 0) -> str:
+    """One paragraph on a generated-energy table: the largest rise, how many exceed, failures."""
     rises = frame["max_step_energy_rise"].to_numpy(dtype=float)
     worst = int(np.nanargmax(rises))
-    failed = int((frame["status"] != "ok").sum())
-    return (f"{_count(len(frame), 'scene')} (seed as below), "
+    failed = [f"scene {r['index']} at step {r['steps_completed'] + 1} ({r['status']})"
+              for r in _records(frame) if r["status"] != "ok"]
+    return (f"{_count(len(frame), 'scene')} (seed {seed}), "
             f"{int(frame['steps'].iloc[0])} steps each: largest one-step rise "
             f"{format_number(rises[worst])} J (scene {int(frame['index'].iloc[worst])}, step "
             f"{int(frame['rise_step'].iloc[worst])}); "
             f"{_count(int((rises > ENERGY_RISE.limit).sum()), 'scene')} above "
             f"{ENERGY_RISE.limit:g} J, {int((rises > ENERGY_RISE.goal).sum())} above "
-            f"{ENERGY_RISE.goal:g} J; {_count(failed, 'run')} stopped by a failed step")
+            f"{ENERGY_RISE.goal:g} J; {_count(len(failed), 'run')} stopped by a failed step"
+            + (f": {', '.join(failed)}" if failed else ""))
 
 
 def _count(number: int, noun: str) -> str:
@@ -319,9 +321,9 @@ def render(before: pd.DataFrame, generated_before: pd.DataFrame,
               "(`metrics.deepest_overlap`).", "",
               scene_table(rows_before, rows_after), "",
               "## Generated scenes", "",
-              f"- **Before:** {generated_summary(generated_before)}."]
+              f"- **Before:** {generated_summary(generated_before, seed)}."]
     if generated_after is not None:
-        parts.append(f"- **After:** {generated_summary(generated_after)}.")
+        parts.append(f"- **After:** {generated_summary(generated_after, seed)}.")
     parts += ["", COMMANDS.format(scenes=len(generated_before), seed=seed), ""]
     return "\n".join(parts)
 
@@ -369,7 +371,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         frame = generated_energy(args.scenes, seed=args.seed, steps=args.steps)
         args.out.parent.mkdir(parents=True, exist_ok=True)
         frame.to_csv(args.out, index=False)
-        print(f"{generated_summary(frame)} ({time.perf_counter() - started:.0f} s)")
+        print(f"{generated_summary(frame, args.seed)} "
+              f"({time.perf_counter() - started:.0f} s)")
         return 0
     text = render(schema.read_results(args.before), read_generated(args.before_generated),
                   schema.read_results(args.after) if args.after else None,
