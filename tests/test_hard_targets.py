@@ -157,3 +157,13 @@ def test_report_shows_before_and_after_and_how_to_regenerate(results: pd.DataFra
                  str(generated_csv), "--out", str(out)]) == 0
     assert out.read_text(encoding="utf-8") == before_only
     pd.testing.assert_frame_equal(read_generated(generated_csv), generated)
+
+
+def test_the_committed_report_is_generated_from_the_committed_numbers() -> None:
+    hard = REPO / "reports" / "hard"
+    after, generated_after = hard / "targets-after.csv", hard / "generated-energy-after.csv"
+    text = render(schema.read_results(hard / "targets-before.csv"),
+                  read_generated(hard / "generated-energy-before.csv"),
+                  schema.read_results(after) if after.exists() else None,
+                  read_generated(generated_after) if generated_after.exists() else None)
+    assert (hard / "targets.md").read_text(encoding="utf-8") == text

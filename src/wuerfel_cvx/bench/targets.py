@@ -277,21 +277,24 @@ Before numbers (kept in `targets-before.csv`, `generated-energy-before.csv`):
 
 ```sh
 wuerfel-cvx bench --suite benchmarks/hard-targets.toml --out bench-results/hard-targets-before
+cp bench-results/hard-targets-before/results.csv reports/hard/targets-before.csv
 python -m wuerfel_cvx.bench.targets sweep --scenes {scenes} --seed {seed} \\
-    --out bench-results/hard-targets-before/generated-energy.csv
+    --out reports/hard/generated-energy-before.csv
 ```
 
-After numbers, and this report with both:
+After numbers (kept in `targets-after.csv`, `generated-energy-after.csv`), and this
+report with both:
 
 ```sh
 wuerfel-cvx bench --suite benchmarks/hard-targets.toml --out bench-results/hard-targets
+cp bench-results/hard-targets/results.csv reports/hard/targets-after.csv
 python -m wuerfel_cvx.bench.targets sweep --scenes {scenes} --seed {seed} \\
-    --out bench-results/hard-targets/generated-energy.csv
+    --out reports/hard/generated-energy-after.csv
 python -m wuerfel_cvx.bench.targets report \\
     --before reports/hard/targets-before.csv \\
     --before-generated reports/hard/generated-energy-before.csv \\
-    --after bench-results/hard-targets/results.csv \\
-    --after-generated bench-results/hard-targets/generated-energy.csv \\
+    --after reports/hard/targets-after.csv \\
+    --after-generated reports/hard/generated-energy-after.csv \\
     --out reports/hard/targets.md
 ```"""
 
