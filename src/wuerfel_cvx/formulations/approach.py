@@ -117,7 +117,9 @@ def approach_rows(model: Model, points: FloatArray, contacts: Contacts, about: F
     rate_rows = point_rows(m, n_unknown, _row_blocks(motion, contacts, np.zeros(m)))
     approach = point_rows(m, n_unknown, _row_blocks(motion, contacts, tau))
     rate = (ramp_end(start, dt, push_speed) - start) / dt
-    rhs = np.concatenate([rate, approach @ about - margin / tau])
+    # at an interior minimiser of psi / tau the right-hand side is exactly ``rate``; the
+    # minimum keeps it there where the sampled minimiser is inexact or on the boundary
+    rhs = np.concatenate([rate, np.minimum(approach @ about - margin / tau, rate)])
     matrix = sp.csr_array(sp.vstack([rate_rows, approach], format="csr"))
     return ApproachRows(matrix, rhs, violation, tau)
 
