@@ -1,27 +1,41 @@
-"""The ``velocity`` formulation: Gauss's principle at velocity level, stabilised.
+"""The ``velocity`` formulation: Gauss's principle at velocity level.
 
 With ``a = (v+ - v) / dt`` the seed's objective becomes one QP in the new corner
 velocities ``v+`` (m/s)::
 
     minimise    sum_i m_i |v+_i - v_i - dt g|^2
     subject to  (d/l) . (v+_i - v+_j) = -(beta/dt) C / l          each rod i-j
-                grad(A/|e|) . v+ >= -rate * A/|e|                  each nearby point-edge pair
+                contact rows                                       each nearby point-edge pair
 
-``C = (|p_i - p_j|^2 - l^2)/2`` and ``A/|e|`` is the signed distance (m) of a point from
-an edge, positive outside.  ``rate = 1/dt`` for a point still outside (a speculative
-contact: it may close the gap in this step but not cross it) and ``beta/dt`` for one
-already inside (Baumgarte: pushed out over a few steps, not in one jump).  Contacts
-are collected within ``contact_margin`` plus what the bodies' speeds can cover in one
-step, so fast landings are caught before they cross.  This is Anitescu-Potra time
+``C = (|p_i - p_j|^2 - l^2)/2``.  Positions are then advanced by the rigid motion that
+``v+`` describes for each box (``position_update="rigid"``, the default; see
+:mod:`~wuerfel_cvx.formulations.motion`), so rod lengths hold to round-off and a spinning
+box keeps its spin.  With ``position_update="linear"`` positions are ``p + dt v+`` and
+only Baumgarte holds the rods, which drift by about ``(omega dt)^2 / 2`` per step.
+Contacts are collected within ``contact_margin`` plus what the bodies' speeds can cover
+in one step, so fast landings are caught before they cross.  This is Anitescu-Potra time
 stepping without friction; restitution is zero.
 
-Positions are then advanced by the rigid motion that ``v+`` describes for each square
-(``position_update="rigid"``, the default): the centre moves by ``dt`` times the mean
-corner velocity and the square turns by ``dt`` times the least-squares angular
-velocity, about a Procrustes fit of its corners to the exact square.  Rod lengths
-therefore hold to round-off, and a spinning square keeps its spin.  With
-``position_update="linear"`` positions are ``p + dt v+`` and only Baumgarte holds the
-rods, which drift by about ``(omega dt)^2 / 2`` per step.
+Contact rows, ``linearisation="closest-approach"`` (the default, ``velocity``)
+    Each contact's gap is followed along the step's rigid motion and must stay above a
+    ramp that ends at zero (or, for a penetration deeper than ``dt push_speed``, that
+    pushes out at ``push_speed``): two rows per contact, one at the start of the step
+    (the gap's rate) and one at its closest approach, linearised along the motion of a
+    velocity estimate (:mod:`~wuerfel_cvx.formulations.approach`).  The first pass
+    linearises about the unconstrained ``v + dt g``; :meth:`VelocityFormulation.refine`
+    re-linearises about each solution (Gauss-Newton) until no gap falls below its ramp by
+    more than ``gap_tolerance`` along the solution's own motion, at most ``max_passes``
+    QPs per step.  Penetration after a step is then at most ``gap_tolerance`` beyond what
+    the ramp allows, whatever the spin, and no active row does positive work.
+
+Contact rows, ``linearisation="start"`` (``velocity-baumgarte``)
+    One row per contact, the gap linearised at the start of the step:
+    ``grad(A/|e|) . v+ >= -rate * A/|e|`` with ``A/|e|`` the signed distance (m) of a point
+    from an edge, positive outside; ``rate = 1/dt`` for a point still outside (a
+    speculative contact: it may close the gap in this step but not cross it) and
+    ``beta/dt`` for one already inside (Baumgarte: pushed out over a few steps).  One QP
+    per step.  A corner of a box spinning at ``omega`` overshoots its edge by up to
+    ``(omega dt)^2 r / 2``, and the push-out of such a depth does work.
 """
 
 from __future__ import annotations
@@ -49,10 +63,11 @@ from .rows import (
 
 @dataclass(frozen=True)
 class VelocityFormulation:
-    """Velocity-level QP with speculative contacts and Baumgarte stabilisation."""
+    """Velocity-level QP with speculative contacts (see the module docstring)."""
 
     beta: float = 0.2
-    """Fraction of a rod error or penetration removed per step (1)."""
+    """Fraction of a rod error (and, with ``linearisation="start"``, of a penetration)
+    removed per step (1)."""
     contact_margin: float = 0.01
     """Distance (m) within which a point-edge pair is always constrained."""
     position_update: Literal["rigid", "linear"] = "rigid"
