@@ -135,8 +135,10 @@ def test_right_hand_sides_follow_the_ramp(setting: tuple[Model, State, Contacts]
 
 def test_closest_approach_minimises_the_mean_rate(
         setting: tuple[Model, State, Contacts]) -> None:
-    """``tau*`` against a dense grid: its mean rate ``psi / tau`` is the smallest, to the
-    grid's own resolution (the parabola refines the 16-interval sampling)."""
+    """``tau*`` against a dense grid: its mean rate ``psi / tau`` is the smallest.
+
+    To the grid's own resolution: the parabola refines the 16-interval sampling.
+    """
     model, state, contacts = setting
     about = random_velocities(model, 7)
     rows = approach_rows(model, state.points, contacts, about, DT, PUSH)

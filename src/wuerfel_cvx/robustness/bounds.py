@@ -244,4 +244,5 @@ def _energy_rise(data: _RunData, push: np.ndarray, margin: float) -> np.ndarray:
     inexact = (0.5 * data.n_rows * (data.complementarity * (1.0 + impulse_total * scale)
                                     + data.primal * impulse_total * scale)
                + 0.5 * data.n_variables * data.dual * (1.0 + impulse_square) * velocity)
-    return pushed + inexact + ROUND_OFF_ENERGY_RELATIVE * data.energy_scale
+    rise: np.ndarray = pushed + inexact + ROUND_OFF_ENERGY_RELATIVE * data.energy_scale
+    return rise
