@@ -183,8 +183,9 @@ class Simulation:
         """Solve ``qp`` and the formulation's further passes.
 
         Returns the last QP, its solution carrying the passes' summed times and iterations
-        (its residuals and status are the last pass's, whose solution is taken), the first
-        failed status of the run's own solver over the passes, and the number of passes.
+        and their solvers and paths (joined by ``+`` where a fallback solved a pass; its
+        residuals and status are the last pass's, whose solution is taken), the first failed
+        status of the run's own solver over the passes, and the number of passes.
         """
         solved = [solve_with_fallback(qp, self.solvers, self.tol, step, self.cache)]
         while (refined := self.formulation.refine(model, state, qp, solved[-1][0].x, self.dt,
@@ -195,7 +196,9 @@ class Simulation:
         last = solutions[-1]
         primary = first_failed_status(solutions, [status for _, status in solved], last)
         return qp, dataclasses.replace(
-            last, solve_wall_time=sum(s.solve_wall_time for s in solutions),
+            last, solver="+".join(dict.fromkeys(s.solver for s in solutions)),
+            path="+".join(dict.fromkeys(s.path for s in solutions)),
+            solve_wall_time=sum(s.solve_wall_time for s in solutions),
             solver_time=float(sum(s.solver_time for s in solutions)),
             iterations=sum(s.iterations for s in solutions)), primary, len(solved)
 
