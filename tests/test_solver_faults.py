@@ -201,8 +201,8 @@ def test_false_infeasible_at_extreme_speed_is_rescued_by_the_fallback() -> None:
     assert m["verified"].all() and np.all(np.isfinite(traj.points))
     assert set(m["primary_status"]) <= {cp.OPTIMAL, cp.INFEASIBLE}
     # a step's solvers over its passes: OSQP took every pass CLARABEL failed
-    for solvers, primary in zip(m["solver"], m["primary_status"], strict=True):
-        assert solvers == "CLARABEL" if primary == cp.OPTIMAL else "OSQP" in solvers.split("+")
+    for used, primary in zip(m["solver"], m["primary_status"], strict=True):
+        assert used == "CLARABEL" if primary == cp.OPTIMAL else "OSQP" in used.split("+")
 
 
 # ------------------------------------------------------------------ NaN data
