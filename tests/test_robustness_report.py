@@ -78,11 +78,11 @@ def test_every_injected_fault_ends_clearly() -> None:
     assert by_fault[(limit, ())].steps_kept == 2
     assert "after CLARABEL's 'user_limit'" in by_fault[(limit, ("OSQP",))].outcome
     assert by_fault[(limit, ("OSQP",))].steps_kept == 6
-    squeezed = "square squeezed by two walls (beta = 0.2)"
+    squeezed = "square squeezed by two walls (push-out on)"
     assert "step 1: solver CLARABEL failed with status 'infeasible'" in \
         by_fault[(squeezed, ())].outcome
     assert "then OSQP failed with 'infeasible'" in by_fault[(squeezed, ("OSQP",))].outcome
-    assert by_fault[("overlap, stabilisation off (beta = 0)", ())].outcome.startswith(
+    assert by_fault[("overlap, stabilisation off (no push-out)", ())].outcome.startswith(
         "completed")
     nan = "NaN in the QP target at step 3"
     assert "'invalid_data' (non-finite target)" in by_fault[(nan, ())].outcome

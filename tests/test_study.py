@@ -47,10 +47,14 @@ def test_formulation_variants_side_by_side_on_a_drop() -> None:
     # the seed's exact update keeps the energy, E(dt) - E(0) = 0 up to round-off of 20 J.
     first = steps[(steps["label"] == "seed") & (steps["step"] == 1)]
     assert abs(float(first["energy_change_J"].iloc[0])) < 1e-12
-    # The reference is at distance 0 from itself; rigid reproduces velocity (1e-13 m in
-    # tests/test_rigid.py); the plain seed sinks through the table by decimetres.
+    # The reference is at distance 0 from itself; rigid reproduces the start-linearised
+    # velocity rows it shares (1e-13 m in tests/test_rigid.py), and on this single drop
+    # the closest-approach rows agree with both to solver tolerance; the plain seed
+    # sinks through the table by decimetres.  Solver tolerance: verified velocities
+    # within ~1e-6 m/s of each other, over the 0.8 s run at most 8e-7 m (measured 3e-8 m).
     assert by_label.loc["velocity", "error_m"] == 0.0
-    assert by_label.loc["rigid", "error_m"] < 1e-10
+    assert by_label.loc["rigid", "error_m"] < 1e-6
+    assert by_label.loc["velocity-baumgarte", "error_m"] < 1e-6
     assert by_label.loc["seed", "error_m"] > 0.1
     assert by_label.loc["seed-baumgarte", "max_penetration_m"] < \
         by_label.loc["seed", "max_penetration_m"]
@@ -87,8 +91,8 @@ def test_trajectory_distance_over_common_steps() -> None:
 
 
 def test_resolve_steps_agrees_on_an_aligned_stack_with_redundant_contacts() -> None:
-    trajectory, recorded = record_step_qps("stack-3", "velocity", 0.01, 6, every=2,
-                                           min_contacts=1)
+    trajectory, recorded = record_step_qps("stack-3", "velocity-baumgarte", 0.01, 6,
+                                           every=2, min_contacts=1)
     assert [step for step, _, _ in recorded] == [2, 4, 6]
     for _, qp, reference in recorded:  # the kept multipliers: one per side row, z >= 0
         assert reference.ineq_dual.shape == (qp.n_inequalities,)

@@ -95,7 +95,8 @@ def test_qp_sizes_of_the_velocity_formulation(traj: Trajectory) -> None:
     assert set(m["n_equalities"]) == {5 * n}
     # the lower square rests on the floor: its bottom corners are constrained from step 1
     assert np.all(m["n_inequalities"].to_numpy() >= 2)
-    assert np.all(m["n_contacts"].to_numpy() == m["n_inequalities"].to_numpy())
+    # two rows per contact: the gap's rate at the start and its closest approach
+    assert np.all(2 * m["n_contacts"].to_numpy() == m["n_inequalities"].to_numpy())
 
 
 def test_timings_are_non_negative(traj: Trajectory) -> None:

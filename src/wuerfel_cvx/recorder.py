@@ -28,6 +28,7 @@ METRIC_COLUMNS = (
     "step_time_s",
     "iterations", "primal_residual", "dual_residual", "complementarity", "rod_drift",
     "penetration_m", "kinetic_energy_J", "potential_energy_J", "total_energy_J", "path",
+    "passes",
 )
 """Columns of :attr:`Trajectory.metrics`, one row per step (state after the step).
 
@@ -42,7 +43,10 @@ step; ``primary_status`` is the run's own solver's status on it, which differs o
 that solver failed and a ``fallback`` solver took over.  ``path`` is how the step's QPs
 reached the solver: ``direct``, ``compiled`` or ``declared`` (joined by ``+`` when a
 step's island QPs went different ways; ``none`` when no QP was solved, ``peer`` for a
-peer engine).
+peer engine).  ``passes`` is the number of QPs solved one after another for the step (the
+most of any island): 1 for a single-pass formulation, up to ``max_passes`` for the
+closest-approach Gauss-Newton passes of ``velocity``, 0 for a step that solved none; its
+times and ``iterations`` are those passes' sums.
 """
 
 

@@ -15,6 +15,7 @@ Nothing is kept between calls but the object's own state: no module-level memo.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
@@ -144,12 +145,13 @@ class Simulation:
             return self._sleep(step, started)
         qps, solutions, primary_statuses, parts = [], [], [], []
         build_time, mark = self._search_time, started
+        most_passes = 0
         for boxes in plan.groups:
             model, state, contacts = restrict(self.model, self.state, self.contacts, boxes)
             qp = self.formulation.build(model, state, contacts, self.dt)
             build_time += time.perf_counter() - mark
-            solution, primary = solve_with_fallback(qp, self.solvers, self.tol, step,
-                                                    self.cache)
+            qp, solution, primary, passes = self._solve_passes(step, model, state, qp)
+            most_passes = max(most_passes, passes)
             parts.append((boxes, self.formulation.advance(model, state, solution.x, self.dt)))
             qps.append(qp)
             solutions.append(solution)
@@ -163,7 +165,7 @@ class Simulation:
         combined = combine_solutions(solutions)
         primary_status = first_failed_status(solutions, primary_statuses, combined)
         self._advance_to(step, state, _solved_row(qps, combined, primary_status, build_time,
-                                                  step_time))
+                                                  step_time, most_passes))
         return StepRecord(step, tuple(qps), tuple(solutions))
 
     def trajectory(self) -> Trajectory:
@@ -176,6 +178,30 @@ class Simulation:
         return self.recorder.trajectory()
 
     # ------------------------------------------------------------------ parts of a step
+    def _solve_passes(self, step: int, model: Model, state: State,
+                      qp: StepQP) -> tuple[StepQP, StepSolution, str, int]:
+        """Solve ``qp`` and the formulation's further passes.
+
+        Returns the last QP, its solution carrying the passes' summed times and iterations
+        and their solvers and paths (joined by ``+`` where a fallback solved a pass; its
+        residuals and status are the last pass's, whose solution is taken), the first failed
+        status of the run's own solver over the passes, and the number of passes.
+        """
+        solved = [solve_with_fallback(qp, self.solvers, self.tol, step, self.cache)]
+        while (refined := self.formulation.refine(model, state, qp, solved[-1][0].x, self.dt,
+                                                  len(solved))) is not None:
+            qp = refined
+            solved.append(solve_with_fallback(qp, self.solvers, self.tol, step, self.cache))
+        solutions = [solution for solution, _ in solved]
+        last = solutions[-1]
+        primary = first_failed_status(solutions, [status for _, status in solved], last)
+        return qp, dataclasses.replace(
+            last, solver="+".join(dict.fromkeys(s.solver for s in solutions)),
+            path="+".join(dict.fromkeys(s.path for s in solutions)),
+            solve_wall_time=sum(s.solve_wall_time for s in solutions),
+            solver_time=float(sum(s.solver_time for s in solutions)),
+            iterations=sum(s.iterations for s in solutions)), primary, len(solved)
+
     def _search(self, state: State) -> tuple[Contacts, float]:
         """``state``'s contacts within the formulation's reach, and the search's time (s)."""
         started = time.perf_counter()
@@ -206,7 +232,7 @@ class Simulation:
 
 
 def _solved_row(qps: list[StepQP], solution: StepSolution, primary_status: str,
-                build_time: float, step_time: float) -> dict[str, Any]:
+                build_time: float, step_time: float, passes: int) -> dict[str, Any]:
     """The solver and timing columns of a step's metrics row (its QPs summed)."""
     return {
         "solver": solution.solver, "status": solution.status,
@@ -219,6 +245,7 @@ def _solved_row(qps: list[StepQP], solution: StepSolution, primary_status: str,
         "step_time_s": step_time, "iterations": solution.iterations,
         "primal_residual": solution.residuals.primal, "dual_residual": solution.residuals.dual,
         "complementarity": solution.residuals.complementarity, "path": solution.path,
+        "passes": passes,
     }
 
 
@@ -227,7 +254,7 @@ def _asleep_row(step_time: float) -> dict[str, Any]:
     nothing_solved = StepSolution(
         x=np.zeros(0), solver="", status=ASLEEP, residuals=Residuals(0.0, 0.0, 0.0),
         verified=True, solve_wall_time=0.0, solver_time=np.nan, iterations=0, path="none")
-    return _solved_row([], nothing_solved, ASLEEP, step_time, step_time)
+    return _solved_row([], nothing_solved, ASLEEP, step_time, step_time, 0)
 
 
 def checked_steps(steps: int) -> int:

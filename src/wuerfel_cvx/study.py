@@ -68,6 +68,7 @@ class Variant:
 FORMULATION_VARIANTS: tuple[Variant, ...] = (
     Variant("seed", formulation="seed"),
     Variant("seed-baumgarte", formulation="seed-baumgarte"),
+    Variant("velocity-baumgarte", formulation="velocity-baumgarte"),
     Variant("velocity", formulation="velocity"),
     Variant("rigid", formulation="rigid"),
     Variant("velocity + sixth rod", formulation="velocity", extra_rod=True),

@@ -9,10 +9,11 @@ from ..contacts import find_contacts
 from ..errors import InputError
 from ..model import Model, State
 from .base import Formulation
+from .motion import rigid_step
 from .qp import StepQP, declare_qp
 from .rigid import RigidFormulation
 from .seed import SeedFormulation
-from .velocity import VelocityFormulation, rigid_step
+from .velocity import VelocityFormulation
 
 SEED_BAUMGARTE_RATE = 20.0
 """Baumgarte rate alpha (1/s) of ``seed-baumgarte``: time constant 50 ms, alpha dt = 0.2
@@ -20,6 +21,8 @@ at dt = 0.01 s (the discrete feedback is stable for alpha dt < 1)."""
 
 FORMULATIONS: dict[str, Callable[[], Formulation]] = {
     "velocity": VelocityFormulation,
+    "velocity-baumgarte": partial(VelocityFormulation, linearisation="start",
+                                  name="velocity-baumgarte"),
     "seed": SeedFormulation,
     "rigid": RigidFormulation,
     "seed-baumgarte": partial(SeedFormulation, name="seed-baumgarte",

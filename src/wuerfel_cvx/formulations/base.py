@@ -17,8 +17,9 @@ class Formulation(Protocol):
     once, with the formulation's own :meth:`body_reach`
     (:func:`~wuerfel_cvx.contacts.find_contacts`), and hands them to :meth:`build`, to
     the island planning and to the penetration diagnostic.  ``build`` is pure: the same
-    model, state, contacts and ``dt`` give the same QP.  ``advance`` turns the QP's
-    solution into the next state.
+    model, state, contacts and ``dt`` give the same QP.  ``refine`` may ask for further
+    passes (QPs of the same structure, linearised about the last solution) before
+    ``advance`` turns the last solution into the next state.
     """
 
     @property
@@ -37,6 +38,15 @@ class Formulation(Protocol):
         """
         ...
 
+    def refine(self, model: Model, state: State, previous: StepQP, solution: FloatArray,
+               dt: float, passes: int) -> StepQP | None:
+        """The QP of pass ``passes + 1`` from the solution of pass ``passes``, or ``None``.
+
+        ``previous`` is pass ``passes``'s QP and ``solution`` its unknowns; ``None`` accepts
+        ``solution`` as the step's.  A pure function of its arguments.
+        """
+        ...
+
     def advance(self, model: Model, state: State, solution: FloatArray, dt: float) -> State:
         """The next state from the QP's solution ``(n_unknowns,)``."""
         ...
@@ -44,3 +54,12 @@ class Formulation(Protocol):
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
         """Corner velocities ``(4 n, 2)`` (m/s) right after the step, before any position fit."""
         ...
+
+
+class SinglePass:
+    """Mixin for formulations whose step is one QP: :meth:`refine` accepts every solution."""
+
+    def refine(self, model: Model, state: State, previous: StepQP, solution: FloatArray,
+               dt: float, passes: int) -> StepQP | None:
+        """``None``: the first pass's solution is the step's."""
+        return None

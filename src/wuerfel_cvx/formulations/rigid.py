@@ -27,12 +27,14 @@ from ..contacts import Contacts
 from ..errors import InputError
 from ..geometry import FloatArray, cross, rot90
 from ..model import Model, State
+from .base import SinglePass
+from .motion import rigid_step
 from .qp import StepQP, declare_qp
-from .velocity import VelocityFormulation, rigid_step
+from .velocity import VelocityFormulation
 
 
 @dataclass(frozen=True)
-class RigidFormulation:
+class RigidFormulation(SinglePass):
     """Velocity-level QP in (u_x, u_y, omega) per square; contacts as in ``velocity``."""
 
     beta: float = 0.2
@@ -43,7 +45,8 @@ class RigidFormulation:
 
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
         """Contact reach (m) per body, as in the velocity formulation."""
-        velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin)
+        velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin,
+                                       linearisation="start")
         return velocity.body_reach(model, state, dt)
 
     def build(self, model: Model, state: State, contacts: Contacts, dt: float) -> StepQP:
@@ -53,7 +56,8 @@ class RigidFormulation:
         """
         if model.table_mass is not None:
             raise InputError("the rigid formulation has fixed tables only", field="table_mass")
-        velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin)
+        velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin,
+                                       linearisation="start")
         points = state.points
         corner_rows, rhs = velocity.contact_rows(model, model.all_points(points), contacts, dt)
         masses = model.point_masses.reshape(-1, 4)

@@ -45,12 +45,13 @@ import scipy.sparse as sp
 from ..contacts import TIE_TOLERANCE, Contacts, pair_distances
 from ..geometry import FloatArray, side_rate, side_value, side_velocity_product
 from ..model import Model, State
+from .base import SinglePass
 from .qp import StepQP, declare_qp, point_rows
 from .rows import held_table_blocks, n_unknown_points, seed_side_blocks, unknown_masses
 
 
 @dataclass(frozen=True)
-class SeedFormulation:
+class SeedFormulation(SinglePass):
     """The seed paper's acceleration-level QP (section 2), with its errata fixed."""
 
     name: str = "seed"

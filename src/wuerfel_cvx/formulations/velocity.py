@@ -1,27 +1,41 @@
-"""The ``velocity`` formulation: Gauss's principle at velocity level, stabilised.
+"""The ``velocity`` formulation: Gauss's principle at velocity level.
 
 With ``a = (v+ - v) / dt`` the seed's objective becomes one QP in the new corner
 velocities ``v+`` (m/s)::
 
     minimise    sum_i m_i |v+_i - v_i - dt g|^2
     subject to  (d/l) . (v+_i - v+_j) = -(beta/dt) C / l          each rod i-j
-                grad(A/|e|) . v+ >= -rate * A/|e|                  each nearby point-edge pair
+                contact rows                                       each nearby point-edge pair
 
-``C = (|p_i - p_j|^2 - l^2)/2`` and ``A/|e|`` is the signed distance (m) of a point from
-an edge, positive outside.  ``rate = 1/dt`` for a point still outside (a speculative
-contact: it may close the gap in this step but not cross it) and ``beta/dt`` for one
-already inside (Baumgarte: pushed out over a few steps, not in one jump).  Contacts
-are collected within ``contact_margin`` plus what the bodies' speeds can cover in one
-step, so fast landings are caught before they cross.  This is Anitescu-Potra time
+``C = (|p_i - p_j|^2 - l^2)/2``.  Positions are then advanced by the rigid motion that
+``v+`` describes for each box (``position_update="rigid"``, the default; see
+:mod:`~wuerfel_cvx.formulations.motion`), so rod lengths hold to round-off and a spinning
+box keeps its spin.  With ``position_update="linear"`` positions are ``p + dt v+`` and
+only Baumgarte holds the rods, which drift by about ``(omega dt)^2 / 2`` per step.
+Contacts are collected within ``contact_margin`` plus what the bodies' speeds can cover
+in one step, so fast landings are caught before they cross.  This is Anitescu-Potra time
 stepping without friction; restitution is zero.
 
-Positions are then advanced by the rigid motion that ``v+`` describes for each square
-(``position_update="rigid"``, the default): the centre moves by ``dt`` times the mean
-corner velocity and the square turns by ``dt`` times the least-squares angular
-velocity, about a Procrustes fit of its corners to the exact square.  Rod lengths
-therefore hold to round-off, and a spinning square keeps its spin.  With
-``position_update="linear"`` positions are ``p + dt v+`` and only Baumgarte holds the
-rods, which drift by about ``(omega dt)^2 / 2`` per step.
+Contact rows, ``linearisation="closest-approach"`` (the default, ``velocity``)
+    Each contact's gap is followed along the step's rigid motion and must stay above a
+    ramp that ends at zero (or, for a penetration deeper than ``dt push_speed``, that
+    pushes out at ``push_speed``): two rows per contact, one at the start of the step
+    (the gap's rate) and one at its closest approach, linearised along the motion of a
+    velocity estimate (:mod:`~wuerfel_cvx.formulations.approach`).  The first pass
+    linearises about the unconstrained ``v + dt g``; :meth:`VelocityFormulation.refine`
+    re-linearises about each solution (Gauss-Newton) until no gap falls below its ramp by
+    more than ``gap_tolerance`` along the solution's own motion, at most ``max_passes``
+    QPs per step.  Penetration after a step is then at most ``gap_tolerance`` beyond what
+    the ramp allows, whatever the spin, and no active row does positive work.
+
+Contact rows, ``linearisation="start"`` (``velocity-baumgarte``)
+    One row per contact, the gap linearised at the start of the step:
+    ``grad(A/|e|) . v+ >= -rate * A/|e|`` with ``A/|e|`` the signed distance (m) of a point
+    from an edge, positive outside; ``rate = 1/dt`` for a point still outside (a
+    speculative contact: it may close the gap in this step but not cross it) and
+    ``beta/dt`` for one already inside (Baumgarte: pushed out over a few steps).  One QP
+    per step.  A corner of a box spinning at ``omega`` overshoots its edge by up to
+    ``(omega dt)^2 r / 2``, and the push-out of such a depth does work.
 """
 
 from __future__ import annotations
@@ -33,8 +47,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..contacts import Contacts
-from ..geometry import FloatArray, rot90
+from ..geometry import FloatArray
 from ..model import Model, State
+from .approach import approach_rows
+from .motion import rigid_step
 from .qp import StepQP, declare_qp, point_rows
 from .rows import (
     held_table_blocks,
@@ -47,14 +63,24 @@ from .rows import (
 
 @dataclass(frozen=True)
 class VelocityFormulation:
-    """Velocity-level QP with speculative contacts and Baumgarte stabilisation."""
+    """Velocity-level QP with speculative contacts (see the module docstring)."""
 
     beta: float = 0.2
-    """Fraction of a rod error or penetration removed per step (1)."""
+    """Fraction of a rod error (and, with ``linearisation="start"``, of a penetration)
+    removed per step (1)."""
     contact_margin: float = 0.01
     """Distance (m) within which a point-edge pair is always constrained."""
     position_update: Literal["rigid", "linear"] = "rigid"
     """How positions follow the new velocities (see the module docstring)."""
+    linearisation: Literal["closest-approach", "start"] = "closest-approach"
+    """Where contact gaps are linearised (see the module docstring)."""
+    push_speed: float = 1.0
+    """Closest-approach rows: largest speed (m/s) at which a penetration is pushed out."""
+    max_passes: int = 4
+    """Closest-approach rows: most QPs (Gauss-Newton passes) per step."""
+    gap_tolerance: float = 1e-6
+    """Closest-approach rows: a pass is accepted once no contact's gap falls below its
+    ramp by more than this (m) along the pass's motion."""
     name: str = "velocity"
 
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
@@ -87,9 +113,30 @@ class VelocityFormulation:
         eq_rhs = np.concatenate([-(self.beta / dt) * rod_error,
                                  np.zeros(held_matrix.shape[0] if held_matrix is not None else 0)])
 
-        ineq_matrix, ineq_rhs = self.contact_rows(model, all_points, contacts, dt)
+        if self.linearisation == "start":
+            ineq_matrix, ineq_rhs = self.contact_rows(model, all_points, contacts, dt)
+        else:
+            rows = approach_rows(model, points, contacts, target.ravel(), dt, self.push_speed)
+            ineq_matrix, ineq_rhs = rows.matrix, rows.rhs
         return declare_qp(weights, target.ravel(), eq_matrix, eq_rhs,
                           ineq_matrix, ineq_rhs, contacts)
+
+    def refine(self, model: Model, state: State, previous: StepQP, solution: FloatArray,
+               dt: float, passes: int) -> StepQP | None:
+        """The next Gauss-Newton pass's QP, or ``None`` to accept ``solution``.
+
+        ``previous`` is the QP of pass ``passes`` (1 for the first) and ``solution`` its
+        unknowns.  A pass is accepted when every contact's gap along its motion stays within
+        :attr:`gap_tolerance` of its ramp, or after :attr:`max_passes` passes.
+        """
+        if self.linearisation == "start" or passes >= self.max_passes:
+            return None
+        rows = approach_rows(model, state.points, previous.contacts, solution, dt,
+                             self.push_speed)
+        if rows.violation <= self.gap_tolerance:
+            return None
+        return declare_qp(previous.weights, previous.target, previous.eq_matrix,
+                          previous.eq_rhs, rows.matrix, rows.rhs, previous.contacts)
 
     def contact_rows(self, model: Model, all_points: FloatArray, contacts: Contacts,
                      dt: float) -> tuple[sp.csr_array, FloatArray]:
@@ -112,41 +159,3 @@ class VelocityFormulation:
         if self.position_update == "linear":
             return State(state.points + dt * velocities, velocities)
         return rigid_step(model.reference_corners, state.points, velocities, dt)
-
-
-def rigid_step(reference: FloatArray, points: FloatArray, velocities: FloatArray,
-               dt: float) -> State:
-    """Advance each square rigidly by the motion its corner velocities describe.
-
-    ``reference`` ``(n, 4, 2)``: corners at angle 0 about the origin (m).  The current
-    corners are fitted by the closest exact square (Procrustes: same centroid, angle
-    ``atan2(sum r x q, sum r . q)``); the centroid moves with the mean corner velocity and
-    the square turns by ``omega dt`` with ``omega = sum q x (v - v_c) / sum |q|^2``
-    (rad/s), which conserves the square's angular momentum about its centre.
-    Returns corners and their rigid velocities at the new positions.
-    """
-    corners = points.reshape(-1, 4, 2)
-    vel = velocities.reshape(-1, 4, 2)
-    center = corners.mean(axis=1)
-    offsets = corners - center[:, None, :]
-    angle = np.arctan2(
-        np.sum(reference[..., 0] * offsets[..., 1] - reference[..., 1] * offsets[..., 0], axis=1),
-        np.sum(reference * offsets, axis=(1, 2)),
-    )
-    fitted = _rotated(angle, reference)
-    center_velocity = vel.mean(axis=1)
-    relative = vel - center_velocity[:, None, :]
-    omega = (np.sum(fitted[..., 0] * relative[..., 1] - fitted[..., 1] * relative[..., 0], axis=1)
-             / np.sum(fitted * fitted, axis=(1, 2)))
-    new_offsets = _rotated(angle + omega * dt, reference)
-    new_center = center + dt * center_velocity
-    new_points = new_center[:, None, :] + new_offsets
-    new_velocities = center_velocity[:, None, :] + omega[:, None, None] * rot90(new_offsets)
-    return State(new_points.reshape(-1, 2), new_velocities.reshape(-1, 2))
-
-
-def _rotated(angles: FloatArray, reference: FloatArray) -> FloatArray:
-    """``reference`` ``(n, 4, 2)`` with square ``k`` turned by ``angles[k]`` (rad)."""
-    cos, sin = np.cos(angles)[:, None], np.sin(angles)[:, None]
-    x, y = reference[..., 0], reference[..., 1]
-    return np.stack([cos * x - sin * y, sin * x + cos * y], axis=-1)

@@ -8,12 +8,13 @@ trajectory is saved and loaded back, or a completed run whose metrics record the
 fallback.  The tests in ``tests/test_solver_faults.py`` pin the same behaviour
 case by case; this module runs them once more for the report.
 
-The infeasible step: overlapping squares with stabilisation off (``beta = 0``) are
-*not* infeasible, since then every row of the velocity QP is satisfied by ``v+ = 0``
-(rod rows ask ``... = -(beta/dt) C/l = 0``, a penetrating corner ``grad . v+ >= 0``, a
-separated one ``>= -distance/dt``).  What is infeasible is a square squeezed between
-two fixed walls that overlap it from both sides, with Baumgarte on: the walls push
-its left corners right and its right corners left, while its rods keep it rigid.
+The infeasible step: overlapping squares with stabilisation off (``beta = 0`` and
+``push_speed = 0``) are *not* infeasible, since then every row of the velocity QP is
+satisfied by ``v+ = 0`` (rod rows ask ``... = -(beta/dt) C/l = 0``, a penetrating corner
+keeps at most its depth, a separated one closes at most its gap).  What is infeasible is
+a square squeezed between two fixed walls that overlap it from both sides, with push-out
+on: the walls push its left corners right and its right corners left, while its rods
+keep it rigid.
 """
 
 from __future__ import annotations
@@ -139,10 +140,11 @@ def scenarios() -> list[FaultScenario]:
         FaultScenario("iteration limit 1 (CLARABEL, from step 3)", "stack-3", 6, limit),
         FaultScenario("iteration limit 1 (CLARABEL, from step 3)", "stack-3", 6, limit,
                       fallback=("OSQP",)),
-        FaultScenario("overlap, stabilisation off (beta = 0)", SQUEEZED_SCENE, 3, _nothing,
-                      formulation=VelocityFormulation(beta=0.0)),
-        FaultScenario("square squeezed by two walls (beta = 0.2)", SQUEEZED_SCENE, 3, _nothing),
-        FaultScenario("square squeezed by two walls (beta = 0.2)", SQUEEZED_SCENE, 3, _nothing,
+        FaultScenario("overlap, stabilisation off (no push-out)", SQUEEZED_SCENE, 3,
+                      _nothing, formulation=VelocityFormulation(beta=0.0, push_speed=0.0)),
+        FaultScenario("square squeezed by two walls (push-out on)", SQUEEZED_SCENE, 3,
+                      _nothing),
+        FaultScenario("square squeezed by two walls (push-out on)", SQUEEZED_SCENE, 3, _nothing,
                       fallback=("OSQP",)),
         FaultScenario("NaN in the QP target at step 3", "stack-3", 6, _nothing,
                       formulation=NaNInQP()),

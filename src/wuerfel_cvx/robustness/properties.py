@@ -7,9 +7,8 @@ velocity and spin, placed without overlap above one wide table (top face at y = 
 tests draw the same :class:`SquareDraw` numbers with hypothesis and call the same
 builder, :func:`scene_from_draws`.
 
-:func:`check_run` checks a trajectory of the default formulation (``velocity``:
-speculative contacts, Baumgarte ``beta``, rigid position update) against four
-invariants.  The bounds are derived here, not fitted.
+:func:`check_run` checks a trajectory of a ``velocity`` formulation (rigid position
+update) against four invariants.
 
 No NaN
     Every position, velocity and metric is finite.
@@ -19,68 +18,11 @@ Rod drift
     rotation), so rod lengths hold to round-off: a relative drift of 1e-6 is ten orders
     above double-precision round-off and would mean the rigid update is broken.
 
-Penetration
-    Let ``d(t)`` be the signed distance of corner ``k`` of body B from the edge line of
-    body A it is matched to, while both move rigidly over a step with the constant
-    centre velocities and spins ``omega_A``, ``omega_B`` that the step's solution
-    describes (exactly the motion of :func:`~wuerfel_cvx.formulations.velocity.rigid_step`).
-    With ``n`` the edge's unit normal (turning at ``omega_A``), ``Delta = p_k - p_i``::
-
-        d = n . Delta,   d'' = -omega_A^2 d + 2 omega_A rot90(n) . Delta' + n . Delta''
-
-    and ``|Delta''| <= omega_A^2 r_A + omega_B^2 r_B`` (centripetal accelerations of
-    the two corners, ``r`` the half diagonal), ``|Delta'| <= 2 V`` (``V`` the largest
-    corner speed), ``|d| <= r_A + r_B`` for a matched pair.  So with ``Omega`` the largest
-    spin and ``R`` the largest half diagonal, ``|d''| <= 4 Omega^2 R + 4 Omega V``.  The QP
-    constrains the first-order prediction ``d + dt d'(0)`` (``d'(0) = grad d . v+``):
-    ``>= 0`` for a point outside (speculative contact) and ``>= (1 - beta) d`` for a
-    point inside (Baumgarte).  Taylor's theorem with the remainder gives the depth after
-    the step::
-
-        depth_k <= (1 - beta) depth_{k-1} + eps_k,
-        eps_k = dt^2 / 2 (4 Omega^2 R + 4 Omega V) + dt * s_k
-
-    where ``s_k`` is the contact-rate error the residual check admits (``s_k = r_k
-    (1 + 6 V + margin / dt + 2 dt |g|)`` with ``r_k`` the step's relative primal
-    residual and the bracket a bound on the primal scale of
-    :func:`~wuerfel_cvx.solve.kkt_residuals`: right-hand sides ``|d| / dt`` with ``|d|``
-    within the two bodies' reach ``margin + dt (2 V + 2 dt |g|)``, and rows ``|G v+| <=
-    3 V``, the gradient of a distance being a unit normal split over three points).
-    The depth measured after the step is at most that of the matched edge, so the
-    recursion bounds the metric.  This is the
-    ``(omega dt)^2 r / 2`` of the README's "Known limitations", with the edge's own
-    spin and the Coriolis term included; for a body at rest or sliding without spin
-    the bound is the solver's tolerance alone.
-
-Energy
-    With ``w = v + dt g`` and the step's multipliers ``nu`` (impulses: the objective has
-    no 1/2, so they are half the QP's duals), stationarity gives
-    ``M (v+ - w) = J^T nu``, and with complementarity ``nu . J v+ = nu . h`` the energy
-    change of a step (kinetic ``|v|_M^2 / 2`` plus potential ``-M g . p``; the centres
-    move by ``dt`` times the mean corner velocity) is, in the mass norm::
-
-        E+ - E = nu . h - |v+ - v|_M^2 / 2
-
-    (checked against the QP's own duals in ``tests/test_properties.py``).  Speculative
-    rows have ``h <= 0`` and ``nu >= 0``, rods have ``h = 0`` to round-off: frictionless
-    contacts with restitution 0 do no positive work, and energy only falls, except
-    (a) through Baumgarte rows (``h = beta depth / dt > 0``) and (b) the solver's
-    inexactness.  (a) A depth ``P`` pushed out at rate ``beta / dt`` through at most
-    ``n`` stacked squares gives a velocity change ``u <= n beta P / dt`` to a total
-    mass ``M`` whose corners move at most at ``V``: kinetic energy grows by at most
-    ``M (V u + u^2 / 2)`` and potential energy by ``M |g| dt u``.  This assumes the
-    impulses are of the size of the momentum they change; a penetrated corner that can
-    hardly be pushed out without breaking the contacts around it (nearly redundant
-    rows) takes far larger impulses and injects more: such runs are reported.
-    (b) With relative residuals ``p`` (primal), ``d`` (dual), ``c`` (complementarity)
-    as :func:`~wuerfel_cvx.solve.kkt_residuals` defines them, the identity above is off
-    by ``sum nu_i s_i`` (``s`` the rows' slack, bounded through ``c`` and ``p`` times
-    the primal scale) and by the stationarity error times ``V``; bounding every dual by
-    twice the momentum ``M (2 V + dt |g|)`` gives
-    ``N_rows (c (1 + Z S) + p Z S) / 2 + N_var d (1 + Z_1) V / 2`` with ``Z`` that bound,
-    ``Z_1`` the same for the heaviest square, ``S`` the primal scale.  A rise above
-    (a) + (b) + round-off is a violation.  Free flight itself loses
-    ``M |g|^2 dt^2 / 2`` per step (semi-implicit Euler), which is not credited.
+Penetration and energy
+    Each step's depth and energy rise stay within the bounds derived in
+    :mod:`~wuerfel_cvx.robustness.bounds` for the formulation the run used (its
+    ``velocity`` variant: contacts linearised at their closest approach, or at the
+    start of the step with Baumgarte push-out).
 
 :func:`run_property_sweep` runs many generated scenes through :func:`check_run` and
 collects what fails, for the robustness report.
@@ -99,21 +41,16 @@ import numpy as np
 from ..bodies import half_diagonal
 from ..errors import StepFailure
 from ..formulations import VelocityFormulation
-from ..formulations.rigid import body_velocities
 from ..library import FLOOR
-from ..metrics import deepest_penetration, total_energy
+from ..metrics import total_energy
 from ..model import Model, State
 from ..scene import Box, Scene, Square
 from ..simulate import simulate
 from ..trajectory import Trajectory
+from .bounds import run_bounds
 
 #: Largest relative rod-length error accepted (see the module docstring).
 ROD_DRIFT_LIMIT = 1e-6
-
-ROUND_OFF_LENGTH = 1e-9
-"""Round-off floor (m) for the penetration bound: positions are O(10) m, eps 2e-16."""
-ROUND_OFF_ENERGY_RELATIVE = 1e-11
-"""Round-off floor for energy, relative to the largest energy magnitude of the run."""
 
 #: Parameter ranges of the generated scenes.
 MAX_SQUARES = 8
@@ -224,88 +161,14 @@ def random_scene(rng: np.random.Generator, n_squares: int | None = None,
 
 
 # ---------------------------------------------------------------------- invariants
-@dataclass(frozen=True)
-class RunBounds:
-    """Per-step bounds of a run, derived from its own states (see the module docstring)."""
-
-    penetration: np.ndarray
-    """Largest depth (m) the formulation allows after each step, ``(steps,)``."""
-    energy_rise: np.ndarray
-    """Largest total-energy rise (J) each step may show, ``(steps,)``."""
-
-
-def _spins_and_speeds(trajectory: Trajectory, n_squares: int) -> tuple[np.ndarray, np.ndarray]:
-    """Largest spin (rad/s) and corner speed (m/s) per state, ``(steps + 1,)`` each."""
-    states = trajectory.points.shape[0]
-    # every state's squares at once: the fit is per square (equal corner masses)
-    _, spin = body_velocities(trajectory.points.reshape(-1, 2),
-                              trajectory.velocities.reshape(-1, 2),
-                              np.ones((states * n_squares, 4)))
-    speed = np.linalg.norm(trajectory.velocities, axis=2)
-    return np.abs(spin).reshape(states, n_squares).max(axis=1), speed.max(axis=1)
-
-
-def run_bounds(trajectory: Trajectory, scene: Scene | None = None,
-               formulation: VelocityFormulation | None = None) -> RunBounds:
-    """The penetration and energy-rise bounds of each step of ``trajectory``.
-
-    ``scene``: the run's scene, by default the one the trajectory records.
-    """
-    scene = _scene_of(trajectory, scene)
-    scheme = formulation if formulation is not None else VelocityFormulation()
-    dt = float(trajectory.info["dt"])
-    beta = scheme.beta
-    steps = trajectory.n_steps
-    n = scene.n_boxes
-    gravity = float(np.hypot(*scene.gravity))
-    masses = np.array([b.mass for b in scene.bodies])
-    total_mass = float(masses.sum())
-    radius = max(half_diagonal(b) for b in scene.bodies)
-    spin, speed = _spins_and_speeds(trajectory, n)
-    depth_start = deepest_penetration(Model.from_scene(scene), trajectory.points[0])
-    metrics = trajectory.metrics
-    primal, dual, complementarity = (
-        np.nan_to_num(metrics[column].to_numpy()[:steps], nan=1.0)
-        for column in ("primal_residual", "dual_residual", "complementarity"))
-    n_rows = metrics[["n_equalities", "n_inequalities"]].to_numpy().sum(axis=1)[:steps]
-    n_variables = metrics["n_variables"].to_numpy()[:steps]
-    depth_measured = np.concatenate([[depth_start], metrics["penetration_m"].to_numpy()[:steps]])
-
-    # the spin and speed of step k are those of the state after it (rigid_step keeps them)
-    omega, velocity = spin[1:], np.maximum(speed[1:], speed[:-1])
-    primal_scale = 1.0 + 6.0 * velocity + scheme.contact_margin / dt + 2.0 * dt * gravity
-    overshoot = (0.5 * dt**2 * (4.0 * omega**2 * radius + 4.0 * omega * velocity)
-                 + dt * primal * primal_scale)
-    penetration = np.empty(steps)
-    depth = depth_start  # 0 for scenes that start apart
-    for k in range(steps):
-        depth = (1.0 - beta) * depth + overshoot[k] + ROUND_OFF_LENGTH
-        penetration[k] = depth
-
-    push = n * beta * depth_measured[:steps] / dt  # Baumgarte push-out speed (m/s)
-    baumgarte = total_mass * (velocity * push + 0.5 * push**2 + gravity * dt * push)
-    # multipliers are twice the impulses (objective without 1/2); an impulse is at most
-    # the momentum that stops or reverses the whole scene, or one square for the
-    # stationarity terms
-    impulse_total = 2.0 * total_mass * (2.0 * velocity + dt * gravity)
-    impulse_square = 2.0 * masses.max() * (2.0 * velocity + dt * gravity)
-    inexact = (0.5 * n_rows * (complementarity * (1.0 + impulse_total * primal_scale)
-                               + primal * impulse_total * primal_scale)
-               + 0.5 * n_variables * dual * (1.0 + impulse_square) * velocity)
-    energy = metrics["total_energy_J"].to_numpy()
-    scale = max(1.0, float(np.nanmax(np.abs(energy))) if energy.size else 1.0)
-    energy_rise = baumgarte + inexact + ROUND_OFF_ENERGY_RELATIVE * scale
-    return RunBounds(penetration=penetration, energy_rise=energy_rise)
-
-
 def check_run(trajectory: Trajectory, scene: Scene | None = None,
               formulation: VelocityFormulation | None = None) -> list[str]:
     """The invariants ``trajectory`` (a run of ``scene``) breaks, one readable line each.
 
     Empty when the run keeps them all.  Each line names the invariant, the first
     offending step, the value and the bound.  ``scene`` is by default the one the
-    trajectory records; ``formulation`` must be the one the run used (default: the
-    default ``velocity`` formulation).
+    trajectory records; ``formulation`` must be the one the run used (default: the one
+    the trajectory names).
     """
     scene = _scene_of(trajectory, scene)
     violations: list[str] = []

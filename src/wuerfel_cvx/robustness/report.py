@@ -91,9 +91,10 @@ FIXED_BUGS: tuple[FixedBug, ...] = (
 
 #: Solver faults and bad inputs that are documented behaviour rather than bugs.
 KNOWN_LIMITS = (
-    "Overlapping squares with stabilisation off (beta = 0) do not give an infeasible step: "
-    "every row of the velocity QP is then satisfied by v+ = 0.  The infeasible step of the "
-    "fault table is a square squeezed by two walls with beta = 0.2 (HiGHS confirms "
+    "Overlapping squares with stabilisation off (beta = 0, push_speed = 0) do not give an "
+    "infeasible step: every row of the velocity QP is then satisfied by v+ = 0.  The "
+    "infeasible step of the fault table is a square squeezed by two walls with push-out on "
+    "(HiGHS confirms "
     "infeasibility independently: tests/test_solver_faults.py::"
     "test_squeezed_square_is_truly_infeasible); no solver or fallback can solve it.",
     "At the far ends of the accepted ranges CLARABEL can report a false 'infeasible' (a "

@@ -1,0 +1,194 @@
+"""Contact rows at each contact's closest approach along the step's rigid motion.
+
+A contact's gap ``phi(tau)`` (m, positive outside) is the signed distance of its point
+from its edge line while both bodies follow the rigid motion of
+:mod:`~wuerfel_cvx.formulations.motion` for ``tau`` in ``[0, dt]``.  The step asks that
+the gap stay above a *ramp*::
+
+    psi(tau) = phi(tau) - r(tau) >= 0,    r(tau) = phi_0 + (c - phi_0) tau / dt,
+    c = min(0, phi_0 + dt u)
+
+``phi_0`` the gap at the start, ``u`` the push-out speed (m/s).  A point outside may close
+its gap at most linearly to zero by the end of the step (a speculative contact over the
+whole path, not only at its start); a point inside is pushed out to zero by the end of the
+step, or by ``dt u`` if it is deeper.  Since ``phi`` is nonlinear in the velocities (the
+bodies turn), each contact's row is the linearisation of ``psi`` at its *closest
+approach* ``tau*``, the minimiser of ``psi`` along the motion of a velocity estimate
+``v0``, divided by ``tau*`` (rows in m/s, the units of the other rows)::
+
+    G v >= G v0 - psi(tau*; v0) / tau*,    G = d phi(tau*; v) / d v / tau*
+
+and as ``tau* -> 0`` its limit, the rate row ``G v >= (c - phi_0) / dt``.  A Gauss-Newton
+pass re-linearises at the last solution (:func:`approach_rows`).
+
+Why the closest approach: the motion is homogeneous in ``v`` (``p(tau; s v) = p(s tau; v)``)
+so ``G v = phi'(tau*)``, the gap's rate at ``tau*``.  At an interior minimum ``psi' = 0``,
+so ``G v = r' = (c - phi_0) / dt``; at ``tau* = dt``, ``psi' <= 0`` and ``G v <= r'``.  At
+the converged solution every active row therefore has ``G v+ <= r'``, which is ``<= 0``
+for a point outside: such rows do no work, and the step dissipates energy as a
+first-order contact with restitution 0 does (see :mod:`wuerfel_cvx.robustness.properties`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..contacts import Contacts
+from ..geometry import FloatArray, cross, rot90, side_gradients
+from ..model import IntArray, Model
+from .motion import BodyMotion, body_motion
+from .qp import point_rows
+from .rows import n_unknown_points
+
+SAMPLES = 16
+"""Intervals of the step on which each contact's ramp margin is sampled to find its
+closest approach, refined by a parabola through the best sample and its neighbours."""
+
+@dataclass(frozen=True)
+class ApproachRows:
+    """The contact rows ``G v >= h`` linearised at each contact's closest approach."""
+
+    matrix: sp.csr_array
+    """``G`` ``(contacts, unknowns)`` (1: rows in m/s per m/s)."""
+    rhs: FloatArray
+    """``h`` (m/s)."""
+    violation: float
+    """Largest ``-psi`` (m) along the motion the rows were linearised about (0 if none)."""
+    closest: FloatArray
+    """Closest-approach time ``tau*`` (s) of each contact."""
+
+
+@dataclass(frozen=True)
+class _ContactCorners:
+    """Each contact's edge body and point body, and the corners involved."""
+
+    edge_body: IntArray
+    point_body: IntArray
+    corner_i: IntArray
+    corner_j: IntArray
+    corner_k: IntArray
+
+    @classmethod
+    def of(cls, contacts: Contacts) -> _ContactCorners:
+        return cls(contacts.edge_body, contacts.point_body, contacts.edge_i % 4,
+                   contacts.edge_j % 4, contacts.point % 4)
+
+
+def gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArray:
+    """Signed distances (m) of the contacts' points from their edge lines at times ``tau``.
+
+    ``tau`` (s) is ``(m,)`` or ``(m, K)`` for ``m`` contacts; the result has its shape.
+    """
+    c = _ContactCorners.of(contacts)
+    shape = np.shape(tau)
+    a, b = (np.reshape(body, (-1,) + (1,) * (len(shape) - 1)) for body in (c.edge_body,
+                                                                              c.point_body))
+
+    def at(body: IntArray, corner: IntArray) -> FloatArray:
+        return motion.positions(body, np.reshape(corner, a.shape), tau)
+
+    p_i, p_j, p_k = at(a, c.corner_i), at(a, c.corner_j), at(b, c.corner_k)
+    edge = p_j - p_i
+    return np.asarray(cross(edge, p_k - p_i) / np.hypot(edge[..., 0], edge[..., 1]))
+
+
+def ramp_end(start_gap: FloatArray, dt: float, push_speed: float) -> FloatArray:
+    """The ramp's end ``c = min(0, phi_0 + dt u)`` (m) for start gaps ``phi_0`` (m)."""
+    return np.minimum(0.0, start_gap + dt * push_speed)
+
+
+def approach_rows(model: Model, points: FloatArray, contacts: Contacts, about: FloatArray,
+                  dt: float, push_speed: float) -> ApproachRows:
+    """The contact rows linearised along the motion of the unknowns ``about``.
+
+    ``points`` ``(4 n, 2)`` (m) is the state at the start of the step; ``about`` the QP's
+    unknowns (m/s), whose first ``8 n`` are the corner velocities.
+    """
+    n_unknown = n_unknown_points(model)
+    if len(contacts) == 0:
+        return ApproachRows(sp.csr_array((0, 2 * n_unknown)), np.zeros(0), 0.0, np.zeros(0))
+    velocities = about.reshape(-1, 2)[: model.n_points]
+    motion = body_motion(model, points, velocities)
+    tau, margin, start, violation = _closest_approach(motion, contacts, dt, push_speed)
+    m = len(contacts)
+    rate_rows = point_rows(m, n_unknown, _row_blocks(motion, contacts, np.zeros(m)))
+    approach = point_rows(m, n_unknown, _row_blocks(motion, contacts, tau))
+    rate = (ramp_end(start, dt, push_speed) - start) / dt
+    # at an interior minimiser of psi / tau the right-hand side is exactly ``rate``; the
+    # minimum keeps it there where the sampled minimiser is inexact or on the boundary
+    rhs = np.concatenate([rate, np.minimum(approach @ about - margin / tau, rate)])
+    matrix = sp.csr_array(sp.vstack([rate_rows, approach], format="csr"))
+    return ApproachRows(matrix, rhs, violation, tau)
+
+
+def _closest_approach(motion: BodyMotion, contacts: Contacts, dt: float,
+                      push_speed: float) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+    """Each contact's ``tau*`` (s), ``psi(tau*)`` (m), start gap ``phi_0`` (m), and the violation.
+
+    ``tau*`` minimises the mean rate ``psi(tau) / tau`` (m/s; ``psi'(0)`` at ``tau = 0``),
+    sampled on :data:`SAMPLES` intervals and refined by a parabola.  The violation (m) is
+    the largest ``-psi`` over the samples and refined times.
+    """
+    m = len(contacts)
+    grid = np.linspace(0.0, dt, SAMPLES + 1)
+    gaps = gaps_at(motion, contacts, np.broadcast_to(grid, (m, SAMPLES + 1)))
+    start = gaps[:, 0]
+    ramp_rate = (ramp_end(start, dt, push_speed) - start) / dt
+    margin = gaps - start[:, None] - ramp_rate[:, None] * grid
+    mean_rate = np.empty_like(margin)
+    mean_rate[:, 1:] = margin[:, 1:] / grid[1:]
+    mean_rate[:, 0] = 2.0 * mean_rate[:, 1] - mean_rate[:, 2]  # for the parabola only
+    best = 1 + np.argmin(mean_rate[:, 1:], axis=1)
+    inner = np.minimum(best, SAMPLES - 1)
+    rows = np.arange(m)
+    left, mid, right = (mean_rate[rows, inner + shift] for shift in (-1, 0, 1))
+    curvature = left - 2.0 * mid + right
+    shift = np.where(curvature > 0.0, 0.5 * (left - right) / np.where(curvature > 0.0,
+                                                                      curvature, 1.0), 0.0)
+    refined = np.clip((inner + np.clip(shift, -1.0, 1.0)) * dt / SAMPLES, dt / SAMPLES, dt)
+    refined_margin = gaps_at(motion, contacts, refined) - start - ramp_rate * refined
+    sampled_tau, sampled_margin = grid[best], margin[rows, best]
+    take = refined_margin / refined < mean_rate[rows, best]
+    violation = float(max(0.0, -np.min(margin), -np.min(refined_margin)))
+    return (np.where(take, refined, sampled_tau), np.where(take, refined_margin, sampled_margin),
+            start, violation)
+
+
+def _row_blocks(motion: BodyMotion, contacts: Contacts,
+                tau: FloatArray) -> list[tuple[IntArray, FloatArray]]:
+    """Blocks of ``d phi(tau; v) / d v / tau`` over the corners of both bodies of each row.
+
+    A corner ``p`` of a box moves by ``tau (I / 4 + rot90(o_p) rot90(f_q)' / S)`` per unit
+    velocity of the box's corner ``q`` (``o`` its offsets at ``tau``, ``f`` at the start,
+    ``S = sum |f|^2``); tables do not move and take no column.
+    """
+    c = _ContactCorners.of(contacts)
+    p_i = motion.positions(c.edge_body, c.corner_i, tau)
+    p_j = motion.positions(c.edge_body, c.corner_j, tau)
+    p_k = motion.positions(c.point_body, c.corner_k, tau)
+    g_i, g_j, g_k = side_gradients(p_i, p_j, p_k)
+    scale = 1.0 / np.linalg.norm(g_k, axis=1)[:, None]  # |g_k| = edge length (m)
+    g_i, g_j, g_k = g_i * scale, g_j * scale, g_k * scale
+    o_i, o_j, o_k = (motion.offsets(body, corner, tau) for body, corner in (
+        (c.edge_body, c.corner_i), (c.edge_body, c.corner_j), (c.point_body, c.corner_k)))
+    edge_push = g_i + g_j
+    edge_turn = np.sum(g_i * rot90(o_i) + g_j * rot90(o_j), axis=1)
+    point_turn = np.sum(g_k * rot90(o_k), axis=1)
+    return (_body_blocks(motion, c.edge_body, edge_push, edge_turn)
+            + _body_blocks(motion, c.point_body, g_k, point_turn))
+
+
+def _body_blocks(motion: BodyMotion, body: IntArray, push: FloatArray,
+                 turn: FloatArray) -> list[tuple[IntArray, FloatArray]]:
+    """Four blocks (one per corner of ``body``): ``push / 4 + turn rot90(f_q) / S``."""
+    fitted = motion.fitted[body]  # (m, 4, 2)
+    inertia = np.sum(fitted * fitted, axis=(1, 2))
+    moving = body < motion.n_boxes
+    blocks = []
+    for corner in range(4):
+        index = np.where(moving, 4 * body + corner, -1)
+        blocks.append((index, 0.25 * push + (turn / inertia)[:, None] * rot90(fitted[:, corner])))
+    return blocks
