@@ -65,7 +65,8 @@ def test_overlap_sees_the_corners_that_penetration_measures_to_a_side_face(name:
 
 @pytest.mark.integration
 def test_results_row_has_the_overlap_depth() -> None:
-    point = GridPoint(suite="t", scene="corner-overlap", formulation="velocity",
+    # the start-linearised rows leave the overlap in place over these 3 steps
+    point = GridPoint(suite="t", scene="corner-overlap", formulation="velocity-baumgarte",
                       solver="CLARABEL", tol="default", dt=0.01, duration=0.03,
                       reference="none", compare_every=0)
     row = run_point(point, None)
