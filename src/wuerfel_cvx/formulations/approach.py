@@ -76,6 +76,11 @@ class _ContactCorners:
         return cls(contacts.edge_body, contacts.point_body, contacts.edge_i % 4,
                    contacts.edge_j % 4, contacts.point % 4)
 
+    def twice(self) -> _ContactCorners:
+        """Every contact twice: the rate rows, then the closest-approach rows."""
+        return _ContactCorners(*(np.concatenate([values, values]) for values in (
+            self.edge_body, self.point_body, self.corner_i, self.corner_j, self.corner_k)))
+
 
 def gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArray:
     """Signed distances (m) of the contacts' points from their edge lines at times ``tau``.
@@ -100,28 +105,65 @@ def ramp_end(start_gap: FloatArray, dt: float, push_speed: float) -> FloatArray:
     return np.minimum(0.0, start_gap + dt * push_speed)
 
 
-def approach_rows(model: Model, points: FloatArray, contacts: Contacts, about: FloatArray,
-                  dt: float, push_speed: float) -> ApproachRows:
-    """The contact rows linearised along the motion of the unknowns ``about``.
+@dataclass(frozen=True)
+class Approach:
+    """Each contact's closest approach along the motion of one velocity estimate."""
+
+    about: FloatArray
+    """The QP's unknowns (m/s) whose motion was followed."""
+    motion: BodyMotion
+    closest: FloatArray
+    """Closest-approach time ``tau*`` (s) of each contact."""
+    margin: FloatArray
+    """``psi(tau*)`` (m) of each contact."""
+    start: FloatArray
+    """Gap ``phi_0`` (m) of each contact at the start of the step."""
+    violation: float
+    """Largest ``-psi`` (m) along the motion (0 if none)."""
+
+
+def closest_approach(model: Model, points: FloatArray, contacts: Contacts, about: FloatArray,
+                     dt: float, push_speed: float) -> Approach:
+    """The contacts' closest approaches along the motion of the unknowns ``about``.
 
     ``points`` ``(4 n, 2)`` (m) is the state at the start of the step; ``about`` the QP's
     unknowns (m/s), whose first ``8 n`` are the corner velocities.
     """
-    n_unknown = n_unknown_points(model)
+    motion = body_motion(model, points, about.reshape(-1, 2)[: model.n_points])
     if len(contacts) == 0:
-        return ApproachRows(sp.csr_array((0, 2 * n_unknown)), np.zeros(0), 0.0, np.zeros(0))
-    velocities = about.reshape(-1, 2)[: model.n_points]
-    motion = body_motion(model, points, velocities)
+        none = np.zeros(0)
+        return Approach(about, motion, none, none, none, 0.0)
     tau, margin, start, violation = _closest_approach(motion, contacts, dt, push_speed)
+    return Approach(about, motion, tau, margin, start, violation)
+
+
+def rows_along(model: Model, contacts: Contacts, approach: Approach, dt: float,
+               push_speed: float) -> ApproachRows:
+    """The rate rows and the closest-approach rows of ``approach`` (see the docstring)."""
+    n_unknown = n_unknown_points(model)
     m = len(contacts)
-    rate_rows = point_rows(m, n_unknown, _row_blocks(motion, contacts, np.zeros(m)))
-    approach = point_rows(m, n_unknown, _row_blocks(motion, contacts, tau))
+    if m == 0:
+        return ApproachRows(sp.csr_array((0, 2 * n_unknown)), np.zeros(0), 0.0, np.zeros(0))
+    tau, start = approach.closest, approach.start
+    blocks = _row_blocks(approach.motion, _ContactCorners.of(contacts).twice(),
+                         np.concatenate([np.zeros(m), tau]))
+    matrix = point_rows(2 * m, n_unknown, blocks)
     rate = (ramp_end(start, dt, push_speed) - start) / dt
     # at an interior minimiser of psi / tau the right-hand side is exactly ``rate``; the
     # minimum keeps it there where the sampled minimiser is inexact or on the boundary
-    rhs = np.concatenate([rate, np.minimum(approach @ about - margin / tau, rate)])
-    matrix = sp.csr_array(sp.vstack([rate_rows, approach], format="csr"))
-    return ApproachRows(matrix, rhs, violation, tau)
+    closest = matrix[m:] @ approach.about - approach.margin / tau
+    rhs = np.concatenate([rate, np.minimum(closest, rate)])
+    return ApproachRows(matrix, rhs, approach.violation, tau)
+
+
+def approach_rows(model: Model, points: FloatArray, contacts: Contacts, about: FloatArray,
+                  dt: float, push_speed: float) -> ApproachRows:
+    """The contact rows linearised along the motion of the unknowns ``about``.
+
+    :func:`closest_approach` then :func:`rows_along`.
+    """
+    approach = closest_approach(model, points, contacts, about, dt, push_speed)
+    return rows_along(model, contacts, approach, dt, push_speed)
 
 
 def _closest_approach(motion: BodyMotion, contacts: Contacts, dt: float,
@@ -157,7 +199,7 @@ def _closest_approach(motion: BodyMotion, contacts: Contacts, dt: float,
             start, violation)
 
 
-def _row_blocks(motion: BodyMotion, contacts: Contacts,
+def _row_blocks(motion: BodyMotion, c: _ContactCorners,
                 tau: FloatArray) -> list[tuple[IntArray, FloatArray]]:
     """Blocks of ``d phi(tau; v) / d v / tau`` over the corners of both bodies of each row.
 
@@ -165,15 +207,13 @@ def _row_blocks(motion: BodyMotion, contacts: Contacts,
     velocity of the box's corner ``q`` (``o`` its offsets at ``tau``, ``f`` at the start,
     ``S = sum |f|^2``); tables do not move and take no column.
     """
-    c = _ContactCorners.of(contacts)
-    p_i = motion.positions(c.edge_body, c.corner_i, tau)
-    p_j = motion.positions(c.edge_body, c.corner_j, tau)
-    p_k = motion.positions(c.point_body, c.corner_k, tau)
+    ends = ((c.edge_body, c.corner_i), (c.edge_body, c.corner_j), (c.point_body, c.corner_k))
+    o_i, o_j, o_k = (motion.offsets(body, corner, tau) for body, corner in ends)
+    p_i, p_j, p_k = (motion.center[body] + tau[:, None] * motion.velocity[body] + offset
+                     for (body, _), offset in zip(ends, (o_i, o_j, o_k), strict=True))
     g_i, g_j, g_k = side_gradients(p_i, p_j, p_k)
     scale = 1.0 / np.linalg.norm(g_k, axis=1)[:, None]  # |g_k| = edge length (m)
     g_i, g_j, g_k = g_i * scale, g_j * scale, g_k * scale
-    o_i, o_j, o_k = (motion.offsets(body, corner, tau) for body, corner in (
-        (c.edge_body, c.corner_i), (c.edge_body, c.corner_j), (c.point_body, c.corner_k)))
     edge_push = g_i + g_j
     edge_turn = np.sum(g_i * rot90(o_i) + g_j * rot90(o_j), axis=1)
     point_turn = np.sum(g_k * rot90(o_k), axis=1)
@@ -185,10 +225,7 @@ def _body_blocks(motion: BodyMotion, body: IntArray, push: FloatArray,
                  turn: FloatArray) -> list[tuple[IntArray, FloatArray]]:
     """Four blocks (one per corner of ``body``): ``push / 4 + turn rot90(f_q) / S``."""
     fitted = motion.fitted[body]  # (m, 4, 2)
-    inertia = np.sum(fitted * fitted, axis=(1, 2))
-    moving = body < motion.n_boxes
-    blocks = []
-    for corner in range(4):
-        index = np.where(moving, 4 * body + corner, -1)
-        blocks.append((index, 0.25 * push + (turn / inertia)[:, None] * rot90(fitted[:, corner])))
-    return blocks
+    weight = turn / np.sum(fitted * fitted, axis=(1, 2))
+    coefficients = 0.25 * push[:, None, :] + weight[:, None, None] * rot90(fitted)
+    index = np.where((body < motion.n_boxes)[:, None], 4 * body[:, None] + np.arange(4), -1)
+    return [(index[:, corner], coefficients[:, corner]) for corner in range(4)]

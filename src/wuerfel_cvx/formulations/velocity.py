@@ -49,7 +49,7 @@ import scipy.sparse as sp
 from ..contacts import Contacts
 from ..geometry import FloatArray
 from ..model import Model, State
-from .approach import approach_rows
+from .approach import approach_rows, closest_approach, rows_along
 from .motion import rigid_step
 from .qp import StepQP, declare_qp, point_rows
 from .rows import (
@@ -131,10 +131,11 @@ class VelocityFormulation:
         """
         if self.linearisation == "start" or passes >= self.max_passes:
             return None
-        rows = approach_rows(model, state.points, previous.contacts, solution, dt,
-                             self.push_speed)
-        if rows.violation <= self.gap_tolerance:
+        approach = closest_approach(model, state.points, previous.contacts, solution, dt,
+                                    self.push_speed)
+        if approach.violation <= self.gap_tolerance:
             return None
+        rows = rows_along(model, previous.contacts, approach, dt, self.push_speed)
         return declare_qp(previous.weights, previous.target, previous.eq_matrix,
                           previous.eq_rhs, rows.matrix, rows.rhs, previous.contacts)
 
