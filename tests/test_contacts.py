@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from manifold_oracle import manifold_rows
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.contacts import Contacts, find_contacts
 from wuerfel_cvx.formulations import get_formulation, step_qp
@@ -59,22 +60,12 @@ def test_corner_on_corner_is_held_by_the_face_it_rests_on() -> None:
 
 
 def all_pairs_contacts(model: Model, points: np.ndarray, margin: float) -> set[tuple[int, ...]]:
-    """Reference: every ordered body pair, no broad phase, the same edge rule."""
-    all_points = model.all_points(points)
-    found = set()
-    for w in range(model.n_bodies):
-        for b in range(model.n_bodies):
-            if w == b or (w >= model.n_boxes and b >= model.n_boxes):
-                continue
-            polygon, foreign = all_points[4 * w: 4 * w + 4], all_points[4 * b: 4 * b + 4]
-            distances = edge_distances(foreign, polygon)
-            separation = distances.min(axis=0)
-            for k in range(4):
-                tied = distances[k] >= distances[k].max() - 1e-9
-                edge = int(np.argmax(np.where(tied, separation, -np.inf)))
-                if distances[k, edge] <= 2 * margin:
-                    found.add((4 * b + k, 4 * w + (edge + 1) % 4, 4 * w + edge))
-    return found
+    """Reference: every body pair, no broad phase, the same manifold rule, one pair a time."""
+    corners = model.all_points(points).reshape(-1, 4, 2)
+    pairs = np.array([(w, b) for w in range(model.n_bodies) for b in range(model.n_bodies)
+                      if w != b])
+    rows = manifold_rows(corners, model.n_boxes, pairs, np.full(model.n_bodies, margin))
+    return {row[:3] for row in rows}
 
 
 def as_set(contacts: Contacts) -> set[tuple[int, ...]]:
