@@ -22,12 +22,12 @@ def outward_normal(polygon: FloatArray, face: int) -> FloatArray:
     return np.array([d[1], -d[0]]) / np.hypot(d[0], d[1])
 
 
-def on_face(polygon: FloatArray, face: int, point: FloatArray) -> bool:
-    """Whether ``point`` projects onto the face within ``TIE_TOLERANCE`` (m) of its ends."""
+def on_face(polygon: FloatArray, face: int, point: FloatArray, beyond: float) -> bool:
+    """Whether ``point`` projects onto the face within ``beyond`` (m) of its ends."""
     tail, head = polygon[face], polygon[(face + 1) % 4]
     length = float(np.hypot(*(head - tail)))
     alpha = float(edge_parameter(tail, head, point))
-    return -TIE_TOLERANCE / length <= alpha <= 1.0 + TIE_TOLERANCE / length
+    return -beyond / length <= alpha <= 1.0 + beyond / length
 
 
 def pair_rows(corners: FloatArray, a: int, b: int, pair_margin: float) -> list[Row]:
@@ -48,7 +48,8 @@ def pair_rows(corners: FloatArray, a: int, b: int, pair_margin: float) -> list[R
         for k in offered:
             point = corners[point_body, k]
             distance = float(edge_distances(point[None, :], polygon)[0, edge])
-            if on_face(polygon, edge, point) and distance <= pair_margin:
+            beyond = TIE_TOLERANCE + (pair_margin if distance > 0.0 else 0.0)
+            if distance <= pair_margin and on_face(polygon, edge, point, beyond):
                 rows.append((4 * point_body + k, 4 * edge_body + (edge + 1) % 4,
                              4 * edge_body + edge, point_body, edge_body, distance))
     return rows

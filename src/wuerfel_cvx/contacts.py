@@ -17,17 +17,21 @@ Manifold rule (one contact normal per body pair, as Box2D's polygon manifolds)
     * each corner of the other body is held by the reference face, and
     * each of the reference face's own two corners is held by the incident face,
 
-    if the corner lies within the face's extent (its projection on the face's line is
-    within :data:`TIE_TOLERANCE` of the face, so that corners exactly at a face's end,
-    as in an aligned stack, are kept) and within the search margin.  All rows of a pair
+    if the corner is within the search margin of the face's line and within the face's
+    extent: its projection on the line is within :data:`TIE_TOLERANCE` of the face (so
+    that corners exactly at a face's end, as in an aligned stack, are kept), or, for a
+    corner outside the line, within the search margin of the face (a corner beyond a
+    face's end may reach the face within the step, as when two corners approach each
+    other).  All rows of a pair
     then push along one normal, in one sense: no two rows of a pair hold the same
     relative sliding in opposite senses.  Each row is still a point against an edge's
     line, so the formulations' rows are unchanged.
 
     A corner inside the other body of a pair always lies within the face's extent, so
-    it has a row unless it is a corner of the reference body off the reference face.
-    Its distance is measured along the pair's normal, which can be deeper than the
-    distance to the nearest face of the other body.
+    it has a row unless it is a corner of the reference body off the reference face; a
+    corner behind a face's line but beyond the face's end has none.  A row's distance is
+    measured along the pair's normal, which can be deeper than the distance to the
+    nearest face of the other body.
 
 Batching
     There is no loop over pairs in Python: the broad phase yields an array of
@@ -206,15 +210,17 @@ def reference_sides(distances: FloatArray) -> tuple[IntArray, FloatArray]:
 
 
 def choose_edges(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
-                 distances: FloatArray) -> tuple[IntArray, NDArray[np.bool_]]:
-    """Edge index and eligibility ``(4, P)`` of each corner of each pair by the manifold rule.
+                 distances: FloatArray, pair_margin: FloatArray
+                 ) -> tuple[IntArray, NDArray[np.bool_]]:
+    """Edge index and whether it holds, ``(4, P)``, for each corner of each pair.
 
     ``corners`` ``(n_bodies, 4, 2)`` (m); ``edge_body``, ``point_body`` ``(P,)`` and
-    ``distances`` ``(4 corners, 4 edges, P)`` as for :func:`reference_sides`.  In an
-    order whose edge body holds the reference face, every corner of the point body is
-    offered that face; in the other order, only the reference face's two corners are,
-    to the edge body's incident face.  ``eligible`` says which corners are offered and lie
-    within the face's extent (module docstring); the margin test is the caller's.
+    ``distances`` ``(4 corners, 4 edges, P)`` as for :func:`reference_sides`;
+    ``pair_margin`` ``(P,)`` (m) the pairs' search margins.  In an order whose edge body
+    holds the reference face, every corner of the point body is offered that face; in
+    the other order, only the reference face's two corners are, to the edge body's
+    incident face.  An offered corner is held if it is within the margin and within the
+    face's extent (module docstring).
     """
     n_pairs = edge_body.shape[0]
     half = n_pairs // 2
@@ -234,8 +240,11 @@ def choose_edges(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
     length = _lengths(along)
     offset = corners[point_body].transpose(1, 0, 2) - start[None, :, :]  # (4, P, 2)
     place = (offset[..., 0] * along[:, 0] + offset[..., 1] * along[:, 1]) / length  # (4, P)
-    within = (place >= -TIE_TOLERANCE) & (place <= length + TIE_TOLERANCE)
-    return np.broadcast_to(face, (4, n_pairs)).copy(), offered & within
+    edge = np.broadcast_to(face, (4, n_pairs)).copy()
+    distance = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]
+    beyond = TIE_TOLERANCE + np.where(distance > 0.0, pair_margin[None, :], 0.0)
+    within = (place >= -beyond) & (place <= length + beyond)
+    return edge, offered & within & (distance <= pair_margin[None, :])
 
 
 def find_contacts(
@@ -261,10 +270,9 @@ def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
     edge_body, point_body = pairs[:, 0], pairs[:, 1]
     corners = all_points.reshape(-1, 4, 2)
     distances = pair_distances(corners, edge_body, point_body)
-    edge, eligible = choose_edges(corners, edge_body, point_body, distances)  # (4 corners, P)
-    chosen = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]
     pair_margin = reach[edge_body] + reach[point_body]
-    keep = eligible & (chosen <= pair_margin)
+    edge, keep = choose_edges(corners, edge_body, point_body, distances, pair_margin)
+    chosen = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]  # (4 corners, P)
     pair_index, corner = np.nonzero(keep.T)  # pair-major order
     edge_index = edge[corner, pair_index]
     w = edge_body[pair_index]
