@@ -7,6 +7,8 @@ corners, :func:`~wuerfel_cvx.geometry.edge_distances` for the distances and
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from wuerfel_cvx.contacts import TIE_TOLERANCE
@@ -22,12 +24,12 @@ def outward_normal(polygon: FloatArray, face: int) -> FloatArray:
     return np.array([d[1], -d[0]]) / np.hypot(d[0], d[1])
 
 
-def on_face(polygon: FloatArray, face: int, point: FloatArray, beyond: float) -> bool:
-    """Whether ``point`` projects onto the face within ``beyond`` (m) of its ends."""
+def past_end(polygon: FloatArray, face: int, point: FloatArray) -> float:
+    """How far (m) ``point``'s projection on the face's line lies beyond the face's ends."""
     tail, head = polygon[face], polygon[(face + 1) % 4]
     length = float(np.hypot(*(head - tail)))
-    alpha = float(edge_parameter(tail, head, point))
-    return -beyond / length <= alpha <= 1.0 + beyond / length
+    place = float(edge_parameter(tail, head, point)) * length
+    return max(-place, place - length, 0.0)
 
 
 def pair_rows(corners: FloatArray, a: int, b: int, pair_margin: float) -> list[Row]:
@@ -48,8 +50,10 @@ def pair_rows(corners: FloatArray, a: int, b: int, pair_margin: float) -> list[R
         for k in offered:
             point = corners[point_body, k]
             distance = float(edge_distances(point[None, :], polygon)[0, edge])
-            beyond = TIE_TOLERANCE + (pair_margin if distance > 0.0 else 0.0)
-            if distance <= pair_margin and on_face(polygon, edge, point, beyond):
+            beyond = past_end(polygon, edge, point)
+            on_face = beyond <= TIE_TOLERANCE or (
+                distance > 0.0 and math.hypot(beyond, distance) <= pair_margin)
+            if distance <= pair_margin and on_face:
                 rows.append((4 * point_body + k, 4 * edge_body + (edge + 1) % 4,
                              4 * edge_body + edge, point_body, edge_body, distance))
     return rows

@@ -20,9 +20,9 @@ Manifold rule (one contact normal per body pair, as Box2D's polygon manifolds)
     if the corner is within the search margin of the face's line and within the face's
     extent: its projection on the line is within :data:`TIE_TOLERANCE` of the face (so
     that corners exactly at a face's end, as in an aligned stack, are kept), or, for a
-    corner outside the line, within the search margin of the face (a corner beyond a
-    face's end may reach the face within the step, as when two corners approach each
-    other).  All rows of a pair
+    corner outside the line and beyond an end, its distance from the face (the segment)
+    is within the search margin: it may reach the face within the step, as when two
+    corners approach each other.  All rows of a pair
     then push along one normal, in one sense: no two rows of a pair hold the same
     relative sliding in opposite senses.  Each row is still a point against an edge's
     line, so the formulations' rows are unchanged.
@@ -242,9 +242,10 @@ def choose_edges(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
     place = (offset[..., 0] * along[:, 0] + offset[..., 1] * along[:, 1]) / length  # (4, P)
     edge = np.broadcast_to(face, (4, n_pairs)).copy()
     distance = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]
-    beyond = TIE_TOLERANCE + np.where(distance > 0.0, pair_margin[None, :], 0.0)
-    within = (place >= -beyond) & (place <= length + beyond)
-    return edge, offered & within & (distance <= pair_margin[None, :])
+    beyond = np.maximum(-place, place - length)  # (4, P) m past the nearer end; < 0 within
+    within = beyond <= TIE_TOLERANCE
+    near_end = (distance > 0.0) & (np.hypot(beyond, distance) <= pair_margin[None, :])
+    return edge, offered & (within | near_end) & (distance <= pair_margin[None, :])
 
 
 def find_contacts(
