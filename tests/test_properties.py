@@ -144,20 +144,18 @@ CORNER_ON_CORNER = [  # hypothesis, deep profile (shrinking stopped early), 7 sq
 @pytest.mark.parametrize("scene", [Scene.from_dict(WEDGED_CORNER),
                                    scene_from_draws(CORNER_ON_CORNER, "corner-on-corner")],
                          ids=["wedged-corner", "corner-on-corner"])
-def test_known_energy_leak_at_overlapping_corners(scene: Scene) -> None:
-    """Known limitation, pinned: energy rises here beyond the Baumgarte bound.
+def test_no_energy_leak_at_overlapping_corners(scene: Scene) -> None:
+    """Formerly a known energy leak, now passing every property check.
 
-    Corners of two squares overlap by 1e-9 to 4e-7 m and the edge rule matches them
-    to faces whose push-outs nearly contradict each other or the contacts around them
-    (in ``corner-on-corner`` two equal stacked squares: a corner of each inside the
-    other, rows with opposite normals).  Baumgarte's push-out then takes opposing
-    impulses of 3e2 to 4e3 N s and injects 4e-5 to 2e-3 J per step, far more than
-    pushing out that depth can explain.  The runs are otherwise sound (no NaN, no
-    drift, penetration within its bound).  A fix of the formulation or the edge rule
-    makes this test fail: then assert ``problems == []`` instead.
+    Corners of two squares overlap by 1e-9 to 4e-7 m.  The per-corner edge rule matched
+    them to faces whose push-outs nearly contradicted each other (in ``corner-on-corner``
+    two equal stacked squares: a corner of each inside the other, rows with opposite
+    normals), and Baumgarte's push-out took opposing impulses of 3e2 to 4e3 N s and
+    injected 4e-5 to 2e-3 J per step.  With one contact normal per body pair the rows no
+    longer oppose each other and the energy stays within the Baumgarte bound.
     """
     problems = check_scene(scene, steps=STEPS, dt=DT)
-    assert len(problems) == 1 and problems[0].startswith("energy rose by"), problems
+    assert problems == []
 
 
 # ---------------------------------------------------------------------- the generator
