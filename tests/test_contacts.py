@@ -11,7 +11,7 @@ from manifold_oracle import manifold_rows
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.contacts import Contacts, find_contacts
 from wuerfel_cvx.formulations import get_formulation, step_qp
-from wuerfel_cvx.geometry import edge_distances, square_corners
+from wuerfel_cvx.geometry import edge_distances, polygon_overlap_depth, square_corners
 from wuerfel_cvx.model import Model, State
 
 pytestmark = pytest.mark.integration
@@ -107,3 +107,17 @@ def test_heavy_table_variant_holds_the_table_and_matches_the_fixed_one() -> None
     # the solver's error grows with it: the seed's "largest mass" is a numerical hazard.
     assert errors[0] < 1e-7  # m, a light table: as good as a fixed one
     assert errors[1] > 100 * errors[0]
+
+
+def test_quarter_overlap_is_pushed_apart_not_merged() -> None:
+    # overlap-recovery starts with the upper unit square 25 % into the lower one.  Held
+    # along one normal per pair, it is pushed up and out and comes to rest on top.  (With
+    # the per-corner edge rule the sunk corners were pushed out sideways through the side
+    # faces: the squares slid into each other and ended coincident, while the deepest
+    # point-to-nearest-face depth read 0.)
+    traj = simulate("overlap-recovery", dt=0.01, steps=200)
+    corners = traj.points.reshape(len(traj.points), -1, 4, 2)
+    assert polygon_overlap_depth(corners[0, 0], corners[0, 1]) == pytest.approx(0.25)
+    assert polygon_overlap_depth(corners[-1, 0], corners[-1, 1]) < 1e-6
+    centers = corners[-1].mean(axis=1)
+    assert centers[1, 1] - centers[0, 1] == pytest.approx(1.0, abs=1e-6)  # resting on top
