@@ -1,4 +1,8 @@
-"""Contact finding: the seed's sector rule, corner ties, the broad phase, tables."""
+"""Contact finding: the seed's sector rule, corner ties, the broad phase, tables.
+
+The search's per-pair manifold rule itself is tested in ``test_contacts_manifold.py``; the
+sector rule below is the per-corner geometry it replaced, still the seed's section 2.3.
+"""
 
 from __future__ import annotations
 
@@ -49,7 +53,8 @@ def test_corner_on_corner_is_held_by_the_face_it_rests_on() -> None:
     model = Model.from_scene(scene)
     contacts = find_contacts(model, scene.initial_points(), 1e-3)
     # Upper square (corners 4..7): its bottom corners 4, 5 rest exactly on the lower
-    # square's top corners, a tie between its top face (3 -> 2) and its sides.
+    # square's top corners, at a tie between its top face (3 -> 2) and its sides; the
+    # pair's normal is vertical, so both are held by the top face.
     upper_on_lower = contacts.point_body == 1
     assert set(contacts.point[upper_on_lower]) == {4, 5}
     assert set(zip(contacts.edge_i[upper_on_lower], contacts.edge_j[upper_on_lower],

@@ -22,10 +22,11 @@ Manifold rule (one contact normal per body pair, as Box2D's polygon manifolds)
     that corners exactly at a face's end, as in an aligned stack, are kept), or, for a
     corner outside the line and beyond an end, its distance from the face (the segment)
     is within the search margin: it may reach the face within the step, as when two
-    corners approach each other.  All rows of a pair
-    then push along one normal, in one sense: no two rows of a pair hold the same
-    relative sliding in opposite senses.  Each row is still a point against an edge's
-    line, so the formulations' rows are unchanged.
+    corners approach each other.  All rows of a pair then push the two bodies apart
+    within 45 degrees of the reference normal (the incident face of a rectangle is at
+    most that far off it): no two rows of a pair hold the same relative sliding in
+    opposite senses.  Each row is still a point against an edge's line, so the
+    formulations' rows are unchanged.
 
     A corner inside the other body of a pair always lies within the face's extent, so
     it has a row unless it is a corner of the reference body off the reference face; a
@@ -191,7 +192,7 @@ def face_normals(corners: FloatArray) -> FloatArray:
     return np.asarray(normal / _lengths(edge)[..., None], dtype=np.float64)
 
 
-def reference_sides(distances: FloatArray) -> tuple[IntArray, FloatArray]:
+def reference_sides(distances: FloatArray) -> tuple[IntArray, NDArray[np.bool_]]:
     """Each ordered pair's best face and whether its edge body holds the reference face.
 
     ``distances`` ``(4 corners, 4 edges, P)`` (m) as from :func:`pair_distances`, for the
