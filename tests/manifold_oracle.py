@@ -24,6 +24,11 @@ def outward_normal(polygon: FloatArray, face: int) -> FloatArray:
     return np.array([d[1], -d[0]]) / np.hypot(d[0], d[1])
 
 
+def face_length(polygon: FloatArray, face: int) -> float:
+    """Length (m) of face ``face`` (corner ``face`` to ``face + 1``)."""
+    return float(np.hypot(*(polygon[(face + 1) % 4] - polygon[face])))
+
+
 def past_end(polygon: FloatArray, face: int, point: FloatArray) -> float:
     """How far (m) ``point``'s projection on the face's line lies beyond the face's ends."""
     tail, head = polygon[face], polygon[(face + 1) % 4]
@@ -36,10 +41,12 @@ def pair_rows(corners: FloatArray, a: int, b: int, pair_margin: float) -> list[R
     """The rows of the unordered pair ``a < b`` (body indices into ``corners (n, 4, 2)``)."""
     separation_a = edge_distances(corners[b], corners[a]).min(axis=0)  # a's faces
     separation_b = edge_distances(corners[a], corners[b]).min(axis=0)
-    if separation_a.max() >= separation_b.max() - TIE_TOLERANCE:
-        reference, other, face = a, b, int(np.argmax(separation_a))
+    face_a, face_b = int(np.argmax(separation_a)), int(np.argmax(separation_b))
+    if abs(separation_a.max() - separation_b.max()) <= TIE_TOLERANCE:
+        a_holds = face_length(corners[a], face_a) >= face_length(corners[b], face_b)
     else:
-        reference, other, face = b, a, int(np.argmax(separation_b))
+        a_holds = separation_a.max() > separation_b.max()
+    reference, other, face = (a, b, face_a) if a_holds else (b, a, face_b)
     normal = outward_normal(corners[reference], face)
     incident = int(np.argmin([outward_normal(corners[other], f) @ normal for f in range(4)]))
     rows: list[Row] = []
@@ -52,7 +59,8 @@ def pair_rows(corners: FloatArray, a: int, b: int, pair_margin: float) -> list[R
             distance = float(edge_distances(point[None, :], polygon)[0, edge])
             beyond = past_end(polygon, edge, point)
             on_face = beyond <= TIE_TOLERANCE or (
-                distance > 0.0 and math.hypot(beyond, distance) <= pair_margin)
+                distance > 0.0 and beyond <= face_length(polygon, edge)
+                and math.hypot(beyond, distance) <= pair_margin)
             if distance <= pair_margin and on_face:
                 rows.append((4 * point_body + k, 4 * edge_body + (edge + 1) % 4,
                              4 * edge_body + edge, point_body, edge_body, distance))

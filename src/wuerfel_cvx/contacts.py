@@ -9,9 +9,11 @@ Manifold rule (one contact normal per body pair, as Box2D's polygon manifolds)
     For each unordered pair of bodies {A, B} (squares and tables) the *reference face*
     is the face, of either body, along whose outward normal the pair is best separated:
     the largest *separation*, the smallest signed distance of the other body's corners
-    from the face's line (the separating-axis test).  A's best face wins unless B's
-    separates by more than :data:`TIE_TOLERANCE`, where A is the lower-numbered body
-    (a table is numbered after every square).  The other body's *incident face* is its
+    from the face's line (the separating-axis test).  Separations within
+    :data:`TIE_TOLERANCE` tie (an aligned stack); a tie goes to the longer face, then to
+    the lower-numbered body (a table is numbered after every square).  The longer face
+    holds a small body resting on a large one by its own corners, and no row reaches far
+    past the end of a short face.  The other body's *incident face* is its
     face whose normal is most anti-parallel to the reference normal.  Then
 
     * each corner of the other body is held by the reference face, and
@@ -20,9 +22,11 @@ Manifold rule (one contact normal per body pair, as Box2D's polygon manifolds)
     if the corner is within the search margin of the face's line and within the face's
     extent: its projection on the line is within :data:`TIE_TOLERANCE` of the face (so
     that corners exactly at a face's end, as in an aligned stack, are kept), or, for a
-    corner outside the line and beyond an end, its distance from the face (the segment)
-    is within the search margin: it may reach the face within the step, as when two
-    corners approach each other.  All rows of a pair then push the two bodies apart
+    corner outside the line and beyond an end by at most the face's length, its distance
+    from the face (the segment) is within the search margin: it may reach the face
+    within the step, as when two corners approach each other.  (Farther out the line no
+    longer stands for the face: its rotation would move the corner more than twice as
+    much as the face.)  All rows of a pair then push the two bodies apart
     within 45 degrees of the reference normal (the incident face of a rectangle is at
     most that far off it): no two rows of a pair hold the same relative sliding in
     opposite senses.  Each row is still a point against an edge's line, so the
@@ -54,8 +58,8 @@ from .geometry import FloatArray
 from .model import IntArray, Model
 
 #: Lengths closer than this (m) count as equal: two faces' separations (a tie between the
-#: bodies goes to the lower-numbered body's face), and a corner's place along a face's line
-#: and the face's end (a corner this close to the end is on the face).
+#: bodies goes to the longer face), and a corner's place along a face's line and the
+#: face's end (a corner this close to the end is on the face).
 TIE_TOLERANCE = 1e-9
 
 
@@ -192,21 +196,25 @@ def face_normals(corners: FloatArray) -> FloatArray:
     return np.asarray(normal / _lengths(edge)[..., None], dtype=np.float64)
 
 
-def reference_sides(distances: FloatArray) -> tuple[IntArray, NDArray[np.bool_]]:
+def reference_sides(distances: FloatArray, face_length: FloatArray
+                    ) -> tuple[IntArray, NDArray[np.bool_]]:
     """Each ordered pair's best face and whether its edge body holds the reference face.
 
     ``distances`` ``(4 corners, 4 edges, P)`` (m) as from :func:`pair_distances`, for the
-    pairs of :func:`body_pairs` (the second half the first half reversed).  Returns
+    pairs of :func:`body_pairs` (the second half the first half reversed);
+    ``face_length`` ``(4 edges, P)`` (m) the edge body's face lengths.  Returns
     ``best_face`` ``(P,)``, the edge body's face with the largest separation from the
     point body, and ``is_reference`` ``(P,)``, true for exactly one of each pair's two
-    orders: the first half's edge body unless the other's separation is larger by more
-    than :data:`TIE_TOLERANCE`.
+    orders: the one with the larger separation, or, within :data:`TIE_TOLERANCE`, the one
+    with the longer best face (the first half's on equal lengths).
     """
     separation = distances.min(axis=0)  # (4 edges, P): the pair's separation along each normal
     best_face = np.asarray(np.argmax(separation, axis=0), dtype=np.int64)
     best = separation.max(axis=0)
+    length = np.take_along_axis(face_length, best_face[None, :], axis=0)[0]
     half = best.shape[0] // 2
-    first_holds = best[:half] >= best[half:] - TIE_TOLERANCE
+    tie = np.abs(best[:half] - best[half:]) <= TIE_TOLERANCE
+    first_holds = np.where(tie, length[:half] >= length[half:], best[:half] > best[half:])
     return best_face, np.concatenate([first_holds, ~first_holds])
 
 
@@ -225,7 +233,8 @@ def choose_edges(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
     """
     n_pairs = edge_body.shape[0]
     half = n_pairs // 2
-    best_face, is_reference = reference_sides(distances)
+    lengths = _lengths(np.roll(corners, -1, axis=1) - corners)  # (n_bodies, 4) face lengths
+    best_face, is_reference = reference_sides(distances, lengths.T.take(edge_body, axis=1))
     partner = np.concatenate([np.arange(half, n_pairs), np.arange(half)])
     reference_face = best_face[partner]  # the point body's face, where it is the reference
     normals = face_normals(corners)
@@ -245,7 +254,8 @@ def choose_edges(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
     distance = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]
     beyond = np.maximum(-place, place - length)  # (4, P) m past the nearer end; < 0 within
     within = beyond <= TIE_TOLERANCE
-    near_end = (distance > 0.0) & (np.hypot(beyond, distance) <= pair_margin[None, :])
+    near_end = ((distance > 0.0) & (beyond <= length)
+                & (np.hypot(beyond, distance) <= pair_margin[None, :]))
     return edge, offered & (within | near_end) & (distance <= pair_margin[None, :])
 
 
