@@ -217,3 +217,15 @@ def test_aligned_stack_holds_each_coincident_corner_pair_twice_in_one_sense() ->
     assert np.count_nonzero(between) == 4
     np.testing.assert_allclose(pushes(model, points, contacts)[between], [[0.0, 1.0]] * 4,
                                atol=1e-15)
+
+
+def test_a_tie_goes_to_the_longer_face_so_no_row_reaches_far_past_a_tiny_face() -> None:
+    # A 1 mm square resting on a 4 m table, searched with a 5 m margin per body (a fast
+    # body's reach).  Both faces separate by 0: the table's top face holds the square's
+    # corners, and the table's corners, 2 m past the square's 1 mm face, are not held by
+    # that face's line (a row with a lever arm of 2000 face lengths).
+    model, points = model_of(Square(center=(0.0, 5e-4), size=1e-3),
+                             Table(center=(0.0, -0.5), size=(4.0, 1.0)))
+    contacts = find_contacts(model, points, 5.0)
+    assert held(contacts, 1) == set()
+    assert held(contacts, 0) == {(k, 1, 2) for k in range(4)}  # the top corners too, at 1 mm
