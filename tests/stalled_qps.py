@@ -2,7 +2,10 @@
 
 Each fixture in ``tests/fixtures/stalled/`` holds one step QP of the velocity formulation
 (dt 0.01 s, tol ``default``), rebuilt from the state before the step a solver failed on
-(``tests/fixtures/stalled/make_fixtures.py`` writes them; its README says how).  Sparse
+(``tests/fixtures/stalled/make_fixtures.py`` writes them; its README says how).  The saved
+QPs keep the contact rows of the search at the time (each corner held by the edge of its
+largest signed distance); :func:`rebuilt_step_qp` builds the same state's QP with the
+current search.  Sparse
 matrices are stored as CSR ``data``/``indices``/``indptr``/``shape``; the contacts' index
 arrays and distances, and the state (corner positions and velocities), are kept beside
 them so that the rows can be traced back to bodies.
@@ -17,9 +20,10 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from wuerfel_cvx import Scene
 from wuerfel_cvx.contacts import Contacts
-from wuerfel_cvx.formulations import StepQP, declare_qp
-from wuerfel_cvx.model import State
+from wuerfel_cvx.formulations import StepQP, declare_qp, get_formulation, step_qp
+from wuerfel_cvx.model import Model, State
 
 STALLED_DIR = Path(__file__).resolve().parent / "fixtures" / "stalled"
 
@@ -86,6 +90,13 @@ def load_step_qp(path: Path) -> tuple[StepQP, State]:
         qp = declare_qp(arrays["weights"], arrays["target"], _csr(arrays, "eq"),
                         arrays["eq_rhs"], _csr(arrays, "ineq"), arrays["ineq_rhs"], contacts)
         return qp, State(arrays["points"], arrays["velocities"])
+
+
+def rebuilt_step_qp(case: StalledCase) -> tuple[StepQP, State]:
+    """The QP of the fixture's state as the velocity formulation builds it now."""
+    _, state = load_step_qp(case.path)
+    model = Model.from_scene(Scene.named(case.scene))
+    return step_qp(get_formulation("velocity"), model, state, DT), state
 
 
 def rigid_basis(state: State) -> np.ndarray:

@@ -1,7 +1,8 @@
 """The batched contact search and row assembly equal the per-pair versions they replaced.
 
 The old implementations are kept below verbatim as oracles (from ``contacts.py``,
-``formulations/rows.py`` and ``formulations/qp.py`` before vectorisation).  The new
+``formulations/rows.py`` and ``formulations/qp.py`` before vectorisation), except that the
+contact search's oracle applies the current per-pair manifold rule one pair at a time.  The new
 ones must return the same contacts in the same order with bit-identical distances,
 and the same sparse matrices, so that trajectories stay bit-for-bit comparable.
 """
@@ -16,11 +17,12 @@ import pytest
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from manifold_oracle import manifold_rows
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx import contacts as new_contacts
 from wuerfel_cvx import formulations as formulations_package
 from wuerfel_cvx import simulation as simulation_module
-from wuerfel_cvx.contacts import TIE_TOLERANCE, Contacts
+from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations import get_formulation, step_qp
 from wuerfel_cvx.formulations import qp as new_qp
 from wuerfel_cvx.formulations import rows as new_rows
@@ -34,7 +36,7 @@ from wuerfel_cvx.formulations.rows import (
     unknown_index,
 )
 from wuerfel_cvx.formulations.velocity import VelocityFormulation
-from wuerfel_cvx.geometry import FloatArray, edge_distances, side_gradients, square_corners
+from wuerfel_cvx.geometry import FloatArray, side_gradients, square_corners
 from wuerfel_cvx.metrics import deepest_penetration
 from wuerfel_cvx.model import IntArray, Model, State
 from wuerfel_cvx.scene import Square, Table
@@ -80,40 +82,19 @@ def find_contacts(
 ) -> Contacts:
     """Point-edge contacts whose signed distance is at most ``margin`` (m).
 
-    ``margin`` is a scalar or one value per body ``(n_bodies,)``; a pair uses the sum
-    of its two bodies' values.  Returns one row per point that is within reach of a
-    foreign body, with the edge chosen by the rule in the module docstring.
+    The broad phase above, then the manifold rule pair by pair (``manifold_oracle``): the
+    batched search replaced a per-pair loop, and its rule later replaced the per-corner
+    largest-distance edge; this oracle follows the current rule in the old loop form.
     """
     all_points = model.all_points(points)
     reach = np.broadcast_to(np.asarray(margin, dtype=np.float64), (model.n_bodies,))
     pairs = body_pairs(model, all_points, reach)
-    if len(pairs) == 0:
+    rows = manifold_rows(all_points.reshape(-1, 4, 2), model.n_boxes, pairs, reach)
+    if not rows:
         return Contacts.empty()
-    corners = all_points.reshape(-1, 4, 2)
-    edge_body, point_body = pairs[:, 0], pairs[:, 1]
-    # distances[p, k, e]: point k of the point body against edge e of the edge body.
-    distances = np.stack([
-        edge_distances(corners[b], corners[w]) for w, b in zip(edge_body, point_body, strict=True)
-    ])
-    separation = distances.min(axis=1)  # (P, 4): the pair's separation along each edge normal
-    best = distances.max(axis=2, keepdims=True)
-    tied = distances >= best - TIE_TOLERANCE
-    score = np.where(tied, separation[:, None, :], -np.inf)
-    edge = np.argmax(score, axis=2)  # (P, 4)
-    chosen = np.take_along_axis(distances, edge[:, :, None], axis=2)[:, :, 0]
-    pair_margin = reach[edge_body] + reach[point_body]
-    keep = chosen <= pair_margin[:, None]
-    pair_index, corner = np.nonzero(keep)
-    edge_index = edge[pair_index, corner]
-    w = edge_body[pair_index]
-    return Contacts(
-        point=4 * point_body[pair_index] + corner,
-        edge_i=4 * w + (edge_index + 1) % 4,
-        edge_j=4 * w + edge_index,
-        point_body=point_body[pair_index],
-        edge_body=w,
-        distance=chosen[pair_index, corner],
-    )
+    columns = list(zip(*rows, strict=True))
+    return Contacts(*(np.array(column, dtype=np.int64) for column in columns[:5]),
+                    distance=np.array(columns[5], dtype=np.float64))
 
 
 def side_blocks(all_points: FloatArray, contacts: Contacts,

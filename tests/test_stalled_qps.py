@@ -5,6 +5,9 @@ explain the stalls and stay true whatever the solvers do: each QP is solvable (a
 solver verifies a solution at tol ``high``), its largest multiplier sits on one of two
 point-edge rows that push the same relative motion of two boxes in opposite senses, and
 in the settled rain-50 pile the touching face-to-face rows are linearly dependent.
+
+The same states' QPs built with the current contact search (one normal per body pair) have
+no opposed rows, and OSQP, PIQP and CLARABEL each verify a solution at tol ``default``.
 """
 
 from __future__ import annotations
@@ -14,7 +17,15 @@ import pytest
 import scipy.optimize as opt
 import scipy.sparse as sp
 
-from stalled_qps import STALLED_CASES, StalledCase, load_step_qp, opposed_pairs, rigid_basis
+from stalled_qps import (
+    DT,
+    STALLED_CASES,
+    StalledCase,
+    load_step_qp,
+    opposed_pairs,
+    rebuilt_step_qp,
+    rigid_basis,
+)
 from wuerfel_cvx.solve import solve_step_qp
 
 pytestmark = pytest.mark.integration
@@ -106,3 +117,50 @@ def test_settled_pile_has_dependent_face_rows() -> None:
     assert touching.size - rank >= 30
     assert values[rank - 1] > 1e-7 * values[0]  # a clear gap: the rank is not a threshold
     assert values[rank] < 1e-12 * values[0]
+
+
+def momentum_scale(qp_weights: np.ndarray, velocities: np.ndarray) -> float:
+    """``sum m (|v| + g dt)`` over the corners (kg m/s).
+
+    The bodies' momentum and one step's weight impulse: the scale of the impulses that stop
+    and carry them.
+    """
+    masses = qp_weights.reshape(-1, 2)[:, 0]
+    return float(np.sum(masses * (np.linalg.norm(velocities, axis=1) + DT * 9.81)))
+
+
+@pytest.mark.parametrize("case", STALLED_CASES, ids=IDS)
+def test_rebuilt_qp_has_no_opposed_rows(case: StalledCase) -> None:
+    """The search now holds each pair along one normal: no anti-parallel rigid rows."""
+    qp, state = rebuilt_step_qp(case)
+    assert qp.n_inequalities > 0
+    assert opposed_pairs(qp, state).size == 0
+    saved, _ = load_step_qp(case.path)
+    assert opposed_pairs(saved, state).size > 0  # the old rows of the same state
+
+
+@pytest.mark.parametrize("solver", ["OSQP", "PIQP", "CLARABEL"])
+@pytest.mark.parametrize("case", STALLED_CASES, ids=IDS)
+def test_rebuilt_qp_is_solved_and_verified_by_every_solver(case: StalledCase,
+                                                            solver: str) -> None:
+    qp, _ = rebuilt_step_qp(case)
+    solution = solve_step_qp(qp, solver, "default")
+    assert solution.status == "optimal"
+    assert solution.verified, solution.residuals
+
+
+@pytest.mark.parametrize("case", STALLED_CASES, ids=IDS)
+def test_rebuilt_impulses_stay_within_the_momentum_scale(case: StalledCase) -> None:
+    """The largest multiplier is below the bodies' momentum scale; the old rows' exceeds it.
+
+    Two opposed rows can carry any impulse whose difference does the work; rows along one
+    normal per pair only carry what stops and supports the bodies.
+    """
+    qp, state = rebuilt_step_qp(case)
+    scale = momentum_scale(qp.weights, state.velocities)
+    rebuilt = solve_step_qp(qp, "CLARABEL", "high")
+    assert rebuilt.verified
+    assert rebuilt.ineq_dual.max() < scale
+    saved, _ = load_step_qp(case.path)
+    old = solve_step_qp(saved, case.reference, "high")
+    assert old.ineq_dual.max() > scale

@@ -1,25 +1,49 @@
-"""Finding point-versus-edge contacts: a broad phase and the edge rule.
+"""Finding point-versus-edge contacts: a broad phase and a per-pair contact manifold.
 
 Broad phase
     A :class:`scipy.spatial.cKDTree` on square centres keeps square pairs whose
     bounding circles come within the margin; squares against tables are checked
     directly (there are few tables).  Only those pairs are examined further.
 
-Edge rule
-    The seed (section 2.3) assigns each foreign point to one edge of a square by the
-    angular sector it lies in, seen from the square's centre.  For a square the
-    sectors are bounded by its diagonals, which is exactly the set of points whose
-    *largest signed distance* to the 4 edge lines belongs to that edge; we use that
-    form because it carries over to rectangular tables and lets ties be broken.  A
-    tie (a point exactly at an edge's end, as in an aligned stack) goes to the edge
-    that best separates the whole pair (the separating-axis choice), so a corner
-    resting on a corner is held by the face it rests on.
+Manifold rule (one contact normal per body pair, as Box2D's polygon manifolds)
+    For each unordered pair of bodies {A, B} (squares and tables) the *reference face*
+    is the face, of either body, along whose outward normal the pair is best separated:
+    the largest *separation*, the smallest signed distance of the other body's corners
+    from the face's line (the separating-axis test).  Separations within
+    :data:`TIE_TOLERANCE` tie (an aligned stack); a tie goes to the longer face, then to
+    the lower-numbered body (a table is numbered after every square).  The longer face
+    holds a small body resting on a large one by its own corners, and no row reaches far
+    past the end of a short face.  The other body's *incident face* is its
+    face whose normal is most anti-parallel to the reference normal.  Then
+
+    * each corner of the other body is held by the reference face, and
+    * each of the reference face's own two corners is held by the incident face,
+
+    if the corner is within the search margin of the face's line and within the face's
+    extent: its projection on the line is within :data:`TIE_TOLERANCE` of the face (so
+    that corners exactly at a face's end, as in an aligned stack, are kept), or, for a
+    corner outside the line and beyond an end by at most the face's length, its distance
+    from the face (the segment) is within the search margin: it may reach the face
+    within the step, as when two corners approach each other.  (Farther out the line no
+    longer stands for the face: its rotation would move the corner more than twice as
+    much as the face.)  All rows of a pair then push the two bodies apart
+    within 45 degrees of the reference normal (the incident face of a rectangle is at
+    most that far off it): no two rows of a pair hold the same relative sliding in
+    opposite senses.  Each row is still a point against an edge's line, so the
+    formulations' rows are unchanged.
+
+    A corner inside the other body of a pair always lies within the face's extent, so
+    it has a row unless it is a corner of the reference body off the reference face; a
+    corner behind a face's line but beyond the face's end has none.  A row's distance is
+    measured along the pair's normal, which can be deeper than the distance to the
+    nearest face of the other body.
 
 Batching
     There is no loop over pairs in Python: the broad phase yields an array of
-    ordered (edge body, point body) pairs, and one array ``(4 corners, 4 edges,
-    pairs)`` of signed distances carries the edge rule and the margin test for all
-    of them at once.  Contacts come out ordered by pair, then by corner.
+    ordered (edge body, point body) pairs (each unordered pair twice, the second half
+    reversed), and one array ``(4 corners, 4 edges, pairs)`` of signed distances carries
+    the manifold rule and the margin test for all of them at once.  Contacts come out
+    ordered by ordered pair, then by corner.
 """
 
 from __future__ import annotations
@@ -27,12 +51,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from .geometry import FloatArray
 from .model import IntArray, Model
 
-#: Two edge distances closer than this (m) count as a tie at a corner.
+#: Lengths closer than this (m) count as equal: two faces' separations (a tie between the
+#: bodies goes to the longer face), and a corner's place along a face's line and the
+#: face's end (a corner this close to the end is on the face).
 TIE_TOLERANCE = 1e-9
 
 
@@ -63,10 +90,11 @@ class Contacts:
         return cls(none, none, none, none, none, np.zeros(0))
 
     def deepest_penetration(self) -> float:
-        """Depth (m) of the deepest point inside a foreign body; 0 if none is inside.
+        """Depth (m) of the deepest held point behind its edge's line; 0 if none is.
 
-        The same for any search margin >= 0: a point inside (distance < 0) is within every
-        such margin, with the same chosen edge and distance.
+        The depth is along the point's pair normal (the module docstring).  The same for
+        any search margin >= 0: the chosen edges do not depend on the margin, and a point
+        behind its edge (distance < 0) is within every such margin.
         """
         if len(self) == 0:
             return 0.0
@@ -157,19 +185,78 @@ def pair_distances(corners: FloatArray, edge_body: IntArray, point_body: IntArra
     return np.asarray(area / of_edges(length), dtype=np.float64)
 
 
-def choose_edges(distances: FloatArray) -> IntArray:
-    """Edge index ``(4, P)`` for each corner of each pair by the edge rule.
+def face_normals(corners: FloatArray) -> FloatArray:
+    """Unit outward normals ``(n_bodies, 4, 2)`` of faces ``e`` (corner ``e`` to ``e + 1``).
 
-    ``distances`` ``(4 corners, 4 edges, P)`` (m) as from :func:`pair_distances`.  The
-    edge with the largest signed distance wins; edges within :data:`TIE_TOLERANCE` of
-    it tie, and a tie goes to the edge along whose normal the whole pair is best
-    separated (the first such edge if that too is a tie).
+    ``corners`` ``(n_bodies, 4, 2)`` (m), counter-clockwise; the normal of a
+    counter-clockwise edge ``d`` is ``(d_y, -d_x) / |d|``.
+    """
+    edge = np.roll(corners, -1, axis=1) - corners
+    normal = np.stack([edge[..., 1], -edge[..., 0]], axis=-1)
+    return np.asarray(normal / _lengths(edge)[..., None], dtype=np.float64)
+
+
+def reference_sides(distances: FloatArray, face_length: FloatArray
+                    ) -> tuple[IntArray, NDArray[np.bool_]]:
+    """Each ordered pair's best face and whether its edge body holds the reference face.
+
+    ``distances`` ``(4 corners, 4 edges, P)`` (m) as from :func:`pair_distances`, for the
+    pairs of :func:`body_pairs` (the second half the first half reversed);
+    ``face_length`` ``(4 edges, P)`` (m) the edge body's face lengths.  Returns
+    ``best_face`` ``(P,)``, the edge body's face with the largest separation from the
+    point body, and ``is_reference`` ``(P,)``, true for exactly one of each pair's two
+    orders: the one with the larger separation, or, within :data:`TIE_TOLERANCE`, the one
+    with the longer best face (the first half's on equal lengths).
     """
     separation = distances.min(axis=0)  # (4 edges, P): the pair's separation along each normal
-    best = distances.max(axis=1)  # (4 corners, P)
-    tied = distances >= (best - TIE_TOLERANCE)[:, None, :]
-    score = np.where(tied, separation[None, :, :], -np.inf)
-    return np.asarray(np.argmax(score, axis=1), dtype=np.int64)
+    best_face = np.asarray(np.argmax(separation, axis=0), dtype=np.int64)
+    best = separation.max(axis=0)
+    length = np.take_along_axis(face_length, best_face[None, :], axis=0)[0]
+    half = best.shape[0] // 2
+    tie = np.abs(best[:half] - best[half:]) <= TIE_TOLERANCE
+    first_holds = np.where(tie, length[:half] >= length[half:], best[:half] > best[half:])
+    return best_face, np.concatenate([first_holds, ~first_holds])
+
+
+def choose_edges(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
+                 distances: FloatArray, pair_margin: FloatArray
+                 ) -> tuple[IntArray, NDArray[np.bool_]]:
+    """Edge index and whether it holds, ``(4, P)``, for each corner of each pair.
+
+    ``corners`` ``(n_bodies, 4, 2)`` (m); ``edge_body``, ``point_body`` ``(P,)`` and
+    ``distances`` ``(4 corners, 4 edges, P)`` as for :func:`reference_sides`;
+    ``pair_margin`` ``(P,)`` (m) the pairs' search margins.  In an order whose edge body
+    holds the reference face, every corner of the point body is offered that face; in
+    the other order, only the reference face's two corners are, to the edge body's
+    incident face.  An offered corner is held if it is within the margin and within the
+    face's extent (module docstring).
+    """
+    n_pairs = edge_body.shape[0]
+    half = n_pairs // 2
+    lengths = _lengths(np.roll(corners, -1, axis=1) - corners)  # (n_bodies, 4) face lengths
+    best_face, is_reference = reference_sides(distances, lengths.T.take(edge_body, axis=1))
+    partner = np.concatenate([np.arange(half, n_pairs), np.arange(half)])
+    reference_face = best_face[partner]  # the point body's face, where it is the reference
+    normals = face_normals(corners)
+    reference_normal = normals[point_body, reference_face]  # (P, 2)
+    facing = np.einsum("pfi,pi->fp", normals[edge_body], reference_normal)  # (4 faces, P)
+    incident = np.asarray(np.argmin(facing, axis=0), dtype=np.int64)
+    face = np.where(is_reference, best_face, incident)  # (P,)
+    corner = np.arange(4)[:, None]
+    offered = is_reference[None, :] | (corner == reference_face[None, :]) | (
+        corner == (reference_face[None, :] + 1) % 4)
+    start = corners[edge_body, face]  # (P, 2)
+    along = corners[edge_body, (face + 1) % 4] - start
+    length = _lengths(along)
+    offset = corners[point_body].transpose(1, 0, 2) - start[None, :, :]  # (4, P, 2)
+    place = (offset[..., 0] * along[:, 0] + offset[..., 1] * along[:, 1]) / length  # (4, P)
+    edge = np.broadcast_to(face, (4, n_pairs)).copy()
+    distance = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]
+    beyond = np.maximum(-place, place - length)  # (4, P) m past the nearer end; < 0 within
+    within = beyond <= TIE_TOLERANCE
+    near_end = ((distance > 0.0) & (beyond <= length)
+                & (np.hypot(beyond, distance) <= pair_margin[None, :]))
+    return edge, offered & (within | near_end) & (distance <= pair_margin[None, :])
 
 
 def find_contacts(
@@ -193,11 +280,12 @@ def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
     if len(pairs) == 0:
         return Contacts.empty()
     edge_body, point_body = pairs[:, 0], pairs[:, 1]
-    distances = pair_distances(all_points.reshape(-1, 4, 2), edge_body, point_body)
-    edge = choose_edges(distances)  # (4 corners, P)
-    chosen = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]
+    corners = all_points.reshape(-1, 4, 2)
+    distances = pair_distances(corners, edge_body, point_body)
     pair_margin = reach[edge_body] + reach[point_body]
-    pair_index, corner = np.nonzero((chosen <= pair_margin).T)  # pair-major order
+    edge, keep = choose_edges(corners, edge_body, point_body, distances, pair_margin)
+    chosen = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]  # (4 corners, P)
+    pair_index, corner = np.nonzero(keep.T)  # pair-major order
     edge_index = edge[corner, pair_index]
     w = edge_body[pair_index]
     return Contacts(

@@ -101,12 +101,12 @@ KNOWN_LIMITS = (
     "unit square at 1e6 m/s over a table, a 1000 m square spinning at 1000 rad/s); OSQP "
     "solves those steps, so `--fallback OSQP` completes such runs.",
     "A fallback is not tried on NaN data ('invalid_data'): the same data fails every solver.",
-    "Found by the property checks and not fixed: where corners of two squares overlap by "
-    "1e-9 to 4e-7 m, the edge rule can pair them with faces whose push-outs nearly "
-    "contradict each other, and Baumgarte's push-out adds 4e-5 to 2e-3 J per step while the "
-    "overlap decays (1 of 800 generated scenes outside this run, 1 of 110 hypothesis "
-    "examples).  Both scenes are pinned, energy being the only invariant they break: "
-    "tests/test_properties.py::test_known_energy_leak_at_overlapping_corners.",
+    "Found by the property checks and fixed by the per-pair contact rule: where corners of "
+    "two squares overlap by 1e-9 to 4e-7 m, the per-corner edge rule paired them with faces "
+    "whose push-outs nearly contradicted each other, and Baumgarte's push-out added 4e-5 to "
+    "2e-3 J per step (1 of 800 generated scenes, 1 of 110 hypothesis examples).  Both "
+    "scenes now pass every check: "
+    "tests/test_properties.py::test_no_energy_leak_at_overlapping_corners.",
 )
 
 
