@@ -76,7 +76,7 @@ class VelocityFormulation:
     """Where contact gaps are linearised (see the module docstring)."""
     push_speed: float = 1.0
     """Closest-approach rows: largest speed (m/s) at which a penetration is pushed out."""
-    max_passes: int = 4
+    max_passes: int = 6
     """Closest-approach rows: most QPs (Gauss-Newton passes) per step."""
     gap_tolerance: float = 1e-6
     """Closest-approach rows: a pass is accepted once no contact's gap falls below its
