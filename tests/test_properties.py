@@ -83,9 +83,12 @@ def test_generated_scenes_keep_the_invariants(draws: list[SquareDraw]) -> None:
 
 
 @pytest.mark.parametrize("name", ["overlap-recovery", "fast-drop", "wall-contact",
-                                  "heavy-on-light-100", "corner-drop"])
+                                  "heavy-on-light-100", "corner-drop", "spinning-pile",
+                                  "corner-overlap", "corner-overlap-wedged"])
 def test_hard_library_scenes_keep_the_invariants(name: str) -> None:
-    # overlap-recovery starts 25 % overlapped: its penetration bound starts at that depth
+    # overlap-recovery starts 25 % overlapped: its penetration bound starts at that depth.
+    # spinning-pile: 20 squares spinning at 8 to 15 rad/s fall into a box; each step's
+    # depth stays within max(0, depth before - dt push_speed) + gap_tolerance
 
     assert check_scene(Scene.named(name), steps=STEPS, dt=DT) == []
 
