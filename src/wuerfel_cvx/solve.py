@@ -27,6 +27,7 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
+from .backends import native_backend
 from .compiled import COMPILED, DECLARED, DIRECT, CompiledQPCache, structure_key
 from .errors import StepFailure
 from .formulations.qp import DeclaredQP, StepQP
@@ -177,7 +178,15 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
 
 def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
            cache: CompiledQPCache | None) -> _Answer:
-    """Solve on the direct path if the cache has one for ``qp``, else through cvxpy."""
+    """Solve on the direct path if the cache has one for ``qp``, else through cvxpy.
+
+    A solver with a native backend (:attr:`~wuerfel_cvx.solvers.SolverSpec.native`) is
+    always called on it, with or without a cache.
+    """
+    if spec.native is not None:
+        raw = native_backend(spec.native).solve(qp, options)
+        return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
+                       raw.iterations, DIRECT, raw.native_time)
     if cache is None:
         declared, path = qp.declared(), DECLARED
     else:

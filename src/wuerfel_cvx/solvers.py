@@ -83,6 +83,9 @@ class SolverSpec:
     """Module of :mod:`wuerfel_cvx.backends` with its direct path (``None``: none)."""
     timing: Timing = field(default_factory=Timing)
     """How its own time is read."""
+    native: str | None = None
+    """Module of :mod:`wuerfel_cvx.backends` whose ``solve(qp, options)`` solves every step
+    QP from its own numbers, on every path, without cvxpy (``None``: through cvxpy)."""
 
     def version(self) -> str:
         """Installed version of :attr:`package` (``"not installed"``, ``"unknown"``)."""
@@ -104,12 +107,15 @@ SOLVERS: dict[str, SolverSpec] = {
             "eps_abs": eps, "eps_rel": eps, "max_iter": 250, "compute_timings": True},
             "proximal interior-point", "piqp", ("#2ca02c", "^"), "piqp",
             Timing(note="its run_time includes the data update on the direct path")),
-        # cvxpy (1.9) runs PROXQP's dense backend; its sparse one fails there with a
-        # TypeError (cvxpy passes a box flag the sparse constructor does not take).
+        # Called natively (backends/proxqp.py, sparse backend): cvxpy (1.9) drops the
+        # infeasibility tolerances, whose default 1e-4 let PROXQP certify feasible QPs
+        # infeasible.  They are held to the step's own eps.
         SolverSpec("PROXQP", "PROXQP", lambda eps: {
-            "eps_abs": eps, "eps_rel": 0.0, "max_iter": 10_000},
-            "proximal augmented Lagrangian (dense backend)", "proxsuite", ("#d62728", "D"),
-            timing=Timing(note="cvxpy reports 0.0 s for it: its time is unknown")),
+            "eps_abs": eps, "eps_rel": 0.0, "max_iter": 10_000,
+            "eps_primal_inf": eps, "eps_dual_inf": eps},
+            "proximal augmented Lagrangian (sparse backend)", "proxsuite", ("#d62728", "D"),
+            native="proxqp",
+            timing=Timing(note="its run_time includes its setup (a fresh solver per QP)")),
         SolverSpec("SCS", "SCS", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, "max_iters": 200_000}, "ADMM (conic)", "scs",
             ("#9467bd", "v")),
