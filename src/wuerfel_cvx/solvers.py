@@ -18,12 +18,21 @@ from functools import cache
 from typing import Any
 
 import cvxpy as cp
+import numpy as np
 
 from .errors import InputError
 from .versions import package_version
 
 TOLERANCE_PRESETS: dict[str, float] = {"low": 1e-4, "default": 1e-7, "high": 1e-9}
 """Solver tolerance ``eps`` per preset (absolute and relative, in the QP's scaled units)."""
+
+
+CERTIFICATE_TOLERANCE = float(np.finfo(np.float64).eps)
+"""PROXQP's ``eps_primal_inf`` and ``eps_dual_inf``: a certificate of infeasibility must
+hold to round-off, whatever the tolerance of the solve.  At any looser value measured (the
+step's ``eps``, and 1e-4 to 1e-13) proxsuite 0.8 certified strictly feasible step QPs
+infeasible (``docs/false-infeasible.md``); at this one it still certifies a truly
+infeasible one."""
 
 
 @cache
@@ -107,13 +116,12 @@ SOLVERS: dict[str, SolverSpec] = {
             "eps_abs": eps, "eps_rel": eps, "max_iter": 250, "compute_timings": True},
             "proximal interior-point", "piqp", ("#2ca02c", "^"), "piqp",
             Timing(note="its run_time includes the data update on the direct path")),
-        # Called natively (backends/proxqp.py, sparse backend): cvxpy (1.9) drops the
-        # infeasibility tolerances, whose default 1e-4 let PROXQP certify feasible QPs
-        # infeasible.  They are held to the step's own eps.
+        # Called natively (backends/proxqp.py): cvxpy (1.9) drops the infeasibility
+        # tolerances, whose default 1e-4 let PROXQP certify feasible QPs infeasible.
         SolverSpec("PROXQP", "PROXQP", lambda eps: {
             "eps_abs": eps, "eps_rel": 0.0, "max_iter": 10_000,
-            "eps_primal_inf": eps, "eps_dual_inf": eps},
-            "proximal augmented Lagrangian (sparse backend)", "proxsuite", ("#d62728", "D"),
+            "eps_primal_inf": CERTIFICATE_TOLERANCE, "eps_dual_inf": CERTIFICATE_TOLERANCE},
+            "proximal augmented Lagrangian (dense backend)", "proxsuite", ("#d62728", "D"),
             native="proxqp",
             timing=Timing(note="its run_time includes its setup (a fresh solver per QP)")),
         SolverSpec("SCS", "SCS", lambda eps: {

@@ -5,8 +5,9 @@ others silently, among them ``eps_primal_inf`` and ``eps_dual_inf``: the toleran
 proxsuite's infeasibility certificates, which default to 1e-4 whatever ``eps_abs`` is.
 This backend therefore does not go through cvxpy at all, on the first QP of a structure,
 on compiled structures and with ``compiled=False`` alike
-(:attr:`~wuerfel_cvx.solvers.SolverSpec.native`).  It hands proxsuite's sparse backend the
-QP in proxsuite's form ``min x' H x / 2 + g' x``, ``A x = b``, ``l <= C x <= u`` with
+(:attr:`~wuerfel_cvx.solvers.SolverSpec.native`); the registry sets the certificates'
+tolerances (:data:`~wuerfel_cvx.solvers.CERTIFICATE_TOLERANCE`).  It hands proxsuite's dense
+backend the QP in proxsuite's form ``min x' H x / 2 + g' x``, ``A x = b``, ``l <= C x <= u`` with
 
     H = 2 W + 2 F' F,   g = -H t,   A = E,   b = e,
 
@@ -20,10 +21,14 @@ would not enter it).  proxsuite's Lagrangian is ``H x + g + A' y + C' z = 0``; s
 the package's, and the package's ``z = z_lower - z_upper`` (:mod:`wuerfel_cvx.formulations.qp`)
 is ``z`` on a negated row and ``-z`` on a two-sided one.
 
-The sparse backend is used, not the dense one cvxpy picks: the dense AVX-512 build's
-round-off depends on where its arrays lie in memory, so its answers differ between
-processes (``docs/false-infeasible.md``); the sparse one gives the same bits in every
-process.  A fresh solver is set up for every QP, so every path gives the same answer.
+The dense backend is used, as cvxpy uses it.  The sparse one (its default Cholesky
+backend) did not return on a step QP of ``stack-10`` that the dense one solves in 4
+iterations, whatever the iteration limits; its matrix-free backend was 40 to 70 times
+slower and did not return on another.  The dense AVX-512 build's round-off depends on where
+its arrays lie in memory, so its answers can differ in the last bits between processes and
+between calls (``docs/false-infeasible.md``); that is proxsuite's, and aligning the inputs
+does not remove it (the solver's own buffers count too).  A fresh solver is set up for
+every QP.
 """
 
 from __future__ import annotations
@@ -46,8 +51,9 @@ MICROSECOND = 1e-6
 def proxsuite_form(qp: StepQP) -> tuple[dict[str, Any], FloatArray]:
     """``qp`` as proxsuite's ``H, g, A, b, C, l, u``, and the sign that maps its ``z`` to ours.
 
-    Sparse CSC matrices, ``None`` for an empty block.  ``C``'s row ``i`` is ``-G_i`` (sign
-    ``+1``) for a one-sided row and ``G_i`` (sign ``-1``) for one with a finite upper bound.
+    Dense matrices (the dense backend's input), ``None`` for an empty block.  ``C``'s row
+    ``i`` is ``-G_i`` (sign ``+1``) for a one-sided row and ``G_i`` (sign ``-1``) for one
+    with a finite upper bound.
     """
     hessian = sp.diags_array(2.0 * qp.weights, format="csc")
     if qp.cost_factor is not None and qp.n_cost_rows:
@@ -61,30 +67,30 @@ def proxsuite_form(qp: StepQP) -> tuple[dict[str, Any], FloatArray]:
         assert qp.ineq_upper is not None
         upper[qp.upper_rows] = qp.ineq_upper[qp.upper_rows]
     has_eq, has_ineq = qp.n_equalities > 0, qp.n_inequalities > 0
-    form = {"H": sp.csc_matrix(hessian), "g": -(hessian @ qp.target),
-            "A": sp.csc_matrix(qp.eq_matrix) if has_eq else None,
+    form = {"H": hessian.toarray(), "g": -(hessian @ qp.target),
+            "A": qp.eq_matrix.toarray() if has_eq else None,
             "b": qp.eq_rhs if has_eq else None,
-            "C": sp.csc_matrix(sp.diags_array(-sign) @ qp.ineq_matrix) if has_ineq else None,
+            "C": (sp.diags_array(-sign) @ qp.ineq_matrix).toarray() if has_ineq else None,
             "l": lower if has_ineq else None, "u": upper if has_ineq else None}
     return form, sign
 
 
 def solve(qp: StepQP, options: dict[str, Any]) -> DirectResult:
-    """Solve ``qp`` with proxsuite's sparse backend and ``options`` (proxsuite settings).
+    """Solve ``qp`` with proxsuite's dense backend and ``options`` (proxsuite settings).
 
     Every option is one of proxsuite's settings, set by name; an unknown name raises
     ``AttributeError`` (a failed step), so that no setting is dropped silently.
     """
     import proxsuite  # type: ignore[import-untyped]  # an optional solver, no stubs
 
-    solver = proxsuite.proxqp.sparse.QP(qp.n_variables, qp.n_equalities, qp.n_inequalities)
+    solver = proxsuite.proxqp.dense.QP(qp.n_variables, qp.n_equalities, qp.n_inequalities)
     settings = solver.settings
     for name, value in {**options, "verbose": False, "compute_timings": True}.items():
         if not hasattr(settings, name):
             raise AttributeError(f"proxsuite has no setting '{name}'")
         setattr(settings, name, value)
-    started = time.perf_counter()
     form, sign = proxsuite_form(qp)
+    started = time.perf_counter()
     solver.init(**form)
     solver.solve()
     native_time = time.perf_counter() - started
