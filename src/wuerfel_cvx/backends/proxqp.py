@@ -23,8 +23,8 @@ is ``z`` on a negated row and ``-z`` on a two-sided one.
 
 The dense backend is used, as cvxpy uses it.  The sparse one (its default Cholesky
 backend) did not return on a step QP of ``stack-10`` that the dense one solves in 4
-iterations, whatever the iteration limits; its matrix-free backend was 40 to 70 times
-slower and did not return on another.  The dense AVX-512 build's round-off depends on where
+iterations, with any of the iteration limits tried; its matrix-free backend was 13 to 44
+times slower and did not return on another.  The dense AVX-512 build's round-off depends on where
 its arrays lie in memory, so its answers can differ in the last bits between processes and
 between calls (``docs/false-infeasible.md``); that is proxsuite's, and aligning the inputs
 does not remove it (the solver's own buffers count too).  A fresh solver is set up for
