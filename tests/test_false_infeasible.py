@@ -1,31 +1,45 @@
 """The step QPs on which PROXQP and CLARABEL reported ``infeasible`` are feasible.
 
 The QPs are saved in ``tests/fixtures/false-infeasible/`` (see its README and
-``docs/false-infeasible.md``).  These tests assert only facts about the saved data that
-no solver fix can change: HiGHS finds a strictly feasible point, and a solver other than
-the one that failed solves each QP with residuals that the package's own KKT check
-verifies.  They never assert that a solver fails.
+``docs/false-infeasible.md``).  Facts about the saved data that no solver fix can change:
+HiGHS finds a strictly feasible point, and a solver other than the one that failed solves
+each QP with residuals that the package's own KKT check verifies.  Then the project's
+fixes: CLARABEL solves the extreme cases in scaled units (:mod:`wuerfel_cvx.scaling`) and
+PROXQP, called natively (:mod:`wuerfel_cvx.backends.proxqp`), solves the stack, on every
+solve path, verified.  No test asserts that a solver fails.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import cvxpy as cp
 import numpy as np
 import pytest
 import scipy.sparse as sp
 from scipy.optimize import linprog
 
+from wuerfel_cvx import simulate
+from wuerfel_cvx.compiled import CompiledQPCache
 from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations import StepQP, declare_qp
-from wuerfel_cvx.solve import VERIFY_FACTOR, kkt_residuals, solve_step_qp
-from wuerfel_cvx.solvers import TOLERANCE_PRESETS
+from wuerfel_cvx.geometry import FloatArray
+from wuerfel_cvx.scaling import unknowns_scale
+from wuerfel_cvx.solve import VERIFY_FACTOR, StepSolution, kkt_residuals, solve_step_qp
+from wuerfel_cvx.solvers import TOLERANCE_PRESETS, available_solvers
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, pytest.mark.filterwarnings(  # cvxpy reading its own
+    "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")]  # sparse parameters
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures" / "false-infeasible"
-CASES = ("proxqp-stack-10", "clarabel-fast-square", "clarabel-big-spin",
-         "clarabel-domino-spin")
+CLARABEL_CASES = ("clarabel-fast-square", "clarabel-big-spin", "clarabel-domino-spin")
+PROXQP_CASES = ("proxqp-stack-10", "proxqp-rain-10")
+CASES = (*PROXQP_CASES, *CLARABEL_CASES)
+NEAR_INFEASIBLE = "proxqp-stack-10-near"
+"""A QP on which the native PROXQP backend reports ``infeasible``: feasible, but by less
+than the tolerance (see :func:`test_the_near_case_is_feasible_by_less_than_the_tolerance`)."""
+needs_proxqp = pytest.mark.skipif("PROXQP" not in available_solvers(),
+                                  reason="proxsuite is an extra solver, not a dependency")
 EPS = TOLERANCE_PRESETS["default"]
 
 #: The phase-1 LP caps the common slack of every ``G x >= h`` row at this (m/s): enough
@@ -42,14 +56,11 @@ def saved_qp(name: str) -> StepQP:
                       data["ineq_rhs"], Contacts.empty())
 
 
-@pytest.mark.parametrize("name", CASES)
-def test_saved_qp_is_strictly_feasible(name: str) -> None:
-    """HiGHS (an LP solver, no QP solver involved): max s s.t. E x = e, G x - s >= h.
+def largest_common_slack(qp: StepQP) -> tuple[float, FloatArray]:
+    """HiGHS (an LP solver, no QP solver involved): max s s.t. E x = e, G x - s >= h, s <= cap.
 
-    The optimum reaches the cap: every row can hold with a slack of 1 m/s at once, so
-    the feasible set has an interior and no certificate of infeasibility exists.
+    The optimal ``s`` (m/s) and its ``x``; raises if HiGHS does not solve the LP.
     """
-    qp = saved_qp(name)
     n = qp.n_variables
     objective = np.zeros(n + 1)
     objective[-1] = -1.0  # maximise s
@@ -57,13 +68,34 @@ def test_saved_qp_is_strictly_feasible(name: str) -> None:
     eq = sp.hstack([qp.eq_matrix, sp.csr_array((qp.n_equalities, 1))])
     result = linprog(objective, A_ub=ineq, b_ub=-qp.ineq_rhs, A_eq=eq, b_eq=qp.eq_rhs,
                      bounds=[(None, None)] * n + [(None, MARGIN_CAP)], method="highs")
-    assert result.status == 0
-    assert -result.fun == pytest.approx(MARGIN_CAP)
-    point = result.x[:n]
-    assert np.min(qp.ineq_matrix @ point - qp.ineq_rhs) >= 0.5 * MARGIN_CAP
+    assert result.status == 0, result.message
+    return float(-result.fun), np.asarray(result.x[:n])
 
 
 @pytest.mark.parametrize("name", CASES)
+def test_saved_qp_is_strictly_feasible(name: str) -> None:
+    """HiGHS's largest common slack reaches the cap of 1 m/s.
+
+    Every row can hold with a slack of 1 m/s at once, so the feasible set has an interior
+    and no certificate of infeasibility exists.
+    """
+    qp = saved_qp(name)
+    margin, point = largest_common_slack(qp)
+    assert margin == pytest.approx(MARGIN_CAP)
+    assert np.min(qp.ineq_matrix @ point - qp.ineq_rhs) >= 0.5 * MARGIN_CAP
+
+
+def test_the_near_case_is_feasible_by_less_than_the_tolerance() -> None:
+    """Its rows hold together only with a common slack far below ``eps`` (m/s).
+
+    So the QP is within ``eps`` of an infeasible one: a claim of ``infeasible`` there is
+    within the tolerance, unlike on the strictly feasible cases.
+    """
+    margin, _ = largest_common_slack(saved_qp(NEAR_INFEASIBLE))
+    assert 0.0 < margin < 0.1 * EPS
+
+
+@pytest.mark.parametrize("name", [*CASES, NEAR_INFEASIBLE])
 def test_saved_qp_solves_with_verified_residuals(name: str) -> None:
     """PIQP (neither of the solvers that failed) solves each; the KKT check verifies it."""
     solution = solve_step_qp(saved_qp(name), "PIQP", "default")
@@ -108,3 +140,51 @@ def test_proxqp_solves_the_stack_qp_with_a_primal_infeasibility_tolerance_of_1e_
         residuals = kkt_residuals(qp, np.asarray(results.x), np.asarray(results.y),
                                   np.asarray(results.z))
         assert residuals.worst() <= VERIFY_FACTOR * EPS
+
+
+def on_every_path(name: str, solver: str) -> list[StepSolution]:
+    """``name`` solved afresh, then twice through one cache (compiled, then direct)."""
+    cache = CompiledQPCache(compile_after=1)
+    return [solve_step_qp(saved_qp(name), solver, "default"),
+            *(solve_step_qp(saved_qp(name), solver, "default", cache=cache)
+              for _ in range(2))]
+
+
+@pytest.mark.parametrize("name", CLARABEL_CASES)
+def test_clarabel_solves_the_extreme_cases_in_scaled_units(name: str) -> None:
+    """The data reach 1e6 m/s; solved in units of 512 or 1024 m/s, verified on the original."""
+    assert unknowns_scale(saved_qp(name)) in (512.0, 1024.0)
+    solutions = on_every_path(name, "CLARABEL")
+    assert [solution.path for solution in solutions] == ["declared", "compiled", "direct"]
+    for solution in solutions:
+        assert solution.status == "optimal" and solution.verified, solution.path
+        assert solution.residuals.worst() <= VERIFY_FACTOR * EPS
+
+
+@needs_proxqp
+@pytest.mark.parametrize("name", [*PROXQP_CASES, NEAR_INFEASIBLE])
+def test_proxqp_solves_the_saved_qps_natively_on_every_path(name: str) -> None:
+    """With its certificates held to round-off (and the near case too), verified."""
+    assert unknowns_scale(saved_qp(name)) == 1.0  # ordinary data
+    for solution in on_every_path(name, "PROXQP"):
+        assert solution.path == "direct"
+        assert solution.status == "optimal" and solution.verified
+        assert solution.residuals.worst() <= VERIFY_FACTOR * EPS
+
+
+@needs_proxqp
+def test_proxqp_runs_never_call_cvxpy(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Neither the first QP of a structure nor a run with ``compiled=False`` goes to cvxpy."""
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        raise AssertionError("cvxpy was called")
+
+    monkeypatch.setattr(cp.Problem, "solve", refuse)
+    monkeypatch.setattr(cp.Problem, "get_problem_data", refuse)
+    runs = [simulate("stack-3", dt=0.02, steps=6, solver="PROXQP", compiled=compiled)
+            for compiled in (True, False)]
+    for run in runs:
+        assert run.n_steps == 6 and run.metrics["verified"].all()
+        assert set(run.metrics["path"]) == {"direct"}
+        # at rest, to the tolerance: eps (m/s) times 6 steps of 0.02 s, with round-off
+        np.testing.assert_allclose(run.points[-1], run.points[0], rtol=0, atol=1e-8)

@@ -37,6 +37,10 @@ def test_each_direct_backend_is_a_module_with_a_builder() -> None:
         if spec.backend is not None:
             module = importlib.import_module(f"wuerfel_cvx.backends.{spec.backend}")
             assert callable(module.build)
+        if spec.native is not None:  # a native backend solves a step QP itself
+            module = importlib.import_module(f"wuerfel_cvx.backends.{spec.native}")
+            assert callable(module.solve)
+    assert SOLVERS["PROXQP"].native == "proxqp"
 
 
 def test_timing_rules() -> None:

@@ -27,10 +27,12 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
+from .backends import native_backend
 from .compiled import COMPILED, DECLARED, DIRECT, CompiledQPCache, structure_key
 from .errors import StepFailure
 from .formulations.qp import DeclaredQP, StepQP
 from .geometry import FloatArray
+from .scaling import scaled_qp, unknowns_scale
 from .solvers import SolverSpec, get_solver, tolerance_value
 
 #: A solution is verified when its relative residuals are below this multiple of ``eps``.
@@ -122,6 +124,11 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
                   *, step: int = 0, cache: CompiledQPCache | None = None) -> StepSolution:
     """Solve ``qp`` with ``solver`` at tolerance ``tol`` and verify the result.
 
+    The solver sees ``qp`` in units that keep its data at most
+    :data:`~wuerfel_cvx.scaling.SCALE_LIMIT` in magnitude (:mod:`wuerfel_cvx.scaling`; ``qp``
+    itself for ordinary data); the solution and multipliers are mapped back and checked on
+    ``qp``.
+
     With a ``cache``, a QP whose structure repeats is solved through its compiled,
     parametrised problem (:mod:`wuerfel_cvx.compiled`); without, it is declared afresh.
 
@@ -137,10 +144,11 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     bad_data = _non_finite_data(qp)
     if bad_data:  # no solver is handed NaN or inf (some would panic or return garbage)
         raise StepFailure(step, spec.name, INVALID_DATA, f"non-finite {bad_data}")
+    scale = unknowns_scale(qp)  # 1 (qp as it is) unless its data are large
     started = time.perf_counter()
     try:
         # inside the try: applying a compiled structure's parameters can raise too
-        answer = _solve(qp, spec, options, cache)
+        answer = _solve(scaled_qp(qp, scale), spec, options, cache)
     except cp.error.SolverError as exc:
         raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
     except Exception as exc:  # a solver library raising anything is a failed step
@@ -149,10 +157,12 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     status = answer.status
     if status not in SOLVED or answer.x is None:
         raise StepFailure(step, spec.name, status)
-    x = np.asarray(answer.x, dtype=np.float64)
+    x = scale * np.asarray(answer.x, dtype=np.float64)  # exact: scale is a power of two
     if not np.all(np.isfinite(x)):
         raise StepFailure(step, spec.name, status, "solution has non-finite entries")
-    residuals = kkt_residuals(qp, x, answer.eq_dual, answer.ineq_dual)
+    ineq_dual = scale * np.asarray(answer.ineq_dual, dtype=np.float64)
+    # checked on the original QP, whatever units the solver saw
+    residuals = kkt_residuals(qp, x, scale * answer.eq_dual, ineq_dual)
     verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
     if status == cp.OPTIMAL_INACCURATE and not verified:
         raise StepFailure(step, spec.name, status,
@@ -162,13 +172,21 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
                         solver_time=spec.timing.solver_time(answer.reported_time,
                                                             answer.native_time),
                         iterations=int(answer.iterations),
-                        ineq_dual=np.asarray(answer.ineq_dual, dtype=np.float64),
+                        ineq_dual=ineq_dual,
                         path=answer.path)
 
 
 def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
            cache: CompiledQPCache | None) -> _Answer:
-    """Solve on the direct path if the cache has one for ``qp``, else through cvxpy."""
+    """Solve on the direct path if the cache has one for ``qp``, else through cvxpy.
+
+    A solver with a native backend (:attr:`~wuerfel_cvx.solvers.SolverSpec.native`) is
+    always called on it, with or without a cache.
+    """
+    if spec.native is not None:
+        raw = native_backend(spec.native).solve(qp, options)
+        return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
+                       raw.iterations, DIRECT, raw.native_time)
     if cache is None:
         declared, path = qp.declared(), DECLARED
     else:

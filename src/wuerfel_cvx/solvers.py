@@ -18,12 +18,21 @@ from functools import cache
 from typing import Any
 
 import cvxpy as cp
+import numpy as np
 
 from .errors import InputError
 from .versions import package_version
 
 TOLERANCE_PRESETS: dict[str, float] = {"low": 1e-4, "default": 1e-7, "high": 1e-9}
 """Solver tolerance ``eps`` per preset (absolute and relative, in the QP's scaled units)."""
+
+
+CERTIFICATE_TOLERANCE = float(np.finfo(np.float64).eps)
+"""PROXQP's ``eps_primal_inf`` and ``eps_dual_inf``: a certificate of infeasibility must
+hold to round-off, whatever the tolerance of the solve.  At any looser value measured (the
+step's ``eps``, and 1e-4 to 1e-13) proxsuite 0.8 certified strictly feasible step QPs
+infeasible (``docs/false-infeasible.md``); at this one it still certifies a truly
+infeasible one."""
 
 
 @cache
@@ -83,6 +92,9 @@ class SolverSpec:
     """Module of :mod:`wuerfel_cvx.backends` with its direct path (``None``: none)."""
     timing: Timing = field(default_factory=Timing)
     """How its own time is read."""
+    native: str | None = None
+    """Module of :mod:`wuerfel_cvx.backends` whose ``solve(qp, options)`` solves every step
+    QP from its own numbers, on every path, without cvxpy (``None``: through cvxpy)."""
 
     def version(self) -> str:
         """Installed version of :attr:`package` (``"not installed"``, ``"unknown"``)."""
@@ -104,12 +116,14 @@ SOLVERS: dict[str, SolverSpec] = {
             "eps_abs": eps, "eps_rel": eps, "max_iter": 250, "compute_timings": True},
             "proximal interior-point", "piqp", ("#2ca02c", "^"), "piqp",
             Timing(note="its run_time includes the data update on the direct path")),
-        # cvxpy (1.9) runs PROXQP's dense backend; its sparse one fails there with a
-        # TypeError (cvxpy passes a box flag the sparse constructor does not take).
+        # Called natively (backends/proxqp.py): cvxpy (1.9) drops the infeasibility
+        # tolerances, whose default 1e-4 let PROXQP certify feasible QPs infeasible.
         SolverSpec("PROXQP", "PROXQP", lambda eps: {
-            "eps_abs": eps, "eps_rel": 0.0, "max_iter": 10_000},
+            "eps_abs": eps, "eps_rel": 0.0, "max_iter": 10_000,
+            "eps_primal_inf": CERTIFICATE_TOLERANCE, "eps_dual_inf": CERTIFICATE_TOLERANCE},
             "proximal augmented Lagrangian (dense backend)", "proxsuite", ("#d62728", "D"),
-            timing=Timing(note="cvxpy reports 0.0 s for it: its time is unknown")),
+            native="proxqp",
+            timing=Timing(note="its run_time includes its setup (a fresh solver per QP)")),
         SolverSpec("SCS", "SCS", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, "max_iters": 200_000}, "ADMM (conic)", "scs",
             ("#9467bd", "v")),

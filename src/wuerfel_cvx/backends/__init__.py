@@ -18,6 +18,9 @@ The duals of our rows are read from the solver's by the row and coefficient each
 right-hand side takes in the conic data, so every step is checked by the same independent
 KKT residuals as any other solve.
 
+PROXQP's backend (:mod:`.proxqp`) is of another kind: *native*, it takes the step QP's own
+numbers rather than cvxpy's map, and serves every path (:func:`native_backend`).
+
 One module per solver (:mod:`.osqp`, :mod:`.piqp`, :mod:`.clarabel`), named by the
 solver's :attr:`~wuerfel_cvx.solvers.SolverSpec.backend`; every use of cvxpy internals is
 in the adapter :mod:`._cvxpy`.  When it cannot be used, :func:`build_direct` warns
@@ -35,7 +38,8 @@ from ..formulations.qp import StepQP
 from ._cvxpy import INTERNALS_CHANGED, DirectPathWarning, Unavailable, warn_unavailable
 from ._map import DirectResult
 
-__all__ = ["DirectPathWarning", "DirectResult", "DirectSolver", "build_direct"]
+__all__ = ["DirectPathWarning", "DirectResult", "DirectSolver", "NativeBackend", "build_direct",
+           "native_backend"]
 
 
 class DirectSolver(Protocol):
@@ -47,6 +51,20 @@ class DirectSolver(Protocol):
     def solve(self, qp: StepQP, settings: dict[str, Any]) -> DirectResult:
         """Solve ``qp`` (of this structure) with the solver's ``settings``."""
         ...
+
+
+class NativeBackend(Protocol):
+    """A module that solves a step QP from its own numbers (:mod:`.proxqp`)."""
+
+    def solve(self, qp: StepQP, options: dict[str, Any]) -> DirectResult:
+        """Solve ``qp`` with the solver's ``options``."""
+        ...
+
+
+def native_backend(name: str) -> NativeBackend:
+    """The native backend module ``name`` (a solver's ``SolverSpec.native``)."""
+    module: NativeBackend = importlib.import_module(f".{name}", __name__)
+    return module
 
 
 def build_direct(solver: str, backend: str, problem: cp.Problem, names: dict[int, str],

@@ -41,6 +41,7 @@ _STATUS_MAPS = {
     "OSQP": ("cvxpy.reductions.solvers.qp_solvers.osqp_qpif", "OSQP"),
     "PIQP": ("cvxpy.reductions.solvers.qp_solvers.piqp_qpif", "PIQP"),
     "CLARABEL": ("cvxpy.reductions.solvers.conic_solvers.clarabel_conif", "CLARABEL"),
+    "PROXQP": ("cvxpy.reductions.solvers.qp_solvers.proxqp_qpif", "PROXQP"),
 }
 
 

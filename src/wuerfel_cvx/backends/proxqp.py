@@ -1,0 +1,105 @@
+"""PROXQP's native backend: proxsuite called on the step QP's own numbers, on every path.
+
+cvxpy's PROXQP interface (1.9) forwards only a few of proxsuite's settings and drops the
+others silently, among them ``eps_primal_inf`` and ``eps_dual_inf``: the tolerances of
+proxsuite's infeasibility certificates, which default to 1e-4 whatever ``eps_abs`` is.
+This backend therefore does not go through cvxpy at all, on the first QP of a structure,
+on compiled structures and with ``compiled=False`` alike
+(:attr:`~wuerfel_cvx.solvers.SolverSpec.native`); the registry sets the certificates'
+tolerances (:data:`~wuerfel_cvx.solvers.CERTIFICATE_TOLERANCE`).  It hands proxsuite's dense
+backend the QP in proxsuite's form ``min x' H x / 2 + g' x``, ``A x = b``, ``l <= C x <= u`` with
+
+    H = 2 W + 2 F' F,   g = -H t,   A = E,   b = e,
+
+and, per row of ``G``: ``-G_i x <= -h_i`` (``l_i = -inf``) for a one-sided row, as cvxpy
+passes it, and ``h_i <= G_i x <= u_i`` for a row with a finite upper bound.  One-sided rows
+are not given as ``h_i <= G_i x <= +inf``: with an infinite upper bound proxsuite 0.8 never
+certifies infeasibility (it ran to its iteration limit on a truly infeasible QP, see
+``docs/false-infeasible.md``).  The objective is the step QP's without its constant
+(proxsuite takes none; with ``eps_rel = 0`` its stopping test is absolute, so the constant
+would not enter it).  proxsuite's Lagrangian is ``H x + g + A' y + C' z = 0``; so ``y`` is
+the package's, and the package's ``z = z_lower - z_upper`` (:mod:`wuerfel_cvx.formulations.qp`)
+is ``z`` on a negated row and ``-z`` on a two-sided one.
+
+The dense backend is used, as cvxpy uses it.  The sparse one (its default Cholesky
+backend) did not return on a step QP of ``stack-10`` that the dense one solves in 4
+iterations, with any of the iteration limits tried; its matrix-free backend was 13 to 44
+times slower and did not return on another.  The dense AVX-512 build's round-off depends on where
+its arrays lie in memory, so its answers can differ in the last bits between processes and
+between calls (``docs/false-infeasible.md``); that is proxsuite's, and aligning the inputs
+does not remove it (the solver's own buffers count too).  A fresh solver is set up for
+every QP.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..formulations.qp import StepQP
+from ..geometry import FloatArray
+from ._cvxpy import status_name
+from ._map import DirectResult
+
+MICROSECOND = 1e-6
+"""proxsuite reports its times in microseconds."""
+
+
+def proxsuite_form(qp: StepQP) -> tuple[dict[str, Any], FloatArray]:
+    """``qp`` as proxsuite's ``H, g, A, b, C, l, u``, and the sign that maps its ``z`` to ours.
+
+    Dense matrices (the dense backend's input), ``None`` for an empty block.  ``C``'s row
+    ``i`` is ``-G_i`` (sign ``+1``) for a one-sided row and ``G_i`` (sign ``-1``) for one
+    with a finite upper bound.
+    """
+    hessian = sp.diags_array(2.0 * qp.weights, format="csc")
+    if qp.cost_factor is not None and qp.n_cost_rows:
+        factor = sp.csc_array(qp.cost_factor)
+        hessian = sp.csc_array(hessian + 2.0 * (factor.T @ factor))
+    sign = np.ones(qp.n_inequalities)
+    sign[qp.upper_rows] = -1.0
+    lower = np.where(sign > 0, -np.inf, qp.ineq_rhs)
+    upper = -qp.ineq_rhs
+    if qp.upper_rows.size:
+        assert qp.ineq_upper is not None
+        upper[qp.upper_rows] = qp.ineq_upper[qp.upper_rows]
+    has_eq, has_ineq = qp.n_equalities > 0, qp.n_inequalities > 0
+    form = {"H": hessian.toarray(), "g": -(hessian @ qp.target),
+            "A": qp.eq_matrix.toarray() if has_eq else None,
+            "b": qp.eq_rhs if has_eq else None,
+            "C": (sp.diags_array(-sign) @ qp.ineq_matrix).toarray() if has_ineq else None,
+            "l": lower if has_ineq else None, "u": upper if has_ineq else None}
+    return form, sign
+
+
+def solve(qp: StepQP, options: dict[str, Any]) -> DirectResult:
+    """Solve ``qp`` with proxsuite's dense backend and ``options`` (proxsuite settings).
+
+    Every option is one of proxsuite's settings, set by name; an unknown name raises
+    ``AttributeError`` (a failed step), so that no setting is dropped silently.
+    """
+    import proxsuite  # type: ignore[import-untyped]  # an optional solver, no stubs
+
+    solver = proxsuite.proxqp.dense.QP(qp.n_variables, qp.n_equalities, qp.n_inequalities)
+    settings = solver.settings
+    for name, value in {**options, "verbose": False, "compute_timings": True}.items():
+        if not hasattr(settings, name):
+            raise AttributeError(f"proxsuite has no setting '{name}'")
+        setattr(settings, name, value)
+    form, sign = proxsuite_form(qp)
+    started = time.perf_counter()
+    solver.init(**form)
+    solver.solve()
+    native_time = time.perf_counter() - started
+    results = solver.results
+    info = results.info
+    return DirectResult(
+        x=np.array(results.x, dtype=np.float64),
+        eq_dual=np.array(results.y, dtype=np.float64),
+        ineq_dual=sign * np.array(results.z, dtype=np.float64),
+        status=status_name("PROXQP", info.status.name),
+        reported_time=float(info.run_time) * MICROSECOND, native_time=native_time,
+        iterations=int(info.iter))
