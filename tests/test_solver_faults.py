@@ -29,8 +29,8 @@ from wuerfel_cvx.formulations.velocity import VelocityFormulation
 from wuerfel_cvx.model import Model, State
 from wuerfel_cvx.robustness.faults import SQUEEZED_SCENE, NaNInQP
 from wuerfel_cvx.scene import Square, Table
-from wuerfel_cvx.solve import Residuals, solve_step_qp
-from wuerfel_cvx.solvers import available_solvers
+from wuerfel_cvx.solve import VERIFY_FACTOR, Residuals, solve_step_qp
+from wuerfel_cvx.solvers import TOLERANCE_PRESETS, available_solvers
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration
@@ -188,21 +188,25 @@ def test_fallback_that_also_fails_names_every_solver() -> None:
     assert failure.trajectory.n_steps == 0
 
 
-def test_false_infeasible_at_extreme_speed_is_rescued_by_the_fallback() -> None:
-    """A unit square at 1e6 m/s (the speed limit) over a table: the fallback solves it.
+def test_no_false_infeasible_at_extreme_speed() -> None:
+    """A unit square at 1e6 m/s (the speed limit) over a table: no false 'infeasible'.
 
-    Every step has a solution (the square is in free flight at first), but CLARABEL may
-    call it infeasible at this scale; OSQP solves it, verified.
+    CLARABEL called such a step infeasible; solved in scaled units it returns an optimum
+    (``wuerfel_cvx.scaling``), so the fallback is not needed.  Its multipliers on the
+    inactive rows (slack of order 1e2 m/s beside targets of 1e6 m/s) leave a relative
+    complementarity residual of 3e-4 at ``default``, above the check's bound: that step is
+    recorded as unverified, not hidden.  OSQP verifies the same QP.
     """
     scene = Scene("fast", (Square(center=(0.0, 2.0), velocity=(1e6, 0.0)),),
                   (Table(center=(0.0, -0.5), size=(20.0, 1.0)),))
     traj = simulate(scene, dt=0.01, steps=2, solver="clarabel", fallback=("osqp",))
     m = traj.metrics
-    assert m["verified"].all() and np.all(np.isfinite(traj.points))
-    assert set(m["primary_status"]) <= {cp.OPTIMAL, cp.INFEASIBLE}
-    # a step's solvers over its passes: OSQP took every pass CLARABEL failed
-    for used, primary in zip(m["solver"], m["primary_status"], strict=True):
-        assert used == "CLARABEL" if primary == cp.OPTIMAL else "OSQP" in used.split("+")
+    assert np.all(np.isfinite(traj.points))
+    assert (m["primary_status"] == cp.OPTIMAL).all() and (m["solver"] == "CLARABEL").all()
+    for verified, complementarity in zip(m["verified"], m["complementarity"], strict=True):
+        assert verified or complementarity > VERIFY_FACTOR * TOLERANCE_PRESETS["default"]
+    assert m["verified"].iloc[1]  # in free flight, out of every contact's reach
+    assert simulate(scene, dt=0.01, steps=2, solver="osqp").metrics["verified"].all()
 
 
 # ------------------------------------------------------------------ NaN data
