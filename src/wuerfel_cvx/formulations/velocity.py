@@ -46,7 +46,7 @@ from typing import Literal
 import numpy as np
 import scipy.sparse as sp
 
-from ..contacts import Contacts
+from ..contacts import Contacts, find_contacts
 from ..geometry import FloatArray
 from ..model import Model, State
 from .approach import approach_rows, closest_approach, rows_along
@@ -127,17 +127,38 @@ class VelocityFormulation:
 
         ``previous`` is the QP of pass ``passes`` (1 for the first) and ``solution`` its
         unknowns.  A pass is accepted when every contact's gap along its motion stays within
-        :attr:`gap_tolerance` of its ramp, or after :attr:`max_passes` passes.
+        :attr:`gap_tolerance` of its ramp, or after :attr:`max_passes` passes.  If the
+        solution moves a body faster than the contacts were searched for (an impulse can
+        speed a body up), the next pass takes the contacts within the solution's reach.
         """
         if self.linearisation == "start" or passes >= self.max_passes:
             return None
-        approach = closest_approach(model, state.points, previous.contacts, solution, dt,
+        contacts = self._reached_contacts(model, state, previous.contacts, solution, dt)
+        approach = closest_approach(model, state.points, contacts, solution, dt,
                                     self.push_speed)
-        if approach.violation <= self.gap_tolerance:
+        if contacts is previous.contacts and approach.violation <= self.gap_tolerance:
             return None
-        rows = rows_along(model, previous.contacts, approach, dt, self.push_speed)
+        rows = rows_along(model, contacts, approach, dt, self.push_speed)
         return declare_qp(previous.weights, previous.target, previous.eq_matrix,
-                          previous.eq_rhs, rows.matrix, rows.rhs, previous.contacts)
+                          previous.eq_rhs, rows.matrix, rows.rhs, contacts)
+
+    def _reached_contacts(self, model: Model, state: State, contacts: Contacts,
+                          solution: FloatArray, dt: float) -> Contacts:
+        """``contacts``, or those within the reach of ``solution``'s speeds where it is larger.
+
+        A body's corners travel at most ``dt`` times their fastest speed in ``solution``;
+        its contacts were searched within :meth:`body_reach` of the start speeds.
+        """
+        searched = self.body_reach(model, state, dt)
+        moving = State(state.points, solution.reshape(-1, 2)[: model.n_points])
+        travel = self.body_reach(model, moving, dt) - dt * dt * np.linalg.norm(model.gravity)
+        if np.all(travel <= searched):
+            return contacts
+        wider = find_contacts(model, state.points, np.maximum(searched, travel))
+        same = len(wider) == len(contacts) and all(
+            np.array_equal(getattr(wider, name), getattr(contacts, name))
+            for name in ("point", "edge_i", "edge_j"))
+        return contacts if same else wider
 
     def contact_rows(self, model: Model, all_points: FloatArray, contacts: Contacts,
                      dt: float) -> tuple[sp.csr_array, FloatArray]:
