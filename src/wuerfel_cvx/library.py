@@ -77,17 +77,29 @@ def _pyramid(n: int | None) -> Scene:
     return Scene(f"pyramid-{base}", tuple(squares), (FLOOR,))
 
 
-def _rain(n: int | None) -> Scene:
-    count = _require(n, "rain")
-    rng = np.random.default_rng(20261122 + count)
+GRID_CELL = 1.6
+"""Cell (m) of the grids of ``rain-N`` and ``spinning-pile-N``: wider than the largest
+square's swept circle (diameter sqrt(2) m) with its jitter, so the squares start apart
+from each other and from the walls, whatever their angle."""
+
+
+def _walled_grid(count: int) -> tuple[int, float, tuple[Table, Table, Table]]:
+    """Columns and width (m) of a grid of ``count`` cells, and its floor and two walls."""
     columns = max(3, math.ceil(math.sqrt(count)))
     rows = math.ceil(count / columns)
-    cell = 1.6
-    width = columns * cell
-    height = rows * cell + 2.0
+    width = columns * GRID_CELL
+    height = rows * GRID_CELL + 2.0
     floor = Table(center=(0.0, -0.5), size=(width + 2.0, 1.0))
     left = Table(center=(-width / 2 - 0.5, height / 2), size=(1.0, height))
     right = Table(center=(width / 2 + 0.5, height / 2), size=(1.0, height))
+    return columns, width, (floor, left, right)
+
+
+def _rain(n: int | None) -> Scene:
+    count = _require(n, "rain")
+    rng = np.random.default_rng(20261122 + count)
+    columns, width, tables = _walled_grid(count)
+    cell = GRID_CELL
     squares = []
     for k in range(count):
         row, col = divmod(k, columns)
@@ -97,7 +109,7 @@ def _rain(n: int | None) -> Scene:
                   1.0 + (row + 0.5) * cell + float(jitter[1]))
         squares.append(Square(center=center, size=size, angle=float(rng.uniform(0, math.pi / 2)),
                               mass=size * size))
-    return Scene(f"rain-{count}", tuple(squares), (floor, left, right))
+    return Scene(f"rain-{count}", tuple(squares), tables)
 
 
 def _heavy_on_light(n: int | None) -> Scene:
@@ -191,16 +203,8 @@ def _spinning_pile(n: int | None) -> Scene:
     # before the squares meet the floor, the walls and each other.
     count = _require(n, "spinning-pile")
     rng = np.random.default_rng(20261201 + count)
-    columns = max(3, math.ceil(math.sqrt(count)))
-    rows = math.ceil(count / columns)
-    # a cell wider than the largest square's swept circle (diameter sqrt(2) m) with its
-    # jitter: the squares start apart from each other and from the walls, whatever angle
-    cell = 1.6
-    width = columns * cell
-    height = rows * cell + 2.0
-    floor = Table(center=(0.0, -0.5), size=(width + 2.0, 1.0))
-    left = Table(center=(-width / 2 - 0.5, height / 2), size=(1.0, height))
-    right = Table(center=(width / 2 + 0.5, height / 2), size=(1.0, height))
+    columns, width, tables = _walled_grid(count)
+    cell = GRID_CELL
     squares = []
     for k in range(count):
         row, col = divmod(k, columns)
@@ -211,7 +215,7 @@ def _spinning_pile(n: int | None) -> Scene:
         spin = float(rng.uniform(*SPIN_RANGE)) * float(rng.choice((-1.0, 1.0)))
         squares.append(Square(center=center, size=size, angle=float(rng.uniform(0, math.pi / 2)),
                               mass=size * size, angular_velocity=spin))
-    return Scene(f"spinning-pile-{count}", tuple(squares), (floor, left, right))
+    return Scene(f"spinning-pile-{count}", tuple(squares), tables)
 
 
 # Two squares as the property checks found them: the upper one stands on the lower with
