@@ -73,6 +73,9 @@ class StepQP:
     """Upper bounds u of ``G x`` (``+inf`` for a one-sided row); ``None``: all ``+inf``."""
     cost_factor: sp.csr_array | None = None
     """The factor F of the coupling cost ``|F (x - t)|^2`` (kg^(1/2)); ``None``: none."""
+    linearised_about: FloatArray | None = None
+    """The unknowns the rows were linearised about, for a formulation that re-linearises
+    them in further passes (``None``: not recorded)."""
 
     def declared(self) -> DeclaredQP:
         """The QP as its own cvxpy problem (declared once, on first call)."""

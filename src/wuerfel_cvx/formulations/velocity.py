@@ -76,7 +76,7 @@ class VelocityFormulation:
     """Where contact gaps are linearised (see the module docstring)."""
     push_speed: float = 1.0
     """Closest-approach rows: largest speed (m/s) at which a penetration is pushed out."""
-    max_passes: int = 6
+    max_passes: int = 8
     """Closest-approach rows: most QPs (Gauss-Newton passes) per step."""
     gap_tolerance: float = 1e-6
     """Closest-approach rows: a pass is accepted once no contact's gap falls below its
@@ -118,8 +118,10 @@ class VelocityFormulation:
         else:
             rows = approach_rows(model, points, contacts, target.ravel(), dt, self.push_speed)
             ineq_matrix, ineq_rhs = rows.matrix, rows.rhs
-        return declare_qp(weights, target.ravel(), eq_matrix, eq_rhs,
-                          ineq_matrix, ineq_rhs, contacts)
+        qp = declare_qp(weights, target.ravel(), eq_matrix, eq_rhs, ineq_matrix, ineq_rhs,
+                        contacts)
+        qp.linearised_about = target.ravel()
+        return qp
 
     def refine(self, model: Model, state: State, previous: StepQP, solution: FloatArray,
                dt: float, passes: int) -> StepQP | None:
@@ -130,6 +132,9 @@ class VelocityFormulation:
         :attr:`gap_tolerance` of its ramp, or after :attr:`max_passes` passes.  If the
         solution moves a body faster than the contacts were searched for (an impulse can
         speed a body up), the next pass takes the contacts within the solution's reach.
+        From the third pass on, the rows are linearised about the mean of the last
+        solution and the last linearisation point: undamped passes can oscillate where
+        fast spins make the gaps strongly nonlinear in the velocities.
         """
         if self.linearisation == "start" or passes >= self.max_passes:
             return None
@@ -138,9 +143,15 @@ class VelocityFormulation:
                                     self.push_speed)
         if contacts is previous.contacts and approach.violation <= self.gap_tolerance:
             return None
+        last = previous.linearised_about
+        if passes >= 2 and last is not None:
+            approach = closest_approach(model, state.points, contacts, 0.5 * (solution + last),
+                                        dt, self.push_speed)
         rows = rows_along(model, contacts, approach, dt, self.push_speed)
-        return declare_qp(previous.weights, previous.target, previous.eq_matrix,
-                          previous.eq_rhs, rows.matrix, rows.rhs, contacts)
+        qp = declare_qp(previous.weights, previous.target, previous.eq_matrix,
+                        previous.eq_rhs, rows.matrix, rows.rhs, contacts)
+        qp.linearised_about = approach.about
+        return qp
 
     def _reached_contacts(self, model: Model, state: State, contacts: Contacts,
                           solution: FloatArray, dt: float) -> Contacts:
