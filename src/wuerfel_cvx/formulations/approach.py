@@ -47,12 +47,14 @@ SAMPLES = 16
 """Intervals of the step on which each contact's ramp margin is sampled to find its
 closest approach, refined by a parabola through the best sample and its neighbours."""
 
+
 @dataclass(frozen=True)
 class ApproachRows:
     """The contact rows ``G v >= h`` linearised at each contact's closest approach."""
 
     matrix: sp.csr_array
-    """``G`` ``(contacts, unknowns)`` (1: rows in m/s per m/s)."""
+    """``G`` ``(2 contacts, unknowns)``: the rate rows, then the closest-approach rows, one
+    of each per contact (1: rows in m/s per m/s)."""
     rhs: FloatArray
     """``h`` (m/s)."""
     violation: float

@@ -67,7 +67,8 @@ class StepQP:
     ineq_rhs: FloatArray
     """Lower bounds h of ``G x`` (finite)."""
     contacts: Contacts
-    """The contacts whose side constraints are the rows of ``G``."""
+    """The contacts whose side constraints are the rows of ``G`` (one row each, or, for the
+    closest-approach rows of ``velocity``, two: all rate rows, then all approach rows)."""
     _declared: DeclaredQP | None = field(default=None, repr=False)
     ineq_upper: FloatArray | None = None
     """Upper bounds u of ``G x`` (``+inf`` for a one-sided row); ``None``: all ``+inf``."""
