@@ -12,21 +12,29 @@ the gap stay above a *ramp*::
 its gap at most linearly to zero by the end of the step (a speculative contact over the
 whole path, not only at its start); a point inside is pushed out to zero by the end of the
 step, or by ``dt u`` if it is deeper.  Since ``phi`` is nonlinear in the velocities (the
-bodies turn), each contact's row is the linearisation of ``psi`` at its *closest
-approach* ``tau*``, the minimiser of ``psi`` along the motion of a velocity estimate
-``v0``, divided by ``tau*`` (rows in m/s, the units of the other rows)::
+bodies turn), the condition is held by two rows per contact (in m/s, the units of the other
+rows), linearised along the motion of a velocity estimate ``v0``:
 
-    G v >= G v0 - psi(tau*; v0) / tau*,    G = d phi(tau*; v) / d v / tau*
+* the *rate row* ``G_0 v >= r' = (c - phi_0) / dt``, ``G_0 v = phi'(0)``: exact, since the
+  gap's rate at the start is linear in ``v``, and necessary, since ``psi(0) = 0``;
+* the *closest-approach row* at ``tau*``, the minimiser of the mean rate ``psi(tau) / tau``
+  over ``[dt / SAMPLES, dt]`` along ``v0``'s motion::
 
-and as ``tau* -> 0`` its limit, the rate row ``G v >= (c - phi_0) / dt``.  A Gauss-Newton
-pass re-linearises at the last solution (:func:`approach_rows`).
+      G v >= min(G v0 - psi(tau*; v0) / tau*, r'),    G = d phi(tau*; v) / d v / tau*
+
+One row per contact is not enough: the condition can bind at the start and later at once,
+and single rows went into two-cycles between those times.  Gauss-Newton passes re-linearise
+along each solution (:func:`closest_approach`, :func:`rows_along`; the passes are driven by
+:meth:`~wuerfel_cvx.formulations.velocity.VelocityFormulation.refine`).
 
 Why the closest approach: the motion is homogeneous in ``v`` (``p(tau; s v) = p(s tau; v)``)
-so ``G v = phi'(tau*)``, the gap's rate at ``tau*``.  At an interior minimum ``psi' = 0``,
-so ``G v = r' = (c - phi_0) / dt``; at ``tau* = dt``, ``psi' <= 0`` and ``G v <= r'``.  At
-the converged solution every active row therefore has ``G v+ <= r'``, which is ``<= 0``
-for a point outside: such rows do no work, and the step dissipates energy as a
-first-order contact with restitution 0 does (see :mod:`wuerfel_cvx.robustness.properties`).
+so ``G v0 = phi'(tau*; v0)``, the gap's rate at ``tau*``.  At an interior minimiser of
+``psi / tau``, ``psi'(tau*) = psi(tau*) / tau*``, so the right-hand side is exactly ``r'``;
+at ``tau* = dt`` it is at most ``r'``; the minimum with ``r'`` keeps it there where the
+sampled minimiser is inexact.  Every active row therefore has ``G v+ <= r'``, which is
+``<= 0`` for a point outside: such rows do no work, and the step dissipates energy as a
+first-order contact with restitution 0 does (the bounds are derived in
+:mod:`wuerfel_cvx.robustness.bounds`).
 """
 
 from __future__ import annotations
