@@ -17,7 +17,14 @@ import pytest
 from wuerfel_cvx import Scene, Simulation
 from wuerfel_cvx.contacts import Contacts, find_contacts
 from wuerfel_cvx.formulations import VelocityFormulation, rigid_step
-from wuerfel_cvx.formulations.approach import approach_rows, gaps_at, ramp_end
+from wuerfel_cvx.formulations.approach import (
+    Approach,
+    ApproachRows,
+    closest_approach,
+    gaps_at,
+    ramp_end,
+    rows_along,
+)
 from wuerfel_cvx.formulations.motion import body_motion
 from wuerfel_cvx.geometry import FloatArray
 from wuerfel_cvx.model import Model, State
@@ -65,6 +72,13 @@ def random_velocities(model: Model, seed: int) -> FloatArray:
     return np.random.default_rng(seed).uniform(-3.0, 3.0, 2 * model.n_points)
 
 
+def approach_rows(model: Model, state: State, contacts: Contacts,
+                  about: FloatArray) -> tuple[Approach, ApproachRows]:
+    """The closest approaches along ``about``'s motion and the rows linearised there."""
+    approach = closest_approach(model, state.points, contacts, about, DT, PUSH)
+    return approach, rows_along(model, contacts, approach)
+
+
 def gaps(model: Model, state: State, contacts: Contacts, velocities: FloatArray,
          tau: FloatArray) -> FloatArray:
     motion = body_motion(model, state.points, velocities.reshape(-1, 2))
@@ -97,10 +111,10 @@ def test_rows_are_the_derivatives_of_the_gaps(setting: tuple[Model, State, Conta
     """Rate rows: ``d phi'(0) / d v``; approach rows: ``d phi(tau*) / d v / tau*``."""
     model, state, contacts = setting
     about = random_velocities(model, seed)
-    rows = approach_rows(model, state.points, contacts, about, DT, PUSH)
+    approach, rows = approach_rows(model, state, contacts, about)
     m = len(contacts)
     dense = rows.matrix.toarray()
-    tau = rows.closest
+    tau = approach.closest
     assert np.all((tau > 0) & (tau <= DT))
     for column in range(about.size):
         step = np.zeros_like(about)
@@ -122,12 +136,12 @@ def test_rows_are_the_derivatives_of_the_gaps(setting: tuple[Model, State, Conta
 def test_right_hand_sides_follow_the_ramp(setting: tuple[Model, State, Contacts]) -> None:
     model, state, contacts = setting
     about = random_velocities(model, 6)
-    rows = approach_rows(model, state.points, contacts, about, DT, PUSH)
+    approach, rows = approach_rows(model, state, contacts, about)
     m = len(contacts)
     start = contacts.distance
     rate = (ramp_end(start, DT, PUSH) - start) / DT
     np.testing.assert_allclose(rows.rhs[:m], rate, rtol=1e-12, atol=1e-12)
-    tau = rows.closest
+    tau = approach.closest
     margin = gaps(model, state, contacts, about, tau) - start - rate * tau
     lifted = rows.matrix.toarray()[m:] @ about - margin / tau
     np.testing.assert_allclose(rows.rhs[m:], np.minimum(lifted, rate), rtol=1e-10, atol=1e-10)
@@ -141,14 +155,14 @@ def test_closest_approach_minimises_the_mean_rate(
     """
     model, state, contacts = setting
     about = random_velocities(model, 7)
-    rows = approach_rows(model, state.points, contacts, about, DT, PUSH)
+    approach, rows = approach_rows(model, state, contacts, about)
     start = contacts.distance
     rate = (ramp_end(start, DT, PUSH) - start) / DT
     grid = np.linspace(DT / 16, DT, 2001)
     dense = gaps(model, state, contacts, about, np.broadcast_to(grid, (len(contacts), grid.size)))
     mean_rate = (dense - start[:, None] - rate[:, None] * grid) / grid
-    found = (gaps(model, state, contacts, about, rows.closest) - start
-             - rate * rows.closest) / rows.closest
+    found = (gaps(model, state, contacts, about, approach.closest) - start
+             - rate * approach.closest) / approach.closest
     scale = np.ptp(mean_rate, axis=1) + 1e-12
     assert np.all(found - mean_rate.min(axis=1) <= 1e-3 * scale)
 
@@ -158,9 +172,9 @@ def test_rows_times_their_velocities_are_gap_rates(
     """Homogeneity ``p(tau; s v) = p(s tau; v)``: ``G v0 = phi'(tau*; v0)``."""
     model, state, contacts = setting
     about = random_velocities(model, 8)
-    rows = approach_rows(model, state.points, contacts, about, DT, PUSH)
+    approach, rows = approach_rows(model, state, contacts, about)
     m = len(contacts)
-    tau = rows.closest
+    tau = approach.closest
     rate_fd = (gaps(model, state, contacts, about, tau + H_TIME)
                - gaps(model, state, contacts, about, tau - H_TIME)) / (2 * H_TIME)
     np.testing.assert_allclose(rows.matrix.toarray()[m:] @ about, rate_fd, rtol=0,
@@ -171,14 +185,14 @@ def test_violation_is_measured_along_the_motion(setting: tuple[Model, State, Con
     """The reported violation is the largest drop of a gap below its ramp on the samples."""
     model, state, contacts = setting
     about = random_velocities(model, 9)
-    rows = approach_rows(model, state.points, contacts, about, DT, PUSH)
+    approach, rows = approach_rows(model, state, contacts, about)
     start = contacts.distance
     rate = (ramp_end(start, DT, PUSH) - start) / DT
     grid = np.linspace(0.0, DT, 17)
     sampled = gaps(model, state, contacts, about, np.broadcast_to(grid, (len(contacts), 17)))
     below = -(sampled - start[:, None] - rate[:, None] * grid).min()
-    assert rows.violation >= max(0.0, below)
-    assert rows.violation <= max(0.0, below) + 1e-3 * abs(below)
+    assert approach.violation >= max(0.0, below)
+    assert approach.violation <= max(0.0, below) + 1e-3 * abs(below)
 
 
 @pytest.mark.integration

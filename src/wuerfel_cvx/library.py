@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError
+from .geometry import FloatArray
 from .scene import Box, Scene, Square, Table
 
 FLOOR = Table(center=(0.0, -0.5), size=(40.0, 1.0), angle=0.0)
@@ -95,18 +96,24 @@ def _walled_grid(count: int) -> tuple[int, float, tuple[Table, Table, Table]]:
     return columns, width, (floor, left, right)
 
 
+def _cell_center(k: int, columns: int, width: float, jitter: FloatArray) -> tuple[float, float]:
+    """Centre (m) of cell ``k`` of a :func:`_walled_grid`, moved by ``jitter`` (m).
+
+    Cells are filled row by row, the lowest row's bottom 1 m above the floor.
+    """
+    row, col = divmod(k, columns)
+    return (-width / 2 + (col + 0.5) * GRID_CELL + float(jitter[0]),
+            1.0 + (row + 0.5) * GRID_CELL + float(jitter[1]))
+
+
 def _rain(n: int | None) -> Scene:
     count = _require(n, "rain")
     rng = np.random.default_rng(20261122 + count)
     columns, width, tables = _walled_grid(count)
-    cell = GRID_CELL
     squares = []
     for k in range(count):
-        row, col = divmod(k, columns)
         size = float(rng.uniform(0.6, 1.0))
-        jitter = rng.uniform(-0.05, 0.05, size=2)
-        center = (-width / 2 + (col + 0.5) * cell + float(jitter[0]),
-                  1.0 + (row + 0.5) * cell + float(jitter[1]))
+        center = _cell_center(k, columns, width, rng.uniform(-0.05, 0.05, size=2))
         squares.append(Square(center=center, size=size, angle=float(rng.uniform(0, math.pi / 2)),
                               mass=size * size))
     return Scene(f"rain-{count}", tuple(squares), tables)
@@ -204,14 +211,10 @@ def _spinning_pile(n: int | None) -> Scene:
     count = _require(n, "spinning-pile")
     rng = np.random.default_rng(20261201 + count)
     columns, width, tables = _walled_grid(count)
-    cell = GRID_CELL
     squares = []
     for k in range(count):
-        row, col = divmod(k, columns)
         size = float(rng.uniform(*SPINNING_PILE_SIZES))
-        jitter = rng.uniform(-0.05, 0.05, size=2)
-        center = (-width / 2 + (col + 0.5) * cell + float(jitter[0]),
-                  1.0 + (row + 0.5) * cell + float(jitter[1]))
+        center = _cell_center(k, columns, width, rng.uniform(-0.05, 0.05, size=2))
         spin = float(rng.uniform(*SPIN_RANGE)) * float(rng.choice((-1.0, 1.0)))
         squares.append(Square(center=center, size=size, angle=float(rng.uniform(0, math.pi / 2)),
                               mass=size * size, angular_velocity=spin))

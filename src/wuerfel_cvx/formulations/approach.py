@@ -65,10 +65,6 @@ class ApproachRows:
     of each per contact (1: rows in m/s per m/s)."""
     rhs: FloatArray
     """``h`` (m/s)."""
-    violation: float
-    """Largest ``-psi`` (m) along the motion the rows were linearised about (0 if none)."""
-    closest: FloatArray
-    """Closest-approach time ``tau*`` (s) of each contact."""
 
 
 @dataclass(frozen=True)
@@ -126,8 +122,8 @@ class Approach:
     """Closest-approach time ``tau*`` (s) of each contact."""
     margin: FloatArray
     """``psi(tau*)`` (m) of each contact."""
-    start: FloatArray
-    """Gap ``phi_0`` (m) of each contact at the start of the step."""
+    rate: FloatArray
+    """The ramp's rate ``r' = (c - phi_0) / dt`` (m/s) of each contact."""
     violation: float
     """Largest ``-psi`` (m) along the motion (0 if none)."""
 
@@ -143,42 +139,26 @@ def closest_approach(model: Model, points: FloatArray, contacts: Contacts, about
     if len(contacts) == 0:
         none = np.zeros(0)
         return Approach(about, motion, none, none, none, 0.0)
-    tau, margin, start, violation = _closest_approach(motion, contacts, dt, push_speed)
-    return Approach(about, motion, tau, margin, start, violation)
+    tau, margin, rate, violation = _closest_approach(motion, contacts, dt, push_speed)
+    return Approach(about, motion, tau, margin, rate, violation)
 
 
-def rows_along(model: Model, contacts: Contacts, approach: Approach, dt: float,
-               push_speed: float) -> ApproachRows:
-    """The rate rows and the closest-approach rows of ``approach`` (see the docstring)."""
-    n_unknown = n_unknown_points(model)
+def rows_along(model: Model, contacts: Contacts, approach: Approach) -> ApproachRows:
+    """The rate rows and the closest-approach rows of ``approach`` (of ``contacts``)."""
     m = len(contacts)
-    if m == 0:
-        return ApproachRows(sp.csr_array((0, 2 * n_unknown)), np.zeros(0), 0.0, np.zeros(0))
-    tau, start = approach.closest, approach.start
+    tau, rate = approach.closest, approach.rate
     blocks = _row_blocks(approach.motion, _ContactCorners.of(contacts).twice(),
                          np.concatenate([np.zeros(m), tau]))
-    matrix = point_rows(2 * m, n_unknown, blocks)
-    rate = (ramp_end(start, dt, push_speed) - start) / dt
+    matrix = point_rows(2 * m, n_unknown_points(model), blocks)
     # at an interior minimiser of psi / tau the right-hand side is exactly ``rate``; the
     # minimum keeps it there where the sampled minimiser is inexact or on the boundary
     closest = matrix[m:] @ approach.about - approach.margin / tau
-    rhs = np.concatenate([rate, np.minimum(closest, rate)])
-    return ApproachRows(matrix, rhs, approach.violation, tau)
-
-
-def approach_rows(model: Model, points: FloatArray, contacts: Contacts, about: FloatArray,
-                  dt: float, push_speed: float) -> ApproachRows:
-    """The contact rows linearised along the motion of the unknowns ``about``.
-
-    :func:`closest_approach` then :func:`rows_along`.
-    """
-    approach = closest_approach(model, points, contacts, about, dt, push_speed)
-    return rows_along(model, contacts, approach, dt, push_speed)
+    return ApproachRows(matrix, np.concatenate([rate, np.minimum(closest, rate)]))
 
 
 def _closest_approach(motion: BodyMotion, contacts: Contacts, dt: float,
                       push_speed: float) -> tuple[FloatArray, FloatArray, FloatArray, float]:
-    """Each contact's ``tau*`` (s), ``psi(tau*)`` (m), start gap ``phi_0`` (m), and the violation.
+    """Each contact's ``tau*`` (s), ``psi(tau*)`` (m), ramp rate ``r'`` (m/s), the violation.
 
     ``tau*`` minimises the mean rate ``psi(tau) / tau`` (m/s; ``psi'(0)`` at ``tau = 0``),
     sampled on :data:`SAMPLES` intervals and refined by a parabola.  The violation (m) is
@@ -206,7 +186,7 @@ def _closest_approach(motion: BodyMotion, contacts: Contacts, dt: float,
     take = refined_margin / refined < mean_rate[rows, best]
     violation = float(max(0.0, -np.min(margin), -np.min(refined_margin)))
     return (np.where(take, refined, sampled_tau), np.where(take, refined_margin, sampled_margin),
-            start, violation)
+            ramp_rate, violation)
 
 
 def _row_blocks(motion: BodyMotion, c: _ContactCorners,

@@ -17,6 +17,7 @@ The motion is linear in ``v`` through ``v_c`` and ``omega``, and homogeneous:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -40,7 +41,7 @@ class BodyMotion:
     """Corners ``(B, 4, 2)`` about the centroid at angle 0 (m)."""
     n_boxes: int
 
-    @property
+    @cached_property
     def fitted(self) -> FloatArray:
         """Corner offsets ``(B, 4, 2)`` (m) of the fitted bodies at the start of the step."""
         return _rotated(self.angle, self.reference)

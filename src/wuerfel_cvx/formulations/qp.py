@@ -214,11 +214,13 @@ def declare_qp(
     *,
     ineq_upper: FloatArray | None = None,
     cost_factor: sp.csr_array | None = None,
+    linearised_about: FloatArray | None = None,
 ) -> StepQP:
     """The QP ``min sum w (x - t)^2 + |F (x - t)|^2  s.t.  E x == e, h <= G x <= u``.
 
     ``ineq_rhs`` is ``h``; ``ineq_upper`` (``u``, ``+inf`` entries for one-sided rows) and
-    ``cost_factor`` (``F``) are optional.  It is declared in cvxpy lazily.  ``E``, ``G`` and
+    ``cost_factor`` (``F``) are optional, as is ``linearised_about`` (the unknowns the rows
+    were linearised about, for further passes).  It is declared in cvxpy lazily.  ``E``, ``G`` and
     ``F`` are stored in canonical CSR form (sorted indices, no duplicates), so equal
     sparsity patterns have equal index arrays.  Raises ``ValueError`` if ``ineq_upper`` does
     not have one entry per row of ``G`` or ``F`` not one column per unknown.
@@ -233,7 +235,8 @@ def declare_qp(
                   eq_rhs=eq_rhs, ineq_matrix=_canonical(ineq_matrix), ineq_rhs=ineq_rhs,
                   contacts=contacts,
                   ineq_upper=None if ineq_upper is None else np.asarray(ineq_upper, float),
-                  cost_factor=None if cost_factor is None else _canonical(cost_factor))
+                  cost_factor=None if cost_factor is None else _canonical(cost_factor),
+                  linearised_about=linearised_about)
 
 
 def _canonical(matrix: sp.csr_array) -> sp.csr_array:

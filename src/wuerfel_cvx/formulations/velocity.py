@@ -49,7 +49,7 @@ import scipy.sparse as sp
 from ..contacts import Contacts, find_contacts
 from ..geometry import FloatArray
 from ..model import Model, State
-from .approach import approach_rows, closest_approach, rows_along
+from .approach import closest_approach, rows_along
 from .motion import rigid_step
 from .qp import StepQP, declare_qp, point_rows
 from .rows import (
@@ -96,7 +96,6 @@ class VelocityFormulation:
         ``contacts``: ``state``'s contacts within :meth:`body_reach`.
         """
         points, velocities = state.points, state.velocities
-        all_points = model.all_points(points)
         n_unknown = n_unknown_points(model)
 
         weights = unknown_masses(model)
@@ -114,14 +113,15 @@ class VelocityFormulation:
                                  np.zeros(held_matrix.shape[0] if held_matrix is not None else 0)])
 
         if self.linearisation == "start":
-            ineq_matrix, ineq_rhs = self.contact_rows(model, all_points, contacts, dt)
+            ineq_matrix, ineq_rhs = self.contact_rows(model, model.all_points(points),
+                                                      contacts, dt)
         else:
-            rows = approach_rows(model, points, contacts, target.ravel(), dt, self.push_speed)
+            approach = closest_approach(model, points, contacts, target.ravel(), dt,
+                                        self.push_speed)
+            rows = rows_along(model, contacts, approach)
             ineq_matrix, ineq_rhs = rows.matrix, rows.rhs
-        qp = declare_qp(weights, target.ravel(), eq_matrix, eq_rhs, ineq_matrix, ineq_rhs,
-                        contacts)
-        qp.linearised_about = target.ravel()
-        return qp
+        return declare_qp(weights, target.ravel(), eq_matrix, eq_rhs, ineq_matrix, ineq_rhs,
+                          contacts, linearised_about=target.ravel())
 
     def refine(self, model: Model, state: State, previous: StepQP, solution: FloatArray,
                dt: float, passes: int) -> StepQP | None:
@@ -147,11 +147,10 @@ class VelocityFormulation:
         if passes >= 2 and last is not None:
             approach = closest_approach(model, state.points, contacts, 0.5 * (solution + last),
                                         dt, self.push_speed)
-        rows = rows_along(model, contacts, approach, dt, self.push_speed)
-        qp = declare_qp(previous.weights, previous.target, previous.eq_matrix,
-                        previous.eq_rhs, rows.matrix, rows.rhs, contacts)
-        qp.linearised_about = approach.about
-        return qp
+        rows = rows_along(model, contacts, approach)
+        return declare_qp(previous.weights, previous.target, previous.eq_matrix,
+                          previous.eq_rhs, rows.matrix, rows.rhs, contacts,
+                          linearised_about=approach.about)
 
     def _reached_contacts(self, model: Model, state: State, contacts: Contacts,
                           solution: FloatArray, dt: float) -> Contacts:
