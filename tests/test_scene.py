@@ -214,8 +214,8 @@ BAD_INPUT: list[tuple[str, str | bytes | None, str | None, str]] = [
     ("not-utf8", b"name = \"caf\xe9\"\n" + _SQ.encode(), None, "not UTF-8"),
     ("unknown-top-level-key", "colour = 'red'\n" + _SQ, "colour", "unknown key 'colour'"),
     ("unknown-square-key", _SQ + "spin = 1.0\n", "squares[0].spin", "unknown key 'spin'"),
-    ("unknown-table-key", _TB + "friction = 0.5\n" + _SQ, "tables[0].friction",
-     "unknown key 'friction'"),
+    ("unknown-table-key", _TB + "restitution = 0.5\n" + _SQ, "tables[0].restitution",
+     "unknown key 'restitution'"),
     ("unknown-key-second-square", _SQ + "[[squares]]\ncenter = [5, 2]\nmas = 2\n",
      "squares[1].mas", "unknown key 'mas'"),
     ("missing-square-center", "[[squares]]\nsize = 1.0\n", "squares[0].center",
@@ -252,8 +252,8 @@ BAD_INPUT: list[tuple[str, str | bytes | None, str | None, str]] = [
     ("square-not-table", "squares = [1.0]\n", "squares[0]", "expected a table"),
     ("no-squares", "name = \"empty\"\n", "squares", "at least one square or box"),
     ("several-unknown-keys", _SQ + "sise = 1.0\ncolour = 'red'\n", "squares[0]",
-     "unknown keys 'colour', 'sise' (allowed: angle, angular_velocity, center, mass, size, "
-     "velocity)"),
+     "unknown keys 'colour', 'sise' (allowed: angle, angular_velocity, center, friction, "
+     "mass, size, velocity)"),
     ("several-unknown-top-level-keys", "colour = 'red'\nfriction = 0.5\n" + _SQ, None,
      "unknown keys 'colour', 'friction' (allowed: allow_overlap, boxes, gravity, name, "
      "squares, tables)"),
@@ -306,7 +306,7 @@ def test_several_unknown_keys_are_all_named_on_one_line_with_printable_quoting(
     assert info.value.field == "squares[0]"
     # sorted as written; bare keys in single quotes, the others escaped in double quotes
     assert info.value.reason == ('unknown keys "", \'zz\', "\\u202eevil" (allowed: angle, '
-                                 "angular_velocity, center, mass, size, velocity)")
+                                 "angular_velocity, center, friction, mass, size, velocity)")
     assert "\n" not in str(info.value) and "\u202e" not in str(info.value)
 
 

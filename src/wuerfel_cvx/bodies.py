@@ -67,6 +67,8 @@ class Square(_RigidRectangle):
     """Velocity of the centre (m/s)."""
     angular_velocity: float = 0.0
     """Angular velocity (rad/s, counter-clockwise)."""
+    friction: float = 0.0
+    """Coulomb friction coefficient (1), >= 0; a contact's is ``sqrt(mu_a mu_b)``."""
 
     @property
     def width(self) -> float:
@@ -95,6 +97,8 @@ class Box(_RigidRectangle):
     """Velocity of the centre (m/s)."""
     angular_velocity: float = 0.0
     """Angular velocity (rad/s, counter-clockwise)."""
+    friction: float = 0.0
+    """Coulomb friction coefficient (1), >= 0; a contact's is ``sqrt(mu_a mu_b)``."""
 
     @property
     def width(self) -> float:
@@ -126,6 +130,8 @@ class Table:
     """Width and height (m)."""
     angle: float = 0.0
     """Orientation (rad, counter-clockwise)."""
+    friction: float = 0.0
+    """Coulomb friction coefficient (1), >= 0; a contact's is ``sqrt(mu_a mu_b)``."""
 
     def corners(self) -> FloatArray:
         """Corner positions ``(4, 2)`` (m), counter-clockwise."""

@@ -136,7 +136,8 @@ class Scene:
             "gravity": list(self.gravity),
             "allow_overlap": self.allow_overlap,
             "tables": [
-                {"center": list(t.center), "size": list(t.size), "angle": t.angle}
+                _with_friction({"center": list(t.center), "size": list(t.size),
+                                "angle": t.angle}, t.friction)
                 for t in self.tables
             ],
             "squares": [_body_dict(s, s.size) for s in self.squares],
@@ -173,6 +174,14 @@ class Scene:
 
 def _body_dict(body: MovingBody, size: float | list[float]) -> dict[str, Any]:
     """A square's or a box's TOML table, its keys in the order of the schema."""
-    return {"center": list(body.center), "size": size, "angle": body.angle,
-            "mass": body.mass, "velocity": list(body.velocity),
-            "angular_velocity": body.angular_velocity}
+    return _with_friction({"center": list(body.center), "size": size, "angle": body.angle,
+                           "mass": body.mass, "velocity": list(body.velocity),
+                           "angular_velocity": body.angular_velocity}, body.friction)
+
+
+def _with_friction(entry: dict[str, Any], friction: float) -> dict[str, Any]:
+    """``entry`` with its ``friction`` key, written only when it is not 0.
+
+    A frictionless scene keeps the seed's schema.
+    """
+    return {**entry, "friction": friction} if friction else entry

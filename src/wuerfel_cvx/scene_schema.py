@@ -58,6 +58,9 @@ LIMITS: dict[str, Limit] = {
     "speed": Limit(1e6, unit="m/s"),
     "angular_speed": Limit(1e6, unit="rad/s"),
     "acceleration": Limit(1e6, unit="m/s^2"),
+    # A friction coefficient scales the tangential rows of the friction cone; beyond 100
+    # the cone is a wall to any slip, and larger values only spread the rows' scales.
+    "friction": Limit(100.0),
 }
 """Ranges of the numbers in a scene; beyond them a step's data is no longer finite or
 meaningful, so such a scene is an :class:`InputError` rather than a failed step.  Every
@@ -65,9 +68,10 @@ side of a square, box or table is a ``"length"``."""
 
 SCENE_KEYS = frozenset({"name", "gravity", "allow_overlap", "tables", "squares", "boxes"})
 """The keys of a scene file's top level."""
-MOVING_KEYS = frozenset({"center", "size", "angle", "mass", "velocity", "angular_velocity"})
+MOVING_KEYS = frozenset({"center", "size", "angle", "mass", "velocity", "angular_velocity",
+                         "friction"})
 """The keys of a ``[[squares]]`` or ``[[boxes]]`` entry."""
-TABLE_KEYS = frozenset({"center", "size", "angle"})
+TABLE_KEYS = frozenset({"center", "size", "angle", "friction"})
 """The keys of a ``[[tables]]`` entry."""
 
 
@@ -197,6 +201,7 @@ def parse_scene(data: Mapping[str, Any], source: str) -> dict[str, Any]:
             center=_vector(entry["center"], source, f"{where}.center"),
             size=_vector(entry.get("size", [20.0, 1.0]), source, f"{where}.size"),
             angle=_number(entry.get("angle", 0.0), source, f"{where}.angle"),
+            friction=_friction(entry.get("friction", 0.0), source, f"{where}.friction"),
         ) for where, entry in _entries(data, "tables", TABLE_KEYS, source))
     squares = tuple(
         Square(size=_positive(entry.get("size", 1.0), source, f"{where}.size"),
@@ -219,7 +224,17 @@ def _motion(entry: Mapping[str, Any], source: str, where: str) -> dict[str, Any]
         "velocity": _vector(entry.get("velocity", [0.0, 0.0]), source, f"{where}.velocity"),
         "angular_velocity": _number(entry.get("angular_velocity", 0.0), source,
                                     f"{where}.angular_velocity"),
+        "friction": _friction(entry.get("friction", 0.0), source, f"{where}.friction"),
     }
+
+
+def _friction(value: Any, source: str, where: str) -> float:
+    """A friction coefficient: a finite number, 0 to ``LIMITS["friction"]``."""
+    number = _number(value, source, where)
+    if number < 0.0:
+        raise InputError(f"must be non-negative, got {value}", source=source, field=where)
+    _within(number, "friction", source, where)
+    return number
 
 
 # ---------------------------------------------------------------------- checking
@@ -239,6 +254,7 @@ def check_scene(scene: Scene) -> None:
                              field=where)
         _vector_within(tb.center, "position", source, f"{where}.center")
         _number(tb.angle, source, f"{where}.angle")
+        _friction(tb.friction, source, f"{where}.friction")
         _sides_within(tb.size, source, f"{where}.size")
     if not scene.allow_overlap:
         _check_no_overlap(scene)
@@ -264,6 +280,7 @@ def _check_moving(bodies: Sequence[MovingBody], kind: type[Square] | type[Box], 
                     f"{where}.size")
         _within(_positive(body.mass, source, f"{where}.mass"), "mass", source,
                 f"{where}.mass")
+        _friction(body.friction, source, f"{where}.friction")
 
 
 def _check_no_overlap(scene: Scene) -> None:

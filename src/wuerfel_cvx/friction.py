@@ -1,0 +1,35 @@
+"""Friction coefficients of bodies and of their contacts (the groundwork of issue 13).
+
+Each square, box and table carries a Coulomb coefficient ``friction`` (1, >= 0, default 0;
+the TOML key of the same name).  A contact between bodies ``a`` and ``b`` takes Box2D's
+mixing rule ``sqrt(mu_a mu_b)``: a frictionless body makes every contact it has
+frictionless, and two equal coefficients mix to themselves.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .contacts import Contacts
+from .geometry import FloatArray
+from .scene import Scene
+
+
+def body_friction(scene: Scene) -> FloatArray:
+    """Coefficient of every body ``(n_bodies,)``: the moving bodies, then the tables."""
+    bodies = [*scene.bodies, *scene.tables]
+    return np.array([body.friction for body in bodies], dtype=np.float64)
+
+
+def contact_friction(friction: FloatArray, contacts: Contacts) -> FloatArray:
+    """Coefficient of each contact ``(len(contacts),)``: ``sqrt(mu_point mu_edge)``.
+
+    ``friction`` is :func:`body_friction`'s array for the model the contacts index.
+    """
+    return np.asarray(np.sqrt(friction[contacts.point_body] * friction[contacts.edge_body]),
+                      dtype=np.float64)
+
+
+def is_frictionless(scene: Scene) -> bool:
+    """Whether no body of ``scene`` has friction (the seed's model)."""
+    return not np.any(body_friction(scene))
