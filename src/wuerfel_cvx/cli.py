@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from .errors import InputError, Interrupted, StepFailure
-from .formulations import FORMULATIONS
+from .formulations import FORMULATIONS, FRICTION_MODELS
 from .library import ENTRIES
 from .simulate import simulate
 from .sleep import SleepSettings
@@ -42,6 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help=f"solver name, case-insensitive (known: {', '.join(SOLVERS)})")
     run.add_argument("--formulation", default="velocity",
                      help=f"formulation ({', '.join(FORMULATIONS)}; default velocity)")
+    run.add_argument("--friction-model", default=FRICTION_MODELS[0],
+                     help=f"friction model for scenes with friction ({', '.join(FRICTION_MODELS)}"
+                          f"; default {FRICTION_MODELS[0]})")
     run.add_argument("--tol", default="default",
                      help=f"tolerance preset ({', '.join(TOLERANCE_PRESETS)}) or a number")
     run.add_argument("--table-mass", type=float, default=None,
@@ -147,7 +150,8 @@ def _simulate(args: argparse.Namespace) -> int:
                               formulation=args.formulation, tol=args.tol,
                               table_mass=args.table_mass, progress=progress,
                               sleep=SleepSettings() if args.sleep else None,
-                              islands=args.islands, fallback=args.fallback)
+                              islands=args.islands, fallback=args.fallback,
+                              friction_model=args.friction_model)
     except StepFailure as failure:
         print(f"{PROG}: {failure}", file=sys.stderr)
         _keep_partial(failure.trajectory, args, progress, "before it")

@@ -1,4 +1,4 @@
-"""Friction coefficients of bodies and of their contacts (the groundwork of issue 13).
+"""Friction coefficients of bodies and of their contacts.
 
 Each square, box and table carries a Coulomb coefficient ``friction`` (1, >= 0, default 0;
 the TOML key of the same name).  A contact between bodies ``a`` and ``b`` takes Box2D's
@@ -8,11 +8,15 @@ frictionless, and two equal coefficients mix to themselves.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from .contacts import Contacts
 from .geometry import FloatArray
 from .scene import Scene
+
+if TYPE_CHECKING:
+    from .contacts import Contacts
 
 
 def body_friction(scene: Scene) -> FloatArray:
@@ -24,7 +28,8 @@ def body_friction(scene: Scene) -> FloatArray:
 def contact_friction(friction: FloatArray, contacts: Contacts) -> FloatArray:
     """Coefficient of each contact ``(len(contacts),)``: ``sqrt(mu_point mu_edge)``.
 
-    ``friction`` is :func:`body_friction`'s array for the model the contacts index.
+    ``friction`` is :func:`body_friction`'s array (:attr:`Model.friction
+    <wuerfel_cvx.model.Model.friction>`) for the model the contacts index.
     """
     return np.asarray(np.sqrt(friction[contacts.point_body] * friction[contacts.edge_body]),
                       dtype=np.float64)

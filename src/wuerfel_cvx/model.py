@@ -11,12 +11,13 @@ equality ("Tischrestriktion").
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError
+from .friction import body_friction
 from .geometry import FloatArray, rectangle_corners
 from .scene import Scene
 
@@ -53,6 +54,8 @@ class Model:
     """Gravitational acceleration ``(2,)`` (m/s^2)."""
     table_mass: float | None = None
     """``None``: tables are constants.  A number (kg per corner): the seed's heavy table."""
+    friction: FloatArray = field(default_factory=lambda: np.zeros(0))
+    """Coulomb coefficient (1) of every body ``(n + t,)``: the boxes, then the tables."""
 
     @classmethod
     def from_scene(
@@ -77,6 +80,7 @@ class Model:
             point_masses=masses, rods=rods, rod_lengths=lengths,
             table_points=scene.table_points(), reference_corners=reference,
             gravity=np.asarray(scene.gravity, dtype=np.float64), table_mass=table_mass,
+            friction=body_friction(scene),
         )
 
     def subset(self, squares: IntArray) -> Model:
@@ -94,6 +98,7 @@ class Model:
             point_masses=self.point_masses[corners], rods=(blocks + shift).reshape(-1, 2),
             rod_lengths=self.rod_lengths.reshape(self.n_boxes, -1)[squares].ravel(),
             reference_corners=self.reference_corners[squares],
+            friction=np.concatenate([self.friction[squares], self.friction[self.n_boxes:]]),
         )
 
     @property

@@ -64,17 +64,19 @@ def physical_metrics(model: Model, state: State, penetration: float) -> dict[str
 
 def run_info(scene: Scene, *, formulation: str, solver: str, tol: str, dt: float,
              steps: int, table_mass: float | None = None, extra_rod: bool = False,
-             fallback: Sequence[str] = (),
+             fallback: Sequence[str] = (), friction_model: str | None = None,
              packages: dict[str, str] | None = None) -> dict[str, Any]:
     """A run's ``info``: its scene (name and data), model options, settings and versions.
 
     ``packages`` maps a key of ``info["versions"]`` to a distribution whose version it
-    records (``wuerfel_cvx`` is always recorded).
+    records (``wuerfel_cvx`` is always recorded).  ``friction_model`` is ``None`` for a
+    formulation without friction.
     """
     return {
         "scene": scene.name, "scene_data": scene.to_dict(), "formulation": formulation,
         "solver": solver, "tol": tol, "dt": float(dt), "steps": int(steps),
         "table_mass": table_mass, "extra_rod": extra_rod, "fallback": list(fallback),
+        "friction_model": friction_model,
         "versions": {key: package_version(package) for key, package in
                      {"wuerfel_cvx": "wuerfel_cvx", **(packages or {})}.items()},
         "compiled_structures": None, "steps_reusing_a_compiled_structure": None,

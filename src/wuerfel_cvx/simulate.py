@@ -58,6 +58,7 @@ def simulate(
     sleep: SleepSettings | None = None,
     islands: bool = False,
     fallback: Sequence[str] = (),
+    friction_model: str = "ccp",
 ) -> Trajectory:
     """Simulate ``steps`` steps of ``dt`` seconds, one QP per step; the trajectory.
 
@@ -67,7 +68,9 @@ def simulate(
 
     Parameters
     ----------
-    scene, dt, solver, formulation, tol, table_mass, extra_rod, compiled, sleep, islands, fallback
+    scene, dt, solver, formulation, tol, table_mass, extra_rod, compiled, sleep, islands
+        As for :class:`~wuerfel_cvx.simulation.Simulation`; ``scene`` may be a name or path.
+    fallback, friction_model
         As for :class:`~wuerfel_cvx.simulation.Simulation`; ``scene`` may be a name or path.
     steps:
         Number of steps, non-negative.
@@ -95,7 +98,8 @@ def simulate(
     scene = resolve_scene(scene)
     simulation = Simulation(scene, dt, solver, formulation, tol, table_mass=table_mass,
                             extra_rod=extra_rod, compiled=compiled, sleep=sleep,
-                            islands=islands, fallback=fallback)
+                            islands=islands, fallback=fallback,
+                            friction_model=friction_model)
     with _noticing_ctrl_c() as ctrl_c:
         try:
             for _ in tqdm(range(int(steps)), disable=not progress, unit="step",

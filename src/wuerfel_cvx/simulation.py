@@ -27,7 +27,13 @@ import numpy as np
 from .compiled import CompiledQPCache
 from .contacts import Contacts, find_contacts
 from .errors import InputError, StepFailure
-from .formulations import Formulation, StepQP, get_formulation
+from .formulations import (
+    FRICTION_MODELS,
+    Formulation,
+    StepQP,
+    get_formulation,
+    with_friction_model,
+)
 from .model import Model, State
 from .recorder import TrajectoryRecorder, physical_metrics, run_info
 from .scene import Scene
@@ -76,6 +82,11 @@ class Simulation:
         Solver registry name, case-insensitive (see :func:`available_solvers`).
     formulation:
         ``"velocity"`` (default) or ``"seed"``, or a formulation object.
+    friction_model:
+        How contacts with friction (the scene's ``friction`` keys) are modelled: ``"ccp"``
+        (default; Anitescu's cone complementarity, one QP) or ``"coulomb"`` (exact Coulomb
+        friction by a fixed point of QPs).  ``velocity`` and ``rigid`` take both; ``seed``
+        has no friction, and a scene with friction is an :class:`InputError` for it.
     tol:
         Tolerance preset (``low``, ``default``, ``high``) or a number.
     table_mass:
@@ -115,13 +126,15 @@ class Simulation:
                  formulation: str | Formulation = "velocity", tol: str | float = "default",
                  *, table_mass: float | None = None, extra_rod: bool = False,
                  compiled: bool = True, sleep: SleepSettings | None = None,
-                 islands: bool = False, fallback: Sequence[str] = ()):
+                 islands: bool = False, fallback: Sequence[str] = (),
+                 friction_model: str = FRICTION_MODELS[0]):
         self.dt = checked_dt(dt)
         self.solvers = [get_solver(name).name for name in (solver, *fallback)]
         tolerance_value(tol)
         self.tol = tol
-        self.formulation = get_formulation(formulation)
         self.model = Model.from_scene(scene, table_mass=table_mass, extra_rod=extra_rod)
+        self.formulation = with_friction_model(get_formulation(formulation), friction_model,
+                                               bool(np.any(self.model.friction > 0.0)))
         self.cache = CompiledQPCache() if compiled else None
         self.planner = IslandPlanner(self.model.n_boxes, sleep, islands)
         self.state = State.initial(scene)
@@ -130,7 +143,8 @@ class Simulation:
         self.recorder = TrajectoryRecorder.start(self.model, run_info(
             scene, formulation=self.formulation.name, solver=self.solvers[0], tol=str(tol),
             dt=self.dt, steps=0, table_mass=table_mass, extra_rod=extra_rod,
-            fallback=self.solvers[1:], packages=_packages(self.solvers[0])), self.state)
+            fallback=self.solvers[1:], packages=_packages(self.solvers[0]),
+            friction_model=getattr(self.formulation, "friction_model", None)), self.state)
 
     def step(self) -> StepRecord:
         """Advance by one step of ``dt``; the QPs solved and their solutions.

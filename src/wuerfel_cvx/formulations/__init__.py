@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from functools import partial
 
@@ -42,6 +43,35 @@ def get_formulation(name: str | Formulation) -> Formulation:
     return FORMULATIONS[key]()
 
 
+FRICTION_MODELS: tuple[str, ...] = ("ccp", "coulomb")
+"""Friction models (the first is the default): Anitescu's cone complementarity, and
+exact Coulomb friction by staggered projections (:mod:`wuerfel_cvx.coulomb`)."""
+
+
+def with_friction_model(formulation: Formulation, friction_model: str,
+                        has_friction: bool) -> Formulation:
+    """``formulation`` with ``friction_model`` (case-insensitive), or :class:`InputError`.
+
+    A formulation without friction (``seed``) takes the default ``"ccp"`` only for a scene
+    without friction (where every model is the frictionless one).
+    """
+    key = str(friction_model).strip().lower()
+    if key not in FRICTION_MODELS:
+        raise InputError(f"unknown friction model '{friction_model}' (available: "
+                         f"{', '.join(FRICTION_MODELS)})", field="friction_model")
+    if not hasattr(formulation, "friction_model"):
+        if has_friction or key != FRICTION_MODELS[0]:
+            raise InputError(f"the '{formulation.name}' formulation has no friction; "
+                             f"friction_model '{key}' needs 'velocity' or 'rigid'"
+                             + (" (the scene has friction)" if has_friction else ""),
+                             field="friction_model")
+        return formulation
+    if formulation.friction_model == key:
+        return formulation
+    replaced: Formulation = dataclasses.replace(formulation, friction_model=key)  # type: ignore[type-var]
+    return replaced
+
+
 def step_qp(formulation: Formulation, model: Model, state: State, dt: float) -> StepQP:
     """The QP of one step from ``state`` over ``dt`` (s): contacts searched, then built.
 
@@ -52,7 +82,6 @@ def step_qp(formulation: Formulation, model: Model, state: State, dt: float) -> 
     return formulation.build(model, state, contacts, dt)
 
 
-__all__ = ["FORMULATIONS", "SEED_BAUMGARTE_RATE", "Formulation", "RigidFormulation",
-           "SeedFormulation", "StepQP",
-           "VelocityFormulation",
-           "declare_qp", "get_formulation", "rigid_step", "step_qp"]
+__all__ = ["FORMULATIONS", "FRICTION_MODELS", "SEED_BAUMGARTE_RATE", "Formulation",
+           "RigidFormulation", "SeedFormulation", "StepQP", "VelocityFormulation",
+           "declare_qp", "get_formulation", "rigid_step", "step_qp", "with_friction_model"]

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import cvxpy as cp
 import numpy as np
@@ -38,6 +39,9 @@ import scipy.sparse as sp
 
 from ..contacts import Contacts
 from ..geometry import FloatArray
+
+if TYPE_CHECKING:
+    from .cone import ConeRows
 
 
 @dataclass(frozen=True)
@@ -77,6 +81,8 @@ class StepQP:
     linearised_about: FloatArray | None = None
     """The unknowns the rows were linearised about, for a formulation that re-linearises
     them in further passes (``None``: not recorded)."""
+    cones: ConeRows | None = None
+    """Where the contacts' friction cones are among the rows (``None``: no friction)."""
 
     def declared(self) -> DeclaredQP:
         """The QP as its own cvxpy problem (declared once, on first call)."""
@@ -215,12 +221,14 @@ def declare_qp(
     ineq_upper: FloatArray | None = None,
     cost_factor: sp.csr_array | None = None,
     linearised_about: FloatArray | None = None,
+    cones: ConeRows | None = None,
 ) -> StepQP:
     """The QP ``min sum w (x - t)^2 + |F (x - t)|^2  s.t.  E x == e, h <= G x <= u``.
 
     ``ineq_rhs`` is ``h``; ``ineq_upper`` (``u``, ``+inf`` entries for one-sided rows) and
     ``cost_factor`` (``F``) are optional, as is ``linearised_about`` (the unknowns the rows
-    were linearised about, for further passes).  It is declared in cvxpy lazily.  ``E``, ``G`` and
+    were linearised about, for further passes) and ``cones`` (where the friction cones' rows
+    are).  It is declared in cvxpy lazily.  ``E``, ``G`` and
     ``F`` are stored in canonical CSR form (sorted indices, no duplicates), so equal
     sparsity patterns have equal index arrays.  Raises ``ValueError`` if ``ineq_upper`` does
     not have one entry per row of ``G`` or ``F`` not one column per unknown.
@@ -236,7 +244,7 @@ def declare_qp(
                   contacts=contacts,
                   ineq_upper=None if ineq_upper is None else np.asarray(ineq_upper, float),
                   cost_factor=None if cost_factor is None else _canonical(cost_factor),
-                  linearised_about=linearised_about)
+                  linearised_about=linearised_about, cones=cones)
 
 
 def _canonical(matrix: sp.csr_array) -> sp.csr_array:

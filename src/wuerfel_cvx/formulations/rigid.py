@@ -12,13 +12,15 @@ corner masses (``sum_i m_i r_i = 0``)::
 masses), ``u0`` the mean corner velocity and ``omega0 = sum_i m_i r_i x v_i0 / I``.  The
 contact rows are the velocity formulation's rows times the corner map, so the two
 formulations pose the same QP whenever the rods hold exactly: this one is the reduced
-model for comparison.  Positions follow the rigid motion (as the velocity formulation's
-default update), so rod lengths hold to round-off.  Fixed tables only.
+model for comparison (friction cones included, :mod:`~wuerfel_cvx.formulations.cone`).
+Positions follow the rigid motion (as the velocity formulation's default update), so rod
+lengths hold to round-off.  Fixed tables only.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
@@ -28,6 +30,7 @@ from ..errors import InputError
 from ..geometry import FloatArray, cross, rot90
 from ..model import Model, State
 from .base import SinglePass
+from .cone import contact_cones
 from .motion import rigid_step
 from .qp import StepQP, declare_qp
 from .velocity import VelocityFormulation
@@ -41,6 +44,8 @@ class RigidFormulation(SinglePass):
     """Fraction of a penetration removed per step (1)."""
     contact_margin: float = 0.01
     """Distance (m) within which a point-edge pair is always constrained."""
+    friction_model: Literal["ccp", "coulomb"] = "ccp"
+    """How contacts with friction are modelled (:mod:`~wuerfel_cvx.formulations.cone`)."""
     name: str = "rigid"
 
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
@@ -59,7 +64,13 @@ class RigidFormulation(SinglePass):
         velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin,
                                        linearisation="start")
         points = state.points
-        corner_rows, rhs = velocity.contact_rows(model, model.all_points(points), contacts, dt)
+        all_points = model.all_points(points)
+        corner_rows, rhs = velocity.contact_rows(model, all_points, contacts, dt)
+        corner_rows, rhs, cones = contact_cones(model, all_points, contacts, corner_rows, rhs,
+                                                np.arange(len(contacts)),
+                                                edges=self.friction_model == "ccp")
+        if cones is not None:
+            cones = replace(cones, slip=body_rows(cones.slip, points))
         masses = model.point_masses.reshape(-1, 4)
         # from the exact squares, not the current corners: constant weights keep the
         # compiled-problem cache's key constant
@@ -69,7 +80,7 @@ class RigidFormulation(SinglePass):
         target = np.column_stack([centre_velocity + dt * model.gravity, spin]).ravel()
         no_rows = sp.csr_array((0, weights.shape[0]))
         return declare_qp(weights, target, no_rows, np.zeros(0),
-                          body_rows(corner_rows, points), rhs, contacts)
+                          body_rows(corner_rows, points), rhs, contacts, cones=cones)
 
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
         """The corner velocities ``(4 n, 2)`` (m/s) of the new body velocities."""

@@ -14,7 +14,9 @@ box keeps its spin.  With ``position_update="linear"`` positions are ``p + dt v+
 only Baumgarte holds the rods, which drift by about ``(omega dt)^2 / 2`` per step.
 Contacts are collected within ``contact_margin`` plus what the bodies' speeds can cover
 in one step, so fast landings are caught before they cross.  This is Anitescu-Potra time
-stepping without friction; restitution is zero.
+stepping; restitution is zero.  Contacts with friction (the scene's ``friction`` keys)
+take the friction cone's two edges in place of each normal row with
+``friction_model="ccp"`` (:mod:`~wuerfel_cvx.formulations.cone`).
 
 Contact rows, ``linearisation="closest-approach"`` (the default, ``velocity``)
     Each contact's gap is followed along the step's rigid motion and must stay above a
@@ -50,6 +52,7 @@ from ..contacts import Contacts, find_contacts
 from ..geometry import FloatArray
 from ..model import Model, State
 from .approach import closest_approach, rows_along
+from .cone import ConeRows, contact_cones
 from .motion import rigid_step
 from .qp import StepQP, declare_qp, point_rows
 from .rows import (
@@ -81,6 +84,8 @@ class VelocityFormulation:
     gap_tolerance: float = 1e-6
     """Closest-approach rows: a pass is accepted once no contact's gap falls below its
     ramp by more than this (m) along the pass's motion."""
+    friction_model: Literal["ccp", "coulomb"] = "ccp"
+    """How contacts with friction are modelled (:mod:`~wuerfel_cvx.formulations.cone`)."""
     name: str = "velocity"
 
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
@@ -120,8 +125,23 @@ class VelocityFormulation:
                                         self.push_speed)
             rows = rows_along(model, contacts, approach)
             ineq_matrix, ineq_rhs = rows.matrix, rows.rhs
+        ineq_matrix, ineq_rhs, cones = self._cones(model, points, contacts, ineq_matrix,
+                                                   ineq_rhs)
         return declare_qp(weights, target.ravel(), eq_matrix, eq_rhs, ineq_matrix, ineq_rhs,
-                          contacts, linearised_about=target.ravel())
+                          contacts, linearised_about=target.ravel(), cones=cones)
+
+    def _cones(self, model: Model, points: FloatArray, contacts: Contacts,
+               normal: sp.csr_array, rhs: FloatArray,
+               ) -> tuple[sp.csr_array, FloatArray, ConeRows | None]:
+        """The normal rows with the ``ccp`` friction cones of the contacts with friction.
+
+        With ``friction_model="coulomb"`` the rows stay normal rows; their
+        :class:`ConeRows` tell the fixed point of :mod:`wuerfel_cvx.coulomb` the slips.
+        """
+        row_contact = np.tile(np.arange(len(contacts)), normal.shape[0] // max(len(contacts),
+                                                                                 1))
+        return contact_cones(model, model.all_points(points), contacts, normal, rhs,
+                             row_contact, edges=self.friction_model == "ccp")
 
     def refine(self, model: Model, state: State, previous: StepQP, solution: FloatArray,
                dt: float, passes: int) -> StepQP | None:
@@ -148,9 +168,10 @@ class VelocityFormulation:
             approach = closest_approach(model, state.points, contacts, 0.5 * (solution + last),
                                         dt, self.push_speed)
         rows = rows_along(model, contacts, approach)
+        matrix, rhs, cones = self._cones(model, state.points, contacts, rows.matrix, rows.rhs)
         return declare_qp(previous.weights, previous.target, previous.eq_matrix,
-                          previous.eq_rhs, rows.matrix, rows.rhs, contacts,
-                          linearised_about=approach.about)
+                          previous.eq_rhs, matrix, rhs, contacts,
+                          linearised_about=approach.about, cones=cones)
 
     def _reached_contacts(self, model: Model, state: State, contacts: Contacts,
                           solution: FloatArray, dt: float) -> Contacts:
