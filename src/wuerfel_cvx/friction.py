@@ -8,6 +8,7 @@ frictionless, and two equal coefficients mix to themselves.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -38,3 +39,23 @@ def contact_friction(friction: FloatArray, contacts: Contacts) -> FloatArray:
 def is_frictionless(scene: Scene) -> bool:
     """Whether no body of ``scene`` has friction (the seed's model)."""
     return not np.any(body_friction(scene))
+
+
+@dataclass(frozen=True)
+class ContactForces:
+    """A step's contact impulses and slips, one entry per contact, whatever the model.
+
+    The friction models' common answer, from which the physical criteria are measured
+    (:mod:`wuerfel_cvx.criteria`).
+    """
+
+    coefficient: FloatArray
+    """Friction coefficient ``mu`` (1)."""
+    normal: FloatArray
+    """Normal impulse ``lambda_n`` (N s), >= 0 up to the solver's tolerance."""
+    friction: FloatArray
+    """Friction impulse ``lambda_t`` (N s) along the contact's tangent (the edge's
+    direction, :func:`~wuerfel_cvx.formulations.cone.slip_rows`)."""
+    slip: FloatArray
+    """Slip ``s`` (m/s) after the step: the contact point's velocity along the tangent
+    relative to the edge."""

@@ -71,7 +71,7 @@ def simulate(
     scene, dt, solver, formulation, tol, table_mass, extra_rod, compiled, sleep, islands
         As for :class:`~wuerfel_cvx.simulation.Simulation`; ``scene`` may be a name or path.
     fallback, friction_model
-        As for :class:`~wuerfel_cvx.simulation.Simulation`; ``scene`` may be a name or path.
+        As for :class:`~wuerfel_cvx.simulation.Simulation`.
     steps:
         Number of steps, non-negative.
     progress:
