@@ -28,7 +28,8 @@ METRIC_COLUMNS = (
     "step_time_s",
     "iterations", "primal_residual", "dual_residual", "complementarity", "rod_drift",
     "penetration_m", "kinetic_energy_J", "potential_energy_J", "total_energy_J", "path",
-    "passes",
+    "passes", "signorini_violation_Nsm", "coulomb_violation_Ns", "dissipation_violation_J",
+    "friction_work_J",
 )
 """Columns of :attr:`Trajectory.metrics`, one row per step (state after the step).
 
@@ -46,7 +47,9 @@ step's island QPs went different ways; ``none`` when no QP was solved, ``peer`` 
 peer engine).  ``passes`` is the number of QPs solved one after another for the step (the
 most of any island): 1 for a single-pass formulation, up to ``max_passes`` for the
 closest-approach Gauss-Newton passes of ``velocity``, 0 for a step that solved none; its
-times and ``iterations`` are those passes' sums.
+times and ``iterations`` are those passes' sums.  The last four are the physical criteria
+of the step's contact impulses (:mod:`wuerfel_cvx.criteria`; NaN for a step without
+friction).
 """
 
 

@@ -26,6 +26,7 @@ import numpy as np
 
 from .compiled import CompiledQPCache
 from .contacts import Contacts, find_contacts
+from .criteria import ccp_forces, combine_criteria, contact_criteria, gaps_after
 from .errors import InputError, StepFailure
 from .formulations import (
     FRICTION_MODELS,
@@ -159,14 +160,17 @@ class Simulation:
             return self._sleep(step, started)
         qps, solutions, primary_statuses, parts = [], [], [], []
         build_time, mark = self._search_time, started
-        most_passes = 0
+        most_passes, criteria = 0, []
         for boxes in plan.groups:
             model, state, contacts = restrict(self.model, self.state, self.contacts, boxes)
             qp = self.formulation.build(model, state, contacts, self.dt)
             build_time += time.perf_counter() - mark
             qp, solution, primary, passes = self._solve_passes(step, model, state, qp)
             most_passes = max(most_passes, passes)
-            parts.append((boxes, self.formulation.advance(model, state, solution.x, self.dt)))
+            moved = self.formulation.advance(model, state, solution.x, self.dt)
+            parts.append((boxes, moved))
+            criteria.append(contact_criteria(ccp_forces(qp, solution), gaps_after(
+                model.all_points(moved.points), qp.contacts)))
             qps.append(qp)
             solutions.append(solution)
             primary_statuses.append(primary)
@@ -179,7 +183,8 @@ class Simulation:
         combined = combine_solutions(solutions)
         primary_status = first_failed_status(solutions, primary_statuses, combined)
         self._advance_to(step, state, _solved_row(qps, combined, primary_status, build_time,
-                                                  step_time, most_passes))
+                                                  step_time, most_passes)
+                         | combine_criteria(criteria))
         return StepRecord(step, tuple(qps), tuple(solutions))
 
     def trajectory(self) -> Trajectory:
@@ -268,7 +273,8 @@ def _asleep_row(step_time: float) -> dict[str, Any]:
     nothing_solved = StepSolution(
         x=np.zeros(0), solver="", status=ASLEEP, residuals=Residuals(0.0, 0.0, 0.0),
         verified=True, solve_wall_time=0.0, solver_time=np.nan, iterations=0, path="none")
-    return _solved_row([], nothing_solved, ASLEEP, step_time, step_time, 0)
+    return (_solved_row([], nothing_solved, ASLEEP, step_time, step_time, 0)
+            | combine_criteria([]))
 
 
 def checked_steps(steps: int) -> int:
