@@ -22,8 +22,9 @@ Maximum dissipation (friction opposes the slip, at the cone's edge while slippin
 ``friction_work_J`` is the friction impulses' work ``sum lambda_t s`` (J) at the
 velocities after the step, which is never positive when maximum dissipation holds.  The
 criteria are measured from the step's own impulses (the QP's multipliers), so a solver's
-inexactness shows in them at the size of its tolerance.  A step without friction (no
-contact with ``mu > 0``) has no friction cones in its QP: its criteria are NaN.
+inexactness shows in them at the size of its tolerance.  A step without a contact with
+friction (``mu > 0``; a frictionless scene, or a body in flight) has no friction cones in
+its QP: its criteria are NaN.
 """
 
 from __future__ import annotations

@@ -52,6 +52,13 @@ Penetration, ``linearisation="closest-approach"`` (``velocity``, the default)
     the linearised rows.  A step that reaches ``max_passes`` before it is accepted can
     exceed the bound, and is reported.
 
+Friction (``friction_model="ccp"``)
+    The cone rows of :mod:`~wuerfel_cvx.formulations.cone` keep their normal rows'
+    right-hand sides ``h``, so the identity below holds with every cone row among the
+    rows and the bounds are the frictionless ones: the friction impulses' work is part of
+    ``nu . h``, and with complementarity it is ``-mu lambda_n |s| <= 0`` for each sliding
+    contact (checked in ``tests/test_friction_analytic.py``).  Friction never adds energy.
+
 Energy, ``linearisation="start"``
     With ``w = v + dt g`` and the step's multipliers ``nu`` (impulses: the objective has
     no 1/2, so they are half the QP's duals), stationarity gives
