@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .analytic_scenes import launched_box_scene, ladder_scene, slope_scene
 from .errors import InputError
 from .geometry import FloatArray
 from .scene import Box, Scene, Square, Table
@@ -300,6 +301,12 @@ ENTRIES: tuple[SceneEntry, ...] = (
     SceneEntry("corner-overlap-wedged", "a heavy square on a light one, sliding, a corner of "
                "each 1.1e-7 and 3.3e-7 m inside the other (found by a property sweep)",
                _corner_overlap_wedged),
+    SceneEntry("friction-slope", "a square on a table tilted 0.4 rad, mu 0.3: slides with "
+               "g (sin - mu cos)", lambda _: slope_scene()),
+    SceneEntry("friction-slide", "a square launched at 3 m/s on a table, mu 0.5: stops after "
+               "v0^2 / (2 mu g)", lambda _: launched_box_scene()),
+    SceneEntry("ladder", "a 2 x 0.1 m plank leaning at 60 degrees on a frictionless wall, "
+               "floor mu 0.3 (stands above 0.264)", lambda _: ladder_scene()),
 )
 
 _NAME = re.compile(r"^(?P<base>[a-z][a-z-]*?)(?:-(?P<number>\d+))?$")

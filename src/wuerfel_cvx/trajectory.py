@@ -152,7 +152,19 @@ class Trajectory:
                 f"{1e3 * solved['solve_time_s'].median():.2f} ms per step "
                 f"(solver's own {1e3 * solved['solver_time_s'].median():.3f} ms)",
             ]
+            lines += _friction_lines(self.info, m)
         return "\n".join(lines)
+
+
+def _friction_lines(info: dict[str, Any], metrics: pd.DataFrame) -> list[str]:
+    """The summary's line on the friction criteria, if any step had a contact with friction."""
+    columns = ("coulomb_violation_Ns", "dissipation_violation_J", "signorini_violation_Nsm")
+    if not set(columns) <= set(metrics.columns) or metrics[list(columns)].isna().all().all():
+        return []
+    worst = metrics[list(columns)].max()
+    return [f"friction ({info.get('friction_model')}): largest Coulomb excess "
+            f"{worst.iloc[0]:.2e} N s, dissipation gap {worst.iloc[1]:.2e} J, "
+            f"Signorini gap x impulse {worst.iloc[2]:.2e} N s m"]
 
 
 def _count(number: int, noun: str) -> str:
