@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .analytic_scenes import launched_box_scene, ladder_scene, slope_scene
+from .analytic_scenes import ladder_scene, launched_box_scene, slope_scene
 from .errors import InputError
 from .geometry import FloatArray
 from .scene import Box, Scene, Square, Table
