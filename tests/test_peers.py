@@ -60,7 +60,7 @@ AT_REST_SPEED = 1e-3  # m/s: < 1 mm of motion per second, below the depths above
 
 @pytest.fixture(params=("PYMUNK", "MUJOCO"))
 def engine(request: pytest.FixtureRequest) -> str:
-    """pymunk and MuJoCo, each if its package is installed (else skipped)."""
+    """The pymunk and MuJoCo engines, each if its package is installed (else skipped)."""
     name = str(request.param)
     pytest.importorskip(PEER_MODULES[name])
     return name
