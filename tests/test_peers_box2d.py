@@ -8,13 +8,15 @@ by at most ``k FLOAT32_EPS X / 2`` plus the rounding of the rotation's cosine an
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 import pytest
 
 from wuerfel_cvx import Box, Scene, Square
+from wuerfel_cvx.errors import InputError
 from wuerfel_cvx.geometry import FloatArray, rectangle_corners, square_corners
-from wuerfel_cvx.peers import PEER_MODULES, simulate_peer
+from wuerfel_cvx.peers import PEER_MODULES, available_peers, simulate_peer
 from wuerfel_cvx.peers.box2d_peer import SUBSTEPS
 
 pytestmark = pytest.mark.integration
@@ -144,3 +146,11 @@ def test_sleep_is_the_engine_default_and_can_be_turned_off(engine: str, sleep: b
     for _ in range(round(1.5 / DT)):  # at rest for longer than the 0.5 s time to sleep
         world.step()  # type: ignore[attr-defined]
     assert world.awake_bodies() == (0 if sleep else 1)  # type: ignore[attr-defined]
+
+
+def test_box2d_v3_without_its_bindings_is_unavailable(monkeypatch: pytest.MonkeyPatch) -> None:
+    """As on Python 3.11, where box2d-python has no wheel: reported, not an import error."""
+    monkeypatch.setitem(sys.modules, "box2d", None)
+    assert "BOX2D" not in available_peers()
+    with pytest.raises(InputError, match=r"'box2d-python'.*\(Python >= 3\.12\)"):
+        simulate_peer("BOX2D", "single-drop", DT, 1)
