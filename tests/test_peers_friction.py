@@ -109,8 +109,9 @@ def test_box_sticks_when_mu_exceeds_tan_theta(engine: str, mu_box: float,
     else:
         assert np.all(np.abs(v[traj.times >= FIT_FROM]) <= AT_REST_SPEED)
         assert np.max(np.abs(s)) <= RIGID_SETTLE
+    # under 1 % of the slide at mu 0.25 (the product rule's coefficient in the mixed case)
     sliding = 0.5 * G * (math.sin(THETA) - 0.25 * math.cos(THETA)) * DURATION**2
-    assert abs(s[-1]) < 0.01 * sliding  # what the product rule would have slid
+    assert abs(s[-1]) < 0.01 * sliding
 
 
 def test_one_frictionless_body_makes_its_contacts_frictionless(engine: str) -> None:
