@@ -1,13 +1,17 @@
-"""Peer engines: the same named scenes in pymunk (Chipmunk2D) and MuJoCo.
+"""Peer engines: the same named scenes in pymunk (Chipmunk2D), MuJoCo, Box2D v3 and 2.3.
 
     >>> from wuerfel_cvx.peers import simulate_peer
     >>> traj = simulate_peer("pymunk", "tilted-drop", dt=0.01, steps=200)
 
 Each square is one rigid body (3 degrees of freedom) with the package's mass and the
-4-corner-mass moment of inertia ``m s^2 / 2`` (kg m^2); contacts are frictionless and
-inelastic, tables static, ``dt`` and gravity the same as for :func:`wuerfel_cvx.simulate`.
-The engine-specific choices (pymunk's collision slop and iterations, MuJoCo's soft
-contact defaults) are documented in :mod:`.pymunk_peer` and :mod:`.mujoco_peer`.
+4-corner-mass moment of inertia ``m s^2 / 2`` (kg m^2); contacts are inelastic, with each
+contact's friction coefficient ``sqrt(mu_a mu_b)`` from the scene's ``friction`` keys
+(frictionless without them), tables static, ``dt`` and gravity the same as for
+:func:`wuerfel_cvx.simulate`.  How each engine is made to mix friction that way, and the
+engine-specific choices (pymunk's collision slop and iterations, MuJoCo's soft contact
+defaults, Box2D's sub-steps, iterations and sleep) are documented in
+:mod:`.pymunk_peer`, :mod:`.mujoco_peer`, :mod:`.box2d_peer` (Box2D v3.1 through
+``box2d-python``, Python >= 3.12) and :mod:`.pybox2d_peer` (Box2D 2.3 through ``box2d``).
 
 The result is a :class:`~wuerfel_cvx.trajectory.Trajectory` in the package's layout
 (corner points and velocities, the same ``info`` keys and metric columns), so peers and
@@ -18,23 +22,35 @@ the QP simulator can be compared with the same code.  The engines are optional:
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from pathlib import Path
 
 from ..errors import InputError
 from ..scene import Scene
 from ..simulate import resolve_scene
 from ..trajectory import Trajectory
-from . import mujoco_peer, pymunk_peer
+from . import box2d_peer, mujoco_peer, pybox2d_peer, pymunk_peer
 from ._common import PeerWorld, check_run_arguments, package_version, run_peer
 
-PEER_ENGINES: tuple[str, ...] = ("PYMUNK", "MUJOCO")
+PEER_ENGINES: tuple[str, ...] = ("PYMUNK", "MUJOCO", "BOX2D", "PYBOX2D")
 """Names of the peer engines (upper case; arguments are case-insensitive)."""
 
-_PACKAGES = {"PYMUNK": pymunk_peer.PACKAGE, "MUJOCO": mujoco_peer.PACKAGE}
+_PACKAGES = {"PYMUNK": pymunk_peer.PACKAGE, "MUJOCO": mujoco_peer.PACKAGE,
+             "BOX2D": box2d_peer.PACKAGE, "PYBOX2D": pybox2d_peer.PACKAGE}
+"""The distribution of each engine (its version goes to ``info["versions"]``)."""
+PEER_MODULES = {"PYMUNK": "pymunk", "MUJOCO": "mujoco", "BOX2D": box2d_peer.MODULE,
+                "PYBOX2D": pybox2d_peer.MODULE}
+"""The module each engine's distribution installs (imported to tell it is available)."""
+_BUILDERS: dict[str, Callable[[Scene, float], PeerWorld]] = {
+    "PYMUNK": pymunk_peer.build_world, "MUJOCO": mujoco_peer.build_world,
+    "BOX2D": box2d_peer.build_world, "PYBOX2D": pybox2d_peer.build_world,
+}
+"""How each engine builds its world of a scene at a time step (s)."""
 INSTALL_HINT = 'pip install "wuerfel-cvx[peers]"'
 """How to install the optional peer engines."""
 
-__all__ = ["INSTALL_HINT", "PEER_ENGINES", "available_peers", "peer_version", "simulate_peer"]
+__all__ = ["INSTALL_HINT", "PEER_ENGINES", "PEER_MODULES", "available_peers", "peer_version",
+           "simulate_peer"]
 
 
 def _engine_name(engine: str) -> str:
@@ -45,9 +61,9 @@ def _engine_name(engine: str) -> str:
     return name
 
 
-def _importable(package: str) -> bool:
+def _importable(module: str) -> bool:
     try:
-        importlib.import_module(package)
+        importlib.import_module(module)
     except (ImportError, OSError):  # OSError: a shared library of the engine is missing
         return False
     return True
@@ -55,7 +71,7 @@ def _importable(package: str) -> bool:
 
 def available_peers() -> list[str]:
     """The peer engines whose package can be imported, in :data:`PEER_ENGINES` order."""
-    return [name for name in PEER_ENGINES if _importable(_PACKAGES[name])]
+    return [name for name in PEER_ENGINES if _importable(PEER_MODULES[name])]
 
 
 def peer_version(engine: str) -> str:
@@ -73,7 +89,7 @@ def simulate_peer(engine: str, scene: Scene | str | Path, dt: float, steps: int,
     Parameters
     ----------
     engine:
-        ``"PYMUNK"`` or ``"MUJOCO"``, case-insensitive.
+        One of :data:`PEER_ENGINES`, case-insensitive.
     scene:
         A :class:`Scene`, a library name such as ``"stack-10"``, or a TOML path.
     dt:
@@ -101,14 +117,11 @@ def simulate_peer(engine: str, scene: Scene | str | Path, dt: float, steps: int,
     """
     name = _engine_name(engine)
     package = _PACKAGES[name]
-    if not _importable(package):
-        raise InputError(f"peer engine {name} needs the package '{package}': {INSTALL_HINT}",
+    if not _importable(PEER_MODULES[name]):
+        hint = INSTALL_HINT + (" (Python >= 3.12)" if name == "BOX2D" else "")
+        raise InputError(f"peer engine {name} needs the package '{package}': {hint}",
                          field="engine")
     resolved = resolve_scene(scene)
     check_run_arguments(dt, steps)
-    world: PeerWorld
-    if name == "PYMUNK":
-        world = pymunk_peer.build_world(resolved, float(dt))
-    else:
-        world = mujoco_peer.build_world(resolved, float(dt))
+    world: PeerWorld = _BUILDERS[name](resolved, float(dt))
     return run_peer(name, package, resolved, world, float(dt), int(steps), progress=progress)

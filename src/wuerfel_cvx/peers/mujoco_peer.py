@@ -24,8 +24,27 @@ Matched physics (SI units throughout)
   static box geoms of the world body, half sizes ``(w/2, TABLE_HALF_DEPTH, h/2)``,
   rotated by the table's angle about ``-y``.  The depths only place contact points along
   y, which exert no torque about the hinge.
-* Frictionless contacts: ``condim="1"`` on every geom (normal force only; no
-  restitution parameter exists, impacts are damped by the contact's ``solref``).
+* A scene without friction keys has frictionless contacts: ``condim="1"`` on every geom
+  (normal force only; no restitution parameter exists, impacts are damped by the
+  contact's ``solref``), and the MJCF text is exactly that of the frictionless model.
+* Matched friction (a scene with a nonzero ``friction``): a geom of coefficient ``mu > 0``
+  gets ``condim="3"`` and sliding friction ``mu`` (torsional and rolling coefficients only
+  act at ``condim >= 4``).  MuJoCo combines two geoms of equal priority by the
+  element-wise *maximum* of their coefficients and the larger condim, not by the
+  package's ``sqrt(mu_a mu_b)``; the two agree when ``mu_a == mu_b``.  Every other pair
+  that can touch (two moving bodies, or a moving body and a table) is written as an
+  explicit ``<contact><pair>`` with ``condim`` 3 and friction ``sqrt(mu_a mu_b)`` (condim
+  1 when that is 0).  MuJoCo's docs: a pair's parameters are its own, the geoms' are
+  ignored, and its collision driver drops the dynamically found contact of a geom pair
+  that an explicit pair covers, so each contact is generated once, with the matched
+  coefficient.  A scene of ``k`` coefficients needs at most the pairs between bodies of
+  different coefficients (none for one common coefficient).
+* The cone is MuJoCo's default pyramidal one.  Bodies move only in the x-z plane, so the
+  second tangent (along y) has a zero Jacobian and its two pyramid edges push along the
+  normal only: the contact's set of forces is exactly ``|f_t| <= mu f_n``.  MuJoCo's
+  computation chapter says so for 2-D contacts ("the pyramid is not even an
+  approximation, but represents the same constraint set as the elliptic cone"); its soft
+  regularisation still differs from the elliptic cone's.
 * Contacts are otherwise MuJoCo's defaults, which are *soft*: ``solref = (0.02, 1)``
   (time constant 0.02 s, raised to ``2 dt`` when ``dt > 0.01`` s, critical damping) and
   ``solimp = (0.9, 0.95, 0.001, 0.5, 2)``; a resting body sits a fraction of a
@@ -38,10 +57,12 @@ Matched physics (SI units throughout)
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
+from ..friction import is_frictionless
 from ..geometry import FloatArray
 from ..scene import Scene
 from ._common import initial_poses, matched_moment
@@ -65,9 +86,34 @@ def _nums(*values: float) -> str:
     return " ".join(_num(v) for v in values)
 
 
+def _contact_attributes(friction: float, frictional: bool) -> str:
+    """A geom's condim and friction attributes: none in a frictionless scene."""
+    if not frictional or friction == 0.0:
+        return ""
+    return f' condim="3" friction="{_num(friction)}"'
+
+
+def _contact_pairs(scene: Scene) -> list[str]:
+    """``<pair>`` lines for the geom pairs whose coefficients differ (``sqrt(mu_a mu_b)``)."""
+    moving = [(f"square{i}", body.friction) for i, body in enumerate(scene.bodies)]
+    tables = [(f"table{j}", table.friction) for j, table in enumerate(scene.tables)]
+    candidates = [(a, b) for i, a in enumerate(moving) for b in moving[i + 1:]]
+    candidates += [(a, b) for a in moving for b in tables]
+    lines = []
+    for (name_a, mu_a), (name_b, mu_b) in candidates:
+        if mu_a == mu_b:
+            continue  # MuJoCo's maximum is the matched coefficient
+        mixed = math.sqrt(mu_a * mu_b)
+        contact = (f'condim="3" friction="{_nums(mixed, mixed)}"' if mixed > 0.0
+                   else 'condim="1"')
+        lines.append(f'    <pair geom1="{name_a}" geom2="{name_b}" {contact}/>')
+    return ["  <contact>", *lines, "  </contact>"] if lines else []
+
+
 def scene_mjcf(scene: Scene, dt: float) -> str:
     """The MJCF XML text of a scene with time step ``dt`` (s); body ``square{i}`` per box."""
     gx, gy = scene.gravity
+    frictional = not is_frictionless(scene)
     lines = [
         f'<mujoco model="wuerfel-{scene.name}">',
         '  <compiler angle="radian"/>',
@@ -80,7 +126,8 @@ def scene_mjcf(scene: Scene, dt: float) -> str:
         lines.append(
             f'    <geom name="table{j}" type="box" pos="{_nums(x, 0.0, y)}"'
             f' axisangle="{_nums(0.0, -1.0, 0.0, table.angle)}"'
-            f' size="{_nums(w / 2, TABLE_HALF_DEPTH, h / 2)}"/>'
+            f' size="{_nums(w / 2, TABLE_HALF_DEPTH, h / 2)}"'
+            f'{_contact_attributes(table.friction, frictional)}/>'
         )
     for i, body in enumerate(scene.bodies):
         m, w, h = body.mass, body.width, body.height
@@ -93,10 +140,14 @@ def scene_mjcf(scene: Scene, dt: float) -> str:
             f'      <inertial pos="0 0 0" mass="{_num(m)}"'
             f' diaginertia="{_nums(moment / 2, moment, moment / 2)}"/>',
             f'      <geom name="square{i}" type="box"'
-            f' size="{_nums(w / 2, SQUARE_HALF_DEPTH, h / 2)}"/>',
+            f' size="{_nums(w / 2, SQUARE_HALF_DEPTH, h / 2)}"'
+            f'{_contact_attributes(body.friction, frictional)}/>',
             "    </body>",
         ]
-    lines += ["  </worldbody>", "</mujoco>"]
+    lines.append("  </worldbody>")
+    if frictional:
+        lines += _contact_pairs(scene)
+    lines.append("</mujoco>")
     return "\n".join(lines) + "\n"
 
 

@@ -12,7 +12,12 @@ Matched physics (SI units throughout)
   shape is ``Poly.create_box`` of its width and height ``(w, h)`` (m) with no rounding
   radius.  Bodies are added in the order of ``Scene.bodies`` (squares, then boxes).
 * Each table is a static body at the table's centre and angle with a box shape.
-* Frictionless and inelastic: ``friction = 0`` and ``elasticity = 0`` on every shape.
+* Matched friction, inelastic: ``elasticity = 0`` on every shape, and the shape of a body
+  whose ``friction`` is ``mu`` gets ``Shape.friction = sqrt(mu)``.  Chipmunk multiplies the
+  two shapes' coefficients of a contact (``arb->u = a->u * b->u`` in its ``cpArbiter``;
+  pymunk documents the product), so a contact gets ``sqrt(mu_a) sqrt(mu_b) = sqrt(mu_a
+  mu_b)``, the package's mixing rule (:func:`wuerfel_cvx.friction.contact_friction`).  A
+  scene without friction keys has ``friction = 0`` on every shape: frictionless, as before.
 * ``Space.collision_slop`` = :data:`COLLISION_SLOP` = 1e-3 m (pymunk's default 0.1 is
   meant for pixel units and would let a unit square sink 10 % of its side).  Overlap up
   to the slop is allowed and not corrected, so a resting body sits about one slop deep.
@@ -24,6 +29,7 @@ Matched physics (SI units throughout)
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -74,7 +80,7 @@ class PymunkWorld:
             base = pymunk.Body(body_type=pymunk.Body.STATIC)
             base.position = table.center
             base.angle = table.angle
-            self.space.add(base, _frictionless_box(base, table.size))
+            self.space.add(base, _box_shape(base, table.size, table.friction))
         self.bodies: list[pymunk.Body] = []
         for item in scene.bodies:
             moment = matched_moment(item.mass, item.width, item.height)
@@ -83,7 +89,7 @@ class PymunkWorld:
             body.angle = item.angle
             body.velocity = item.velocity
             body.angular_velocity = item.angular_velocity
-            self.space.add(body, _frictionless_box(body, (item.width, item.height)))
+            self.space.add(body, _box_shape(body, (item.width, item.height), item.friction))
             body.mass = item.mass  # explicit, after the shape: nothing recomputes them
             body.moment = moment
             self.bodies.append(body)
@@ -116,11 +122,12 @@ class PymunkWorld:
         return round(total)
 
 
-def _frictionless_box(body: pymunk.Body, size: tuple[float, float]) -> pymunk.Poly:
+def _box_shape(body: pymunk.Body, size: tuple[float, float], friction: float) -> pymunk.Poly:
+    """A box shape ``size`` (m) on ``body``: inelastic, friction ``sqrt(friction)`` (1)."""
     import pymunk
 
     shape = pymunk.Poly.create_box(body, size)
-    shape.friction = 0.0
+    shape.friction = math.sqrt(friction)  # Chipmunk multiplies the two shapes' values
     shape.elasticity = 0.0
     return shape
 
