@@ -18,6 +18,11 @@ if TYPE_CHECKING:
     from .model import Model
     from .scene import Scene
 
+NULLABLE_COLUMNS = {"coulomb_iterations": "Int64", "coulomb_converged": "boolean"}
+"""Metrics columns that may be empty (``NA``), with their dtypes: the Coulomb fixed point's
+(:data:`wuerfel_cvx.coulomb.COULOMB_COLUMNS`), empty in runs without it; kept by
+:meth:`Trajectory.load`."""
+
 
 @dataclass
 class Trajectory:
@@ -100,6 +105,8 @@ class Trajectory:
             arrays = {key: data[key] for key in data.files}
         metrics_file = cls.metrics_path(path)
         metrics = pd.read_csv(metrics_file) if metrics_file.exists() else pd.DataFrame()
+        metrics = metrics.astype({name: dtype for name, dtype in NULLABLE_COLUMNS.items()
+                                  if name in metrics.columns})
         return cls(times=arrays["times"], points=arrays["points"],
                    velocities=arrays["velocities"], metrics=metrics,
                    table_points=arrays.get("table_points", np.zeros((0, 2))),
