@@ -259,7 +259,8 @@ def test_a_fixed_point_that_does_not_converge_is_reported_and_the_run_goes_on() 
     assert not metrics["coulomb_converged"].any()
     assert (metrics["coulomb_iterations"] == 1).all()
     named = [str(w.message) for w in caught if issubclass(w.category, CoulombNotConverged)]
-    assert [message.split(":")[0] for message in named] == ["step 1", "step 2", "step 3"]
+    assert [message.split(":")[0] for message in named] == ["step 1"]  # once per run
+    assert "not converged: steps 1, 2, 3" in sim.trajectory().summary()
     # the last iterate's contact QP still met the gap acceptance
     assert metrics["penetration_m"].max() <= VelocityFormulation().gap_tolerance
     forces = record.coulomb_forces[0]

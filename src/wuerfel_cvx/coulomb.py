@@ -396,20 +396,22 @@ def coulomb_settings(formulation: Formulation) -> CoulombSettings:
     return CoulombSettings(int(fields.coulomb_max_iterations), float(fields.coulomb_tolerance))
 
 
-def coulomb_columns(step: int, outcomes: Sequence[CoulombStep | None],
-                    active: bool) -> dict[str, object]:
+def coulomb_columns(step: int, outcomes: Sequence[CoulombStep | None], active: bool, *,
+                    warn: bool = True) -> dict[str, object]:
     """The :data:`COULOMB_COLUMNS` of a step whose island QPs gave ``outcomes``.
 
     ``active``: the run uses the fixed point.  A step whose fixed point did not converge
-    is reported by a :class:`CoulombNotConverged` warning naming the step.
+    is reported by a :class:`CoulombNotConverged` warning naming the step if ``warn`` (a
+    run warns of its first such step; its metrics and summary name them all).
     """
     if not active:
         return dict.fromkeys(COULOMB_COLUMNS, pd.NA)
     ran = [outcome for outcome in outcomes if outcome is not None]
     iterations = max((outcome.iterations for outcome in ran), default=0)
     converged = all(outcome.converged for outcome in ran)
-    if not converged:
+    if not converged and warn:
         warnings.warn(f"step {step}: the Coulomb fixed point did not converge in {iterations} "
-                      "iterations; the step goes on with its last iterate",
-                      CoulombNotConverged, stacklevel=2)
+                      "iterations; the step goes on with its last iterate (later such steps "
+                      "are in the metrics' coulomb_converged and the run's summary)",
+                      CoulombNotConverged, stacklevel=3)
     return {"coulomb_iterations": iterations, "coulomb_converged": converged}

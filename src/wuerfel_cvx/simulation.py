@@ -149,6 +149,7 @@ class Simulation:
         self.cache = CompiledQPCache() if compiled else None
         self._coulomb = (getattr(self.formulation, "friction_model", None) == "coulomb"
                          and bool(np.any(self.model.friction > 0.0)))
+        self._coulomb_warned = False  # a run warns of its first unconverged step only
         self.planner = IslandPlanner(self.model.n_boxes, sleep, islands)
         self.state = State.initial(scene)
         self.step_index = 0
@@ -193,9 +194,11 @@ class Simulation:
         step_time = self._search_time + time.perf_counter() - started
         combined = combine_solutions(solutions)
         primary_status = first_failed_status(solutions, primary_statuses, combined)
+        coulomb_row = coulomb_columns(step, coulombs, self._coulomb,
+                                      warn=not self._coulomb_warned)
+        self._coulomb_warned |= coulomb_row["coulomb_converged"] is False
         self._advance_to(step, state, _solved_row(qps, combined, primary_status, build_time,
-                                                  step_time, most_passes)
-                         | coulomb_columns(step, coulombs, self._coulomb))
+                                                  step_time, most_passes) | coulomb_row)
         return StepRecord(step, tuple(qps), tuple(solutions),
                           tuple(None if c is None else c.forces for c in coulombs))
 

@@ -159,7 +159,25 @@ class Trajectory:
                 f"{1e3 * solved['solve_time_s'].median():.2f} ms per step "
                 f"(solver's own {1e3 * solved['solver_time_s'].median():.3f} ms)",
             ]
+            lines += _coulomb_lines(m)
         return "\n".join(lines)
+
+
+def _coulomb_lines(metrics: pd.DataFrame) -> list[str]:
+    """The Coulomb fixed point's line of :meth:`Trajectory.summary` (none without it).
+
+    Names the steps whose fixed point did not converge (the first ten).
+    """
+    if "coulomb_converged" not in metrics or metrics["coulomb_converged"].isna().all():
+        return []
+    ran = metrics[metrics["coulomb_converged"].notna()]
+    failed = ran.loc[~ran["coulomb_converged"].astype(bool), "step"].tolist()
+    line = (f"coulomb fixed point  converged in {len(ran) - len(failed)}/{len(ran)} steps "
+            f"(at most {int(ran['coulomb_iterations'].max())} iterations)")
+    if failed:
+        shown = ", ".join(str(step) for step in failed[:10])
+        line += f"; not converged: steps {shown}" + (" ..." if len(failed) > 10 else "")
+    return [line]
 
 
 def _count(number: int, noun: str) -> str:
