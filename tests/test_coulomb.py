@@ -15,16 +15,16 @@ import pytest
 
 from wuerfel_cvx import simulate
 from wuerfel_cvx.contacts import find_contacts
-from wuerfel_cvx.coulomb import (
-    CoulombNotConverged,
+from wuerfel_cvx.coulomb import CoulombNotConverged, with_friction_impulse
+from wuerfel_cvx.formulations import VelocityFormulation
+from wuerfel_cvx.friction_problem import (
+    FrictionCache,
     FrictionProblem,
     friction_problem,
     friction_residuals,
     normal_impulses,
     solve_friction,
-    with_friction_impulse,
 )
-from wuerfel_cvx.formulations import VelocityFormulation
 from wuerfel_cvx.model import Model, State
 from wuerfel_cvx.scene import Scene, Square, Table
 from wuerfel_cvx.simulation import Simulation
@@ -151,6 +151,21 @@ def test_the_friction_check_catches_a_wrong_answer(perturb: str) -> None:
         x = x + 1e-3
     residuals = friction_residuals(problem, x, friction, answer.eq_dual)
     assert residuals.worst() > 10.0 * CHECK  # well beyond what verification accepts
+
+
+def test_a_compiled_friction_problem_gives_the_declared_answer() -> None:
+    problem, answer = solved_friction_problem()
+    cache = FrictionCache()
+    first = solve_friction(problem, "CLARABEL", "default", step=1, cache=cache)  # declared
+    other = FrictionProblem(problem.qp, problem.target, 0.5 * problem.bound)
+    compiled = solve_friction(other, "CLARABEL", "default", step=2, cache=cache)
+    again = solve_friction(problem, "CLARABEL", "default", step=3, cache=cache)
+    assert len(cache._problems) == 1  # one structure, compiled on its second sighting
+    np.testing.assert_allclose(first.friction, answer.friction, rtol=1e-12)
+    np.testing.assert_allclose(compiled.friction, 0.5 * answer.friction, rtol=1e-5)
+    np.testing.assert_allclose(again.friction, answer.friction, rtol=1e-5,
+                               atol=CHECK * np.max(problem.bound))
+    assert compiled.verified and again.verified
 
 
 def test_a_cone_violation_is_measured_even_where_stationarity_holds() -> None:

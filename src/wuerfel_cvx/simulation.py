@@ -31,7 +31,6 @@ from .coulomb import (
     coulomb_columns,
     coulomb_settings,
     fixed_point,
-    solve_friction_with_fallback,
 )
 from .errors import InputError, StepFailure
 from .formulations import (
@@ -42,6 +41,7 @@ from .formulations import (
     with_friction_model,
 )
 from .friction import ContactForces
+from .friction_problem import FrictionCache, solve_friction_with_fallback
 from .model import Model, State
 from .recorder import TrajectoryRecorder, physical_metrics, run_info
 from .scene import Scene
@@ -147,6 +147,7 @@ class Simulation:
         self.formulation = with_friction_model(get_formulation(formulation), friction_model,
                                                bool(np.any(self.model.friction > 0.0)))
         self.cache = CompiledQPCache() if compiled else None
+        self._friction_cache = FrictionCache() if compiled else None
         self._coulomb = (getattr(self.formulation, "friction_model", None) == "coulomb"
                          and bool(np.any(self.model.friction > 0.0)))
         self._coulomb_warned = False  # a run warns of its first unconverged step only
@@ -233,7 +234,7 @@ class Simulation:
             coulomb = fixed_point(
                 self.formulation, model, state, qp, self.dt, solve,
                 lambda problem: solve_friction_with_fallback(problem, self.solvers, self.tol,
-                                                             step),
+                                                             step, self._friction_cache),
                 coulomb_settings(self.formulation))
             qp, solved = coulomb.qp, coulomb.solved
         else:
