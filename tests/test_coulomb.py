@@ -16,6 +16,7 @@ import pytest
 from wuerfel_cvx import simulate
 from wuerfel_cvx.contacts import find_contacts
 from wuerfel_cvx.coulomb import CoulombNotConverged, with_friction_impulse
+from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations import VelocityFormulation
 from wuerfel_cvx.friction_problem import (
     FrictionCache,
@@ -24,6 +25,7 @@ from wuerfel_cvx.friction_problem import (
     friction_residuals,
     normal_impulses,
     solve_friction,
+    solve_friction_with_fallback,
 )
 from wuerfel_cvx.model import Model, State
 from wuerfel_cvx.scene import Scene, Square, Table
@@ -166,6 +168,15 @@ def test_a_compiled_friction_problem_gives_the_declared_answer() -> None:
     np.testing.assert_allclose(again.friction, answer.friction, rtol=1e-5,
                                atol=CHECK * np.max(problem.bound))
     assert compiled.verified and again.verified
+
+
+def test_a_failed_friction_problem_names_its_step_and_every_solver() -> None:
+    problem, _ = solved_friction_problem()
+    broken = FrictionProblem(problem.qp, np.full_like(problem.target, np.nan), problem.bound)
+    with pytest.raises(StepFailure) as caught:
+        solve_friction_with_fallback(broken, ["CLARABEL", "OSQP"], "default", step=7)
+    assert caught.value.step == 7 and caught.value.solver == "CLARABEL"
+    assert "friction problem" in str(caught.value) and "then OSQP failed" in str(caught.value)
 
 
 def test_a_cone_violation_is_measured_even_where_stationarity_holds() -> None:
