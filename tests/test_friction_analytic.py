@@ -42,7 +42,7 @@ from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration
 
-MODELS = ("ccp",)
+MODELS = ("ccp", "coulomb")
 """Friction models under test."""
 SOLVERS = ("CLARABEL", "OSQP", "PIQP")
 SLOPE_TOLERANCE = {"ccp": 0.03, "coulomb": 0.01}

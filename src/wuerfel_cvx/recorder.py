@@ -18,7 +18,7 @@ from .geometry import FloatArray
 from .metrics import kinetic_energy, potential_energy, rod_length_drift
 from .model import Model, State
 from .scene import Scene
-from .trajectory import Trajectory
+from .trajectory import NULLABLE_COLUMNS, Trajectory
 from .versions import package_version
 
 METRIC_COLUMNS = (
@@ -30,6 +30,7 @@ METRIC_COLUMNS = (
     "penetration_m", "kinetic_energy_J", "potential_energy_J", "total_energy_J", "path",
     "passes", "signorini_violation_Nsm", "coulomb_violation_Ns", "dissipation_violation_J",
     "friction_work_J",
+    "coulomb_iterations", "coulomb_converged",
 )
 """Columns of :attr:`Trajectory.metrics`, one row per step (state after the step).
 
@@ -49,7 +50,8 @@ most of any island): 1 for a single-pass formulation, up to ``max_passes`` for t
 closest-approach Gauss-Newton passes of ``velocity``, 0 for a step that solved none; its
 times and ``iterations`` are those passes' sums.  The last four are the physical criteria
 of the step's contact impulses (:mod:`wuerfel_cvx.criteria`; NaN for a step without
-friction).
+friction).  ``coulomb_iterations`` and ``coulomb_converged`` are the Coulomb fixed point's
+(:data:`~wuerfel_cvx.coulomb.COULOMB_COLUMNS`; empty without it).
 """
 
 
@@ -119,8 +121,7 @@ class TrajectoryRecorder:
     def trajectory(self) -> Trajectory:
         """The trajectory recorded so far (a copy of the lists' current contents)."""
         metrics = pd.DataFrame(self.rows, columns=list(METRIC_COLUMNS))
-        if self.column_dtypes:
-            metrics = metrics.astype(self.column_dtypes)
+        metrics = metrics.astype({**NULLABLE_COLUMNS, **self.column_dtypes})
         return Trajectory(times=np.array(self.times), points=np.array(self.points),
                           velocities=np.array(self.velocities), metrics=metrics,
                           table_points=self.model.table_points.copy(), info=dict(self.info))

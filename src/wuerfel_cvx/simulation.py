@@ -26,6 +26,12 @@ import numpy as np
 
 from .compiled import CompiledQPCache
 from .contacts import Contacts, find_contacts
+from .coulomb import (
+    CoulombStep,
+    coulomb_columns,
+    coulomb_settings,
+    fixed_point,
+)
 from .criteria import ccp_forces, combine_criteria, contact_criteria, gaps_after
 from .errors import InputError, StepFailure
 from .formulations import (
@@ -35,6 +41,8 @@ from .formulations import (
     get_formulation,
     with_friction_model,
 )
+from .friction import ContactForces
+from .friction_problem import FrictionCache, solve_friction_with_fallback
 from .model import Model, State
 from .recorder import TrajectoryRecorder, physical_metrics, run_info
 from .scene import Scene
@@ -66,6 +74,9 @@ class StepRecord:
     step: int
     qps: tuple[StepQP, ...]
     solutions: tuple[StepSolution, ...]
+    coulomb_forces: tuple[ContactForces | None, ...] = ()
+    """Per island QP, the Coulomb fixed point's contact forces (``None``: no fixed point ran,
+    as for ``ccp``, frictionless contacts, or another formulation)."""
 
 
 class Simulation:
@@ -137,6 +148,10 @@ class Simulation:
         self.formulation = with_friction_model(get_formulation(formulation), friction_model,
                                                bool(np.any(self.model.friction > 0.0)))
         self.cache = CompiledQPCache() if compiled else None
+        self._friction_cache = FrictionCache() if compiled else None
+        self._coulomb = (getattr(self.formulation, "friction_model", None) == "coulomb"
+                         and bool(np.any(self.model.friction > 0.0)))
+        self._coulomb_warned = False  # a run warns of its first unconverged step only
         self.planner = IslandPlanner(self.model.n_boxes, sleep, islands)
         self.state = State.initial(scene)
         self.step_index = 0
@@ -161,15 +176,18 @@ class Simulation:
         qps, solutions, primary_statuses, parts = [], [], [], []
         build_time, mark = self._search_time, started
         most_passes, criteria = 0, []
+        coulombs: list[CoulombStep | None] = []
         for boxes in plan.groups:
             model, state, contacts = restrict(self.model, self.state, self.contacts, boxes)
             qp = self.formulation.build(model, state, contacts, self.dt)
             build_time += time.perf_counter() - mark
-            qp, solution, primary, passes = self._solve_passes(step, model, state, qp)
+            qp, solution, primary, passes, coulomb = self._solve_passes(step, model, state, qp)
             most_passes = max(most_passes, passes)
+            coulombs.append(coulomb)
             moved = self.formulation.advance(model, state, solution.x, self.dt)
             parts.append((boxes, moved))
-            criteria.append(contact_criteria(ccp_forces(qp, solution), gaps_after(
+            criteria.append(contact_criteria(
+                ccp_forces(qp, solution) if coulomb is None else coulomb.forces, gaps_after(
                 model.all_points(moved.points), qp.contacts)))
             qps.append(qp)
             solutions.append(solution)
@@ -182,10 +200,15 @@ class Simulation:
         step_time = self._search_time + time.perf_counter() - started
         combined = combine_solutions(solutions)
         primary_status = first_failed_status(solutions, primary_statuses, combined)
+        coulomb_row = coulomb_columns(step, coulombs, self._coulomb,
+                                      warn=not self._coulomb_warned)
+        self._coulomb_warned |= coulomb_row["coulomb_converged"] is False
         self._advance_to(step, state, _solved_row(qps, combined, primary_status, build_time,
                                                   step_time, most_passes)
+                         | coulomb_row
                          | combine_criteria(criteria))
-        return StepRecord(step, tuple(qps), tuple(solutions))
+        return StepRecord(step, tuple(qps), tuple(solutions),
+                          tuple(None if c is None else c.forces for c in coulombs))
 
     def trajectory(self) -> Trajectory:
         """The trajectory so far: every completed step, with the run's settings."""
@@ -197,29 +220,51 @@ class Simulation:
         return self.recorder.trajectory()
 
     # ------------------------------------------------------------------ parts of a step
-    def _solve_passes(self, step: int, model: Model, state: State,
-                      qp: StepQP) -> tuple[StepQP, StepSolution, str, int]:
+    def _solve_passes(self, step: int, model: Model, state: State, qp: StepQP,
+                      ) -> tuple[StepQP, StepSolution, str, int, CoulombStep | None]:
         """Solve ``qp`` and the formulation's further passes.
 
         Returns the last QP, its solution carrying the passes' summed times and iterations
         and their solvers and paths (joined by ``+`` where a fallback solved a pass; its
         residuals and status are the last pass's, whose solution is taken), the first failed
-        status of the run's own solver over the passes, and the number of passes.
+        status of the run's own solver over the passes, and the number of passes.  With
+        ``friction_model="coulomb"`` and contacts with friction, the passes are those of the
+        Coulomb fixed point (:mod:`wuerfel_cvx.coulomb`), returned last (else ``None``); its
+        friction problems' times and iterations are in the sums, and a friction problem that
+        fails its own check makes the step unverified.
         """
-        solved = [solve_with_fallback(qp, self.solvers, self.tol, step, self.cache)]
-        while (refined := self.formulation.refine(model, state, qp, solved[-1][0].x, self.dt,
-                                                  len(solved))) is not None:
-            qp = refined
-            solved.append(solve_with_fallback(qp, self.solvers, self.tol, step, self.cache))
+        def solve(pass_qp: StepQP) -> tuple[StepSolution, str]:
+            return solve_with_fallback(pass_qp, self.solvers, self.tol, step, self.cache)
+
+        coulomb = None
+        if qp.cones is not None and self._coulomb:
+            coulomb = fixed_point(
+                self.formulation, model, state, qp, self.dt, solve,
+                lambda problem: solve_friction_with_fallback(problem, self.solvers, self.tol,
+                                                             step, self._friction_cache),
+                coulomb_settings(self.formulation))
+            qp, solved = coulomb.qp, coulomb.solved
+        else:
+            solved = [solve(qp)]
+            while (refined := self.formulation.refine(model, state, qp, solved[-1][0].x,
+                                                      self.dt, len(solved))) is not None:
+                qp = refined
+                solved.append(solve(qp))
         solutions = [solution for solution, _ in solved]
         last = solutions[-1]
+        answers = coulomb.answers if coulomb is not None else []
         primary = first_failed_status(solutions, [status for _, status in solved], last)
         return qp, dataclasses.replace(
             last, solver="+".join(dict.fromkeys(s.solver for s in solutions)),
             path="+".join(dict.fromkeys(s.path for s in solutions)),
-            solve_wall_time=sum(s.solve_wall_time for s in solutions),
-            solver_time=float(sum(s.solver_time for s in solutions)),
-            iterations=sum(s.iterations for s in solutions)), primary, len(solved)
+            verified=last.verified and all(answer.verified for answer in answers),
+            solve_wall_time=sum(s.solve_wall_time for s in solutions)
+            + sum(a.solve_wall_time for a in answers),
+            solver_time=float(sum(s.solver_time for s in solutions)
+                              + sum(a.solver_time for a in answers)),
+            iterations=sum(s.iterations for s in solutions)
+            + sum(a.iterations for a in answers)), primary, \
+            len(solved), coulomb
 
     def _search(self, state: State) -> tuple[Contacts, float]:
         """``state``'s contacts within the formulation's reach, and the search's time (s)."""

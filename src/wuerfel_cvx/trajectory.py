@@ -18,6 +18,11 @@ if TYPE_CHECKING:
     from .model import Model
     from .scene import Scene
 
+NULLABLE_COLUMNS = {"coulomb_iterations": "Int64", "coulomb_converged": "boolean"}
+"""Metrics columns that may be empty (``NA``), with their dtypes: the Coulomb fixed point's
+(:data:`wuerfel_cvx.coulomb.COULOMB_COLUMNS`), empty in runs without it; kept by
+:meth:`Trajectory.load`."""
+
 
 @dataclass
 class Trajectory:
@@ -100,6 +105,8 @@ class Trajectory:
             arrays = {key: data[key] for key in data.files}
         metrics_file = cls.metrics_path(path)
         metrics = pd.read_csv(metrics_file) if metrics_file.exists() else pd.DataFrame()
+        metrics = metrics.astype({name: dtype for name, dtype in NULLABLE_COLUMNS.items()
+                                  if name in metrics.columns})
         return cls(times=arrays["times"], points=arrays["points"],
                    velocities=arrays["velocities"], metrics=metrics,
                    table_points=arrays.get("table_points", np.zeros((0, 2))),
@@ -152,7 +159,7 @@ class Trajectory:
                 f"{1e3 * solved['solve_time_s'].median():.2f} ms per step "
                 f"(solver's own {1e3 * solved['solver_time_s'].median():.3f} ms)",
             ]
-            lines += _friction_lines(self.info, m)
+            lines += _friction_lines(self.info, m) + _coulomb_lines(m)
         return "\n".join(lines)
 
 
@@ -165,6 +172,23 @@ def _friction_lines(info: dict[str, Any], metrics: pd.DataFrame) -> list[str]:
     return [f"friction ({info.get('friction_model')}): largest Coulomb excess "
             f"{worst.iloc[0]:.2e} N s, dissipation gap {worst.iloc[1]:.2e} J, "
             f"Signorini gap x impulse {worst.iloc[2]:.2e} N s m"]
+
+
+def _coulomb_lines(metrics: pd.DataFrame) -> list[str]:
+    """The Coulomb fixed point's line of :meth:`Trajectory.summary` (none without it).
+
+    Names the steps whose fixed point did not converge (the first ten).
+    """
+    if "coulomb_converged" not in metrics or metrics["coulomb_converged"].isna().all():
+        return []
+    ran = metrics[metrics["coulomb_converged"].notna()]
+    failed = ran.loc[~ran["coulomb_converged"].astype(bool), "step"].tolist()
+    line = (f"coulomb fixed point  converged in {len(ran) - len(failed)}/{len(ran)} steps "
+            f"(at most {int(ran['coulomb_iterations'].max())} iterations)")
+    if failed:
+        shown = ", ".join(str(step) for step in failed[:10])
+        line += f"; not converged: steps {shown}" + (" ..." if len(failed) > 10 else "")
+    return [line]
 
 
 def _count(number: int, noun: str) -> str:

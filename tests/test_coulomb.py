@@ -1,0 +1,308 @@
+"""The Coulomb friction model (:mod:`wuerfel_cvx.coulomb`).
+
+Its two problems checked on their own, and the fixed point against the analytic slides of
+a box on a slope and on a flat table.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from wuerfel_cvx import simulate
+from wuerfel_cvx.contacts import find_contacts
+from wuerfel_cvx.coulomb import CoulombNotConverged, with_friction_impulse
+from wuerfel_cvx.errors import StepFailure
+from wuerfel_cvx.formulations import VelocityFormulation
+from wuerfel_cvx.friction_problem import (
+    FrictionCache,
+    FrictionProblem,
+    friction_problem,
+    friction_residuals,
+    normal_impulses,
+    solve_friction,
+    solve_friction_with_fallback,
+)
+from wuerfel_cvx.model import Model, State
+from wuerfel_cvx.scene import Scene, Square, Table
+from wuerfel_cvx.simulation import Simulation
+from wuerfel_cvx.solve import VERIFY_FACTOR, solve_step_qp
+from wuerfel_cvx.solvers import tolerance_value
+from wuerfel_cvx.trajectory import Trajectory
+
+pytestmark = pytest.mark.unit
+
+G = 9.81
+"""Gravity (m/s^2) of every scene."""
+DT = 1.0 / 240.0
+"""Time step (s) of the analytic tests (the issue's ramp target is at dt 1/240)."""
+SOLVERS = ("CLARABEL", "OSQP", "PIQP")
+EPS = tolerance_value("default")
+CHECK = VERIFY_FACTOR * EPS
+"""What the residual checks accept at the default tolerance."""
+
+
+def slope(theta: float, mu: float) -> Scene:
+    """A unit box resting on a table tilted by ``theta`` (rad), both with friction ``mu``."""
+    normal = np.array([-math.sin(theta), math.cos(theta)])
+    return Scene(name="slope",
+                 squares=(Square(center=(0.5 * normal[0], 0.5 * normal[1]), size=1.0,
+                                 angle=theta, friction=mu),),
+                 tables=(Table(center=(-0.5 * normal[0], -0.5 * normal[1]), size=(40.0, 1.0),
+                               angle=theta, friction=mu),))
+
+
+def flat(v0: float, mu: float) -> Scene:
+    """A unit box on a flat table, launched along it at ``v0`` (m/s)."""
+    return Scene(name="flat",
+                 squares=(Square(center=(0.0, 0.5), size=1.0, velocity=(v0, 0.0), friction=mu),),
+                 tables=(Table(center=(0.0, -0.5), size=(40.0, 1.0), friction=mu),))
+
+
+def along(traj: Trajectory, theta: float) -> tuple[np.ndarray, np.ndarray]:
+    """The box centre's position along the slope and its height above the contact (m)."""
+    centre = traj.points.reshape(len(traj.points), 4, 2).mean(axis=1)
+    tangent = np.array([math.cos(theta), math.sin(theta)])
+    normal = np.array([-math.sin(theta), math.cos(theta)])
+    return centre @ tangent, centre @ normal - 0.5
+
+
+def fitted_acceleration(traj: Trajectory, theta: float) -> float:
+    """The acceleration (m/s^2) down the slope of a parabola fitted to the slide."""
+    position, _ = along(traj, theta)
+    coefficients = np.polyfit(traj.times, position, 2)
+    return float(-2.0 * coefficients[0])
+
+
+def sliding_qp(mu: float = 0.3, theta: float = 0.5):  # type: ignore[no-untyped-def]
+    """The first contact QP of a box on a slope, with the slide under way (coulomb rows)."""
+    scene = slope(theta, mu)
+    model = Model.from_scene(scene)
+    start = State.initial(scene)
+    tangent = np.array([math.cos(theta), math.sin(theta)])
+    state = State(start.points, np.tile(-0.5 * tangent, (4, 1)))  # sliding down at 0.5 m/s
+    formulation = VelocityFormulation(friction_model="coulomb")
+    contacts = find_contacts(model, state.points, formulation.body_reach(model, state, DT))
+    return formulation.build(model, state, contacts, DT)
+
+
+def test_the_fixed_impulse_enters_the_contact_qp_as_its_work() -> None:
+    qp = sliding_qp()
+    assert qp.cones is not None and len(qp.contacts) == 2
+    friction = np.array([0.3, -0.7])
+    shifted = with_friction_impulse(qp, friction)
+    rng = np.random.default_rng(13)
+    x = qp.target + 0.1 * rng.standard_normal(qp.n_variables)
+
+    def difference(v: np.ndarray) -> float:
+        """Shifted minus original objective: -2 lambda_t . S x plus a constant."""
+        return float(np.sum(shifted.weights * (v - shifted.target) ** 2)
+                     - np.sum(qp.weights * (v - qp.target) ** 2))
+
+    step = 1e-6
+    numeric = np.array([(difference(x + step * e) - difference(x - step * e)) / (2 * step)
+                        for e in np.eye(qp.n_variables)])
+    np.testing.assert_allclose(numeric, -2.0 * qp.cones.slip.T @ friction, atol=1e-6)
+    # and the solved QP's stationarity in the original target carries 2 S' lambda_t
+    solution = solve_step_qp(shifted, "CLARABEL")
+    assert solution.verified
+    eq_dual = np.linalg.lstsq(qp.eq_matrix.T.toarray(), (
+        qp.ineq_matrix.T @ solution.ineq_dual - 2.0 * qp.weights * (solution.x - qp.target)
+        + 2.0 * qp.cones.slip.T @ friction), rcond=None)[0]
+    stationarity = (2.0 * qp.weights * (solution.x - qp.target) + qp.eq_matrix.T @ eq_dual
+                    - qp.ineq_matrix.T @ solution.ineq_dual - 2.0 * qp.cones.slip.T @ friction)
+    assert np.max(np.abs(stationarity)) < CHECK * (1.0 + np.max(np.abs(solution.ineq_dual)))
+
+
+def solved_friction_problem(solver: str = "CLARABEL"):  # type: ignore[no-untyped-def]
+    qp = sliding_qp()
+    solution = solve_step_qp(qp, "CLARABEL")
+    problem = friction_problem(qp, solution, qp.target)
+    return problem, solve_friction(problem, solver, "default", step=1)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_the_friction_problem_gives_maximal_dissipation_at_the_cone_edge(solver: str) -> None:
+    problem, answer = solved_friction_problem(solver)
+    assert answer.verified and answer.residuals.worst() <= CHECK
+    normal = problem.bound / 0.3
+    np.testing.assert_allclose(normal.sum(), 1.0 * G * math.cos(0.5) * DT, rtol=1e-4)
+    slip = problem.qp.cones.slip @ answer.x
+    assert np.all(np.abs(slip) > 0.1)  # still sliding after one step
+    # the impulse opposes the slip with its full Coulomb bound mu lambda_n
+    np.testing.assert_allclose(-np.sign(slip) * answer.friction, problem.bound, rtol=1e-5,
+                               atol=CHECK * np.max(problem.bound))
+
+
+@pytest.mark.parametrize("perturb", ["half impulse", "impulse along the slip",
+                                     "impulse beyond the cone", "unknowns moved"])
+def test_the_friction_check_catches_a_wrong_answer(perturb: str) -> None:
+    problem, answer = solved_friction_problem()
+    x, friction = answer.x.copy(), answer.friction.copy()
+    if perturb == "half impulse":
+        friction = 0.5 * friction
+    elif perturb == "impulse along the slip":
+        friction = -friction
+    elif perturb == "impulse beyond the cone":
+        friction = 1.1 * friction
+    else:
+        x = x + 1e-3
+    residuals = friction_residuals(problem, x, friction, answer.eq_dual)
+    assert residuals.worst() > 10.0 * CHECK  # well beyond what verification accepts
+
+
+def test_a_compiled_friction_problem_gives_the_declared_answer() -> None:
+    problem, answer = solved_friction_problem()
+    cache = FrictionCache()
+    first = solve_friction(problem, "CLARABEL", "default", step=1, cache=cache)  # declared
+    other = FrictionProblem(problem.qp, problem.target, 0.5 * problem.bound)
+    compiled = solve_friction(other, "CLARABEL", "default", step=2, cache=cache)
+    again = solve_friction(problem, "CLARABEL", "default", step=3, cache=cache)
+    assert len(cache._problems) == 1  # one structure, compiled on its second sighting
+    np.testing.assert_allclose(first.friction, answer.friction, rtol=1e-12)
+    np.testing.assert_allclose(compiled.friction, 0.5 * answer.friction, rtol=1e-5)
+    np.testing.assert_allclose(again.friction, answer.friction, rtol=1e-5,
+                               atol=CHECK * np.max(problem.bound))
+    assert compiled.verified and again.verified
+
+
+def test_a_failed_friction_problem_names_its_step_and_every_solver() -> None:
+    problem, _ = solved_friction_problem()
+    broken = FrictionProblem(problem.qp, np.full_like(problem.target, np.nan), problem.bound)
+    with pytest.raises(StepFailure) as caught:
+        solve_friction_with_fallback(broken, ["CLARABEL", "OSQP"], "default", step=7)
+    assert caught.value.step == 7 and caught.value.solver == "CLARABEL"
+    assert "friction problem" in str(caught.value) and "then OSQP failed" in str(caught.value)
+
+
+def test_a_cone_violation_is_measured_even_where_stationarity_holds() -> None:
+    problem, answer = solved_friction_problem()
+    tighter = FrictionProblem(problem.qp, problem.target, 0.5 * problem.bound)
+    residuals = friction_residuals(tighter, answer.x, answer.friction, answer.eq_dual)
+    assert residuals.stationarity <= CHECK and residuals.cone > 10.0 * CHECK
+
+
+def test_normal_impulses_are_the_multipliers_of_both_rows_of_a_contact() -> None:
+    qp = sliding_qp()
+    solution = solve_step_qp(qp, "CLARABEL")
+    normal = normal_impulses(qp, solution.ineq_dual)
+    assert normal.shape == (2,) and qp.n_inequalities == 4  # rate and approach rows
+    np.testing.assert_allclose(normal, 0.5 * (solution.ineq_dual[:2] + solution.ineq_dual[2:]))
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_a_box_slides_down_a_slope_at_g_sin_minus_mu_cos(solver: str) -> None:
+    theta, mu = 0.5, 0.3
+    traj = simulate(slope(theta, mu), dt=DT, steps=60, solver=solver,
+                    friction_model="coulomb")
+    expected = G * (math.sin(theta) - mu * math.cos(theta))
+    assert fitted_acceleration(traj, theta) == pytest.approx(expected, rel=0.01)
+    metrics = traj.metrics
+    assert metrics["verified"].all() and metrics["coulomb_converged"].all()
+    assert metrics["coulomb_iterations"].max() <= VelocityFormulation().coulomb_max_iterations
+    # no hover: the gap stays at the contact (the closest-approach acceptance), where the
+    # ccp model would lift by mu |v_t| dt, about 1e-3 m at the end of this slide
+    _, height = along(traj, theta)
+    final_speed = expected * traj.times[-1]
+    assert np.max(np.abs(height)) <= VelocityFormulation().gap_tolerance
+    assert VelocityFormulation().gap_tolerance < 1e-2 * mu * final_speed * DT
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("formulation", ["velocity", "rigid"])
+def test_a_box_sticks_when_mu_reaches_tan_theta(formulation: str) -> None:
+    theta = 0.5
+    mu = math.tan(theta) * 1.05
+    traj = simulate(slope(theta, mu), dt=DT, steps=60, formulation=formulation,
+                    friction_model="coulomb")
+    position, _ = along(traj, theta)
+    # static friction holds the box: what is left of the pull g sin(theta) is solver noise,
+    # far below the 1 % of it that a slide would show in this time
+    drift = np.max(np.abs(position - position[0]))
+    assert drift < 0.01 * 0.5 * G * math.sin(theta) * traj.times[-1] ** 2
+    assert traj.metrics["coulomb_converged"].all()
+
+
+@pytest.mark.integration
+def test_the_rigid_formulation_slides_as_the_velocity_one() -> None:
+    theta, mu = 0.5, 0.3
+    traj = simulate(slope(theta, mu), dt=DT, steps=60, formulation="rigid",
+                    friction_model="coulomb")
+    expected = G * (math.sin(theta) - mu * math.cos(theta))
+    assert fitted_acceleration(traj, theta) == pytest.approx(expected, rel=0.01)
+
+
+@pytest.mark.integration
+def test_a_launched_box_stops_after_v0_squared_over_two_mu_g() -> None:
+    v0, mu = 2.0, 0.5
+    stop_time = v0 / (mu * G)
+    steps = int(math.ceil(1.25 * stop_time / DT))
+    traj = simulate(flat(v0, mu), dt=DT, steps=steps, friction_model="coulomb")
+    centre = traj.points.reshape(len(traj.points), 4, 2).mean(axis=1)
+    # the stop is resolved to one step: the distance to within v0 dt
+    assert centre[-1, 0] - centre[0, 0] == pytest.approx(v0**2 / (2 * mu * G), abs=v0 * DT)
+    speed = traj.velocities.reshape(len(traj.points), 4, 2).mean(axis=1)[:, 0]
+    # at rest once stopped: no creep at the fixed point's tolerance, tol g dt = 4e-6 m/s
+    resting = 0.25 * VelocityFormulation().coulomb_tolerance * G * DT
+    moving = traj.times[np.abs(speed) > resting]
+    assert moving.max() == pytest.approx(stop_time, abs=DT)
+    assert traj.metrics["coulomb_converged"].all()
+
+
+def test_mu_zero_is_the_frictionless_trajectory() -> None:
+    # the table has friction, the box none: every contact mixes to mu = 0
+    rough_table = Scene(name="flat", squares=(Square(center=(0.0, 0.5), size=1.0,
+                                                     velocity=(2.0, 0.0)),),
+                        tables=(Table(center=(0.0, -0.5), size=(40.0, 1.0), friction=0.5),))
+    smooth = Scene(name="flat", squares=rough_table.squares,
+                   tables=(Table(center=(0.0, -0.5), size=(40.0, 1.0)),))
+    with_mu = simulate(rough_table, dt=DT, steps=10, friction_model="coulomb")
+    without = simulate(smooth, dt=DT, steps=10)
+    np.testing.assert_array_equal(with_mu.points, without.points)
+    # a coulomb run with friction in the scene, but no fixed point was needed
+    assert (with_mu.metrics["coulomb_iterations"] == 0).all()
+    assert with_mu.metrics["coulomb_converged"].all()
+
+
+def test_ccp_runs_leave_the_coulomb_columns_empty() -> None:
+    traj = simulate(slope(0.5, 0.3), dt=DT, steps=2)
+    assert traj.metrics["coulomb_iterations"].isna().all()
+    assert traj.metrics["coulomb_converged"].isna().all()
+
+
+def test_a_fixed_point_that_does_not_converge_is_reported_and_the_run_goes_on() -> None:
+    sim = Simulation(slope(0.5, 0.6), dt=DT, friction_model="coulomb",
+                     formulation=dataclasses.replace(VelocityFormulation(),
+                                                     coulomb_max_iterations=1))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(3):
+            record = sim.step()
+    metrics = sim.trajectory().metrics
+    assert not metrics["coulomb_converged"].any()
+    assert (metrics["coulomb_iterations"] == 1).all()
+    named = [str(w.message) for w in caught if issubclass(w.category, CoulombNotConverged)]
+    assert [message.split(":")[0] for message in named] == ["step 1"]  # once per run
+    assert "not converged: steps 1, 2, 3" in sim.trajectory().summary()
+    # the last iterate's contact QP still met the gap acceptance
+    assert metrics["penetration_m"].max() <= VelocityFormulation().gap_tolerance
+    forces = record.coulomb_forces[0]
+    assert forces is not None and forces.normal.shape == (2,)
+
+
+def test_a_step_reports_its_contact_forces_inside_the_cone() -> None:
+    sim = Simulation(slope(0.5, 0.3), dt=DT, friction_model="coulomb")
+    sim.step()
+    record = sim.step()
+    (forces,) = record.coulomb_forces
+    assert forces is not None
+    np.testing.assert_allclose(forces.normal.sum(), G * math.cos(0.5) * DT, rtol=1e-3)
+    tolerance = VelocityFormulation().coulomb_tolerance * np.max(forces.normal)
+    assert np.all(np.abs(forces.friction) <= forces.coefficient * forces.normal + tolerance)
+    assert np.all(np.abs(forces.slip) > 0.0)
+    assert np.all(forces.friction * forces.slip < 0.0)  # opposes the slip
