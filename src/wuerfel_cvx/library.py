@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError
+from .field_scenes import FIELD_SCENES
 from .geometry import FloatArray
 from .scene import Box, Scene, Square, Table
 
@@ -300,6 +301,8 @@ ENTRIES: tuple[SceneEntry, ...] = (
     SceneEntry("corner-overlap-wedged", "a heavy square on a light one, sliding, a corner of "
                "each 1.1e-7 and 3.3e-7 m inside the other (found by a property sweep)",
                _corner_overlap_wedged),
+    # the field's scenes, from Solver2D and Box2D v3 (wuerfel_cvx.field_scenes)
+    *(SceneEntry(*row) for row in FIELD_SCENES),
 )
 
 _NAME = re.compile(r"^(?P<base>[a-z][a-z-]*?)(?:-(?P<number>\d+))?$")
