@@ -55,8 +55,6 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
-import tomli_w
-
 from .bodies import Box, Square, Table, Vec2
 from .errors import InputError
 from .scene import Scene
@@ -381,13 +379,12 @@ EXAMPLE_NAMES = ("vertical-stack", "field-pyramid-10", "field-pyramid-20", "fric
 def example_text(name: str) -> str:
     """The ``examples/<name>.toml`` file of a library scene: a comment, then its TOML.
 
-    The TOML is :meth:`Scene.to_dict` written by :mod:`tomli_w`, every key in full, so
-    the file loads to a scene equal to ``Scene.named(name)``.
+    The TOML is :meth:`Scene.to_toml`, every key in full, so the file loads to a scene
+    equal to ``Scene.named(name)``.
     """
-    scene = Scene.named(name)
     header = (f"# The library's `{name}` (wuerfel_cvx.field_scenes: source and differences),\n"
               "# written by wuerfel_cvx.field_scenes.write_examples; do not edit by hand.\n")
-    return header + tomli_w.dumps(scene.to_dict())
+    return header + Scene.named(name).to_toml()
 
 
 def write_examples(directory: str | Path) -> list[Path]:
