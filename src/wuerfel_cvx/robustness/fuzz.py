@@ -5,7 +5,8 @@
 - *structured* ones edit the parsed scene (wrong types, missing and unknown keys, huge,
   tiny, infinite and NaN numbers, negative sizes and masses, big integers, dates,
   unicode, nested lists, many squares or boxes, a square's scalar ``size`` on a box and
-  a box's ``[w, h]`` on a square) and write it back with :mod:`tomli_w`;
+  a box's ``[w, h]`` on a square, negative, NaN, huge and non-numeric ``friction``) and
+  write it back with :mod:`tomli_w`;
 - *textual* ones edit the file's bytes (number tokens TOML allows such as ``inf``,
   ``nan``, ``1e309`` and 30-digit integers, deep nesting, flipped and inserted bytes,
   invalid UTF-8, truncation, duplicated lines, megabytes of comments).
@@ -52,7 +53,7 @@ CROSS_CHECK = ("OSQP", "PIQP")
 
 #: Library scenes whose files seed the structured mutations (small: one step is cheap).
 SEED_SCENES = ("tilted-drop", "stack-3", "overlap-recovery", "wall-contact", "rain-4",
-               "plank-drop", "domino-row")
+               "plank-drop", "domino-row", "friction-ramps")
 
 #: Numbers a field may be replaced by: boundaries of :data:`wuerfel_cvx.scene.LIMITS`,
 #: the extremes of doubles, signs, and TOML integers beyond 64 bits.
@@ -74,6 +75,13 @@ ODD_VALUES: tuple[Any, ...] = (
 NUMBER_TOKENS = ("inf", "-inf", "+inf", "nan", "-nan", "1e309", "-1e309", "1e-400",
                  "0x7FFFFFFFFFFFFFFF", "99999999999999999999999999999", "1_000.5", "0o17",
                  "0b101", "1979-05-27", "\"3\"", "true", "[1, 2]", "{ a = 1 }")
+
+#: Values a ``friction`` key may be set to: the ends of ``scene.LIMITS["friction"]`` (0
+#: to 100) and just beyond, negative, NaN, infinite, huge, and of the wrong type.
+FRICTION_VALUES: tuple[Any, ...] = (
+    0.0, -0.0, 0.3, 1.0, 100.0, 100.0000001, 1e6, 1e308, math.inf, math.nan, -0.1, -1e-300,
+    -math.inf, 10**30, "0.5", "", True, [0.5], {"mu": 0.5},
+)
 
 #: Unicode that a scene's strings and keys may be given.
 UNICODE_TEXT = ("Würfel", "立方体", "\U0001f9ca", "\u0000", "\u202e", "a\tb", "\ud7ff",
@@ -325,6 +333,19 @@ def _add_key(rng: random.Random, data: dict[str, Any]) -> str:
     return f"add key {key!r} beside {where}"
 
 
+def _set_friction(rng: random.Random, data: dict[str, Any]) -> str:
+    """Set (or add) the ``friction`` of one square, box or table to a :data:`FRICTION_VALUES`."""
+    entries = [(f"{group}[{i}]", entry) for group in ("squares", "boxes", "tables")
+               if isinstance(data.get(group), list)
+               for i, entry in enumerate(data[group]) if isinstance(entry, dict)]
+    if not entries:
+        return _set_value(rng, data)
+    where, entry = rng.choice(entries)
+    value = rng.choice(FRICTION_VALUES)
+    entry["friction"] = copy.deepcopy(value)
+    return f"set {where}.friction = {value!r:.40}"
+
+
 def _unicode_name(rng: random.Random, data: dict[str, Any]) -> str:
     data["name"] = "".join(rng.choice(UNICODE_TEXT) for _ in range(rng.randint(1, 50)))
     return "unicode name"
@@ -341,7 +362,7 @@ def _nest(rng: random.Random, data: dict[str, Any]) -> str:
 
 
 def _many_squares(rng: random.Random, data: dict[str, Any]) -> str:
-    count = rng.choice((40, 40, 400))  # 400: as many as the library's largest scene
+    count = rng.choice((40, 40, 400))  # 400: a large scene (large-pyramid has 5050)
     spread = rng.choice((1.0, 3.0))  # 1.0: touching or overlapping unit squares
     group = rng.choice(("squares", "boxes"))
     bodies = []
@@ -374,7 +395,7 @@ def _empty_groups(rng: random.Random, data: dict[str, Any]) -> str:
 
 _STRUCTURE_EDITS: tuple[Callable[[random.Random, dict[str, Any]], str], ...] = (
     _set_value, _set_value, _set_value, _negate, _delete_key, _add_key, _unicode_name,
-    _nest, _many_squares, _empty_groups, _swap_size_kind,
+    _nest, _many_squares, _empty_groups, _swap_size_kind, _set_friction,
 )
 
 
