@@ -4,9 +4,8 @@
 
 - *structured* ones edit the parsed scene (wrong types, missing and unknown keys, huge,
   tiny, infinite and NaN numbers, negative sizes and masses, big integers, dates,
-  unicode, nested lists, many squares or boxes, a square's scalar ``size`` on a box and
-  a box's ``[w, h]`` on a square, negative, NaN, huge and non-numeric ``friction``) and
-  write it back with :mod:`tomli_w`;
+  unicode, nested lists, many squares or boxes, a square's ``size`` on a box and back,
+  negative, NaN, huge and non-numeric ``friction``) and write it back with :mod:`tomli_w`;
 - *textual* ones edit the file's bytes (number tokens TOML allows such as ``inf``,
   ``nan``, ``1e309`` and 30-digit integers, deep nesting, flipped and inserted bytes,
   invalid UTF-8, truncation, duplicated lines, megabytes of comments).
@@ -76,12 +75,8 @@ NUMBER_TOKENS = ("inf", "-inf", "+inf", "nan", "-nan", "1e309", "-1e309", "1e-40
                  "0x7FFFFFFFFFFFFFFF", "99999999999999999999999999999", "1_000.5", "0o17",
                  "0b101", "1979-05-27", "\"3\"", "true", "[1, 2]", "{ a = 1 }")
 
-#: Values a ``friction`` key may be set to: the ends of ``scene.LIMITS["friction"]`` (0
-#: to 100) and just beyond, negative, NaN, infinite, huge, and of the wrong type.
-FRICTION_VALUES: tuple[Any, ...] = (
-    0.0, -0.0, 0.3, 1.0, 100.0, 100.0000001, 1e6, 1e308, math.inf, math.nan, -0.1, -1e-300,
-    -math.inf, 10**30, "0.5", "", True, [0.5], {"mu": 0.5},
-)
+#: Values for a ``friction`` key: near its range's ends (0 and 100), and the extreme numbers.
+FRICTION_VALUES: tuple[Any, ...] = (0.3, 100.0, 100.0000001, -0.1, "0.5", [0.5], *EXTREME_NUMBERS)
 
 #: Unicode that a scene's strings and keys may be given.
 UNICODE_TEXT = ("Würfel", "立方体", "\U0001f9ca", "\u0000", "\u202e", "a\tb", "\ud7ff",
@@ -334,16 +329,12 @@ def _add_key(rng: random.Random, data: dict[str, Any]) -> str:
 
 
 def _set_friction(rng: random.Random, data: dict[str, Any]) -> str:
-    """Set (or add) the ``friction`` of one square, box or table to a :data:`FRICTION_VALUES`."""
-    entries = [(f"{group}[{i}]", entry) for group in ("squares", "boxes", "tables")
-               if isinstance(data.get(group), list)
-               for i, entry in enumerate(data[group]) if isinstance(entry, dict)]
-    if not entries:
+    """Set (or add) one square's, box's or table's ``friction`` to a :data:`FRICTION_VALUES`."""
+    if not (slots := [slot for slot in _slots(data) if "[" in slot[0]]):  # no entry's key
         return _set_value(rng, data)
-    where, entry = rng.choice(entries)
-    value = rng.choice(FRICTION_VALUES)
-    entry["friction"] = copy.deepcopy(value)
-    return f"set {where}.friction = {value!r:.40}"
+    where, table, _ = rng.choice(slots)
+    table["friction"] = copy.deepcopy(value := rng.choice(FRICTION_VALUES))
+    return f"set {where.rsplit('.', 1)[0]}.friction = {value!r:.40}"
 
 
 def _unicode_name(rng: random.Random, data: dict[str, Any]) -> str:
