@@ -42,6 +42,14 @@ a source leaves a shape's friction at its default, it is Box2D's default, 0.6
 - ``card-house``: the source puts the first floor's card centres at 0.18 m, so that a
   tilted card's lowest corner is 1.7 mm below the ground; here the whole house is raised
   by that amount (:func:`card_house_lift`), so those corners touch the ground exactly.
+  The source's flat cards (0.4 m, 0.35 m apart on one floor) overlap their neighbours by
+  5 cm end to end; here they are 0.35 m long, centred between the tops they bridge, and
+  touch end to end (:data:`FLAT_CARD_SIZE`).
+- ``vertical-stack`` is Solver2D's (15 boxes 0.1 m apart); Box2D v3's ``VerticalStack``
+  is 12 rounded boxes that touch.  Its ground has the default 0.6, so a box's contact
+  with it has ``sqrt(0.3 * 0.6) = 0.42``.  Likewise the ramps of ``friction-ramps`` have
+  0.2, so their boxes' contacts have ``sqrt(0.2 mu)``.
+- ``field-pyramid-N`` of a base over 190 gets a ground 10 m wider than the base.
 - ``double-domino``: Box2D gives the first domino a linear impulse of 0.2 N s at its top;
   here it starts with the velocity and spin that impulse gives a body of this package's
   inertia (:func:`impulse_velocity`).
@@ -163,8 +171,8 @@ def high_mass_ratio_1(_: int | None = None) -> Scene:
     side, base = 2.0, 10
     squares = []
     for j, density in enumerate(HIGH_MASS_RATIO_1_APEX_DENSITY):
-        # Solver2D: offset -20 + 2 (count + 1) j with count = 10, and the base starts
-        # half a box left of the offset
+        # Solver2D's offset is -20 + 2 (count + 1) j with count = 10; each base is centred
+        # half a box (1 m) left of it
         pyramid = pyramid_squares(base, side, HIGH_MASS_RATIO_1_FRICTION,
                                   x_offset=-20.0 + 2.0 * (base + 1.0) * j - side / 2.0)
         apex = pyramid[-1]
