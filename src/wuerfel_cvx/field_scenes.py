@@ -368,7 +368,8 @@ FIELD_SCENES: tuple[tuple[str, str, Callable[[int | None], Scene], int | None], 
      high_mass_ratio_2, None),
     ("overlap-recovery-friction", "Solver2D: a 4-base pyramid of unit boxes overlapping by "
      "25 %, mu 0.6", overlap_recovery_friction, None),
-    ("card-house", "PEEL/Box2D: 40 cards 2 mm x 0.4 m in five floors, mu 0.7", card_house,
+    ("card-house", "PEEL/Box2D: 40 cards 2 mm thick in five floors (0.4 m leaning, 0.35 m "
+     "flat), mu 0.7", card_house,
      None),
     ("double-domino", "Solver2D/Box2D: 15 dominoes 0.25 x 1 m, 1 m apart, the first pushed, "
      "mu 0.6", double_domino, None),
