@@ -10,6 +10,7 @@ command in a subprocess.
 from __future__ import annotations
 
 import builtins
+import dataclasses
 import marshal
 import math
 import pickle
@@ -36,6 +37,7 @@ from wuerfel_cvx.robustness.fuzz import (
     run_fuzz,
     seed_files,
 )
+from wuerfel_cvx.robustness.properties import FRICTION_RANGE, random_scene
 from wuerfel_cvx.scene import LIMITS, Square, Table
 
 pytestmark = pytest.mark.integration
@@ -227,6 +229,50 @@ def test_a_loaded_scene_whose_step_fails_is_a_clear_step_failure(tmp_path: Path)
     assert _cross_check(path) == "other solvers: OSQP infeasible, PIQP infeasible"
 
 
+def test_fuzzed_friction_loads_in_range_and_is_one_error_naming_it_otherwise(
+        tmp_path: Path) -> None:
+    single = [item for item in generate_inputs(1500, seed=13)
+              if ".friction = " in item.label and ";" not in item.label]  # that edit alone
+    assert len(single) >= 20
+    path = tmp_path / "fuzzed.toml"
+    kinds = set()
+    for item in single:
+        path.write_bytes(item.data)
+        try:
+            Scene.from_toml(path)
+        except InputError as error:
+            text = str(error)
+            assert text.startswith(str(path)) and "\n" not in text, item.label
+            assert error.field is not None and error.field.endswith(".friction"), item.label
+            kinds.add(rejection_kind(error.reason))
+    assert {"must be non-negative", "must be finite", "expected a number"} <= kinds, kinds
+    assert any(kind.startswith("out of range") for kind in kinds), kinds
+
+
+def test_fuzzer_seeds_include_a_scene_with_friction() -> None:
+    # so that value edits, negations and deletions reach friction keys too
+    assert any(b"friction = " in data for _, data in seed_files())
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_generated_friction_changes_no_other_number(seed: int) -> None:
+    plain = random_scene(np.random.default_rng(seed))
+    rough = random_scene(np.random.default_rng(seed), friction=True)
+    assert {body.friction for body in plain.bodies} == {0.0} == {plain.tables[0].friction}
+    frictions = [body.friction for body in (*rough.bodies, *rough.tables)]
+    assert all(FRICTION_RANGE[0] <= mu <= FRICTION_RANGE[1] for mu in frictions)
+    smooth = [dataclasses.replace(body, friction=0.0) for body in rough.bodies]
+    assert tuple(smooth) == plain.bodies
+    assert dataclasses.replace(rough.tables[0], friction=0.0) == plain.tables[0]
+
+
+def test_generated_friction_is_given_to_some_bodies() -> None:
+    rng = np.random.default_rng(7)
+    bodies = [body for _ in range(30) for body in random_scene(rng, friction=True).bodies]
+    with_friction = sum(body.friction > 0.0 for body in bodies)
+    assert 0 < with_friction < len(bodies)
+
+
 def test_fuzz_inputs_are_reproducible_from_the_seed() -> None:
     first = [(item.label, item.data) for item in generate_inputs(40, seed=3)]
     again = [(item.label, item.data) for item in generate_inputs(40, seed=3)]
@@ -298,6 +344,23 @@ def test_fuzzed_rejections_exit_2_without_traceback_in_a_real_process(tmp_path: 
         assert len(lines) == 1 and lines[0].startswith(f"wuerfel-cvx: error: {path}"), lines
 
 
+@pytest.mark.subprocess
+@pytest.mark.parametrize("value", [-0.1, math.nan, 1e6, "high"])
+def test_bad_friction_exits_2_with_one_line_in_a_real_process(tmp_path: Path,
+                                                              value: object) -> None:
+    data = Scene.named("friction-ramps").to_dict()
+    data["squares"][0]["friction"] = value
+    path = tmp_path / "ramps.toml"
+    path.write_text(tomli_w.dumps(data), encoding="utf-8")
+    result = subprocess.run([*cli_command(), "simulate", str(path), "--steps", "1"],
+                            capture_output=True, text=True, timeout=120, check=False)
+    assert result.returncode == 2, result.stderr
+    assert result.stdout == "" and "Traceback" not in result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"wuerfel-cvx: error: {path}"), lines
+    assert "squares[0].friction" in lines[0]
+
+
 # ------------------------------------------------------------------ hypothesis
 _scalars = (st.floats(allow_nan=True, allow_infinity=True) | st.integers() | st.booleans()
             | st.text(max_size=5) | st.dates())
@@ -308,12 +371,12 @@ _vector = st.lists(st.floats(-1e7, 1e7) | st.integers(-10**7, 10**7) | _scalars,
 _entry_values = st.one_of(_vector, _values, st.floats(-2e6, 2e6))
 _square = st.dictionaries(
     st.sampled_from(["center", "size", "angle", "mass", "velocity", "angular_velocity",
-                     "spin"]), _entry_values, max_size=6)
+                     "spin", "friction"]), _entry_values, max_size=6)
 _box = st.dictionaries(
     st.sampled_from(["center", "size", "angle", "mass", "velocity", "angular_velocity",
-                     "sise"]), _entry_values, max_size=6)
-_table = st.dictionaries(st.sampled_from(["center", "size", "angle"]), _entry_values,
-                         max_size=3)
+                     "sise", "friction"]), _entry_values, max_size=6)
+_table = st.dictionaries(st.sampled_from(["center", "size", "angle", "friction"]),
+                         _entry_values, max_size=4)
 _scene = st.fixed_dictionaries({}, optional={
     "name": st.text(max_size=5) | _values, "gravity": _vector | _values,
     "allow_overlap": st.booleans() | _values, "squares": st.lists(_square, max_size=3) | _values,
@@ -340,6 +403,8 @@ def test_any_structured_scene_loads_or_is_one_input_error(data: dict[str, Any]) 
                    for side in box.size)
         assert LIMITS["mass"].smallest <= box.mass <= LIMITS["mass"].largest
         assert np.all(np.isfinite(box.corners()))
+    for body in (*scene.bodies, *scene.tables):
+        assert 0.0 <= body.friction <= LIMITS["friction"].largest
 
 
 def test_seed_files_are_valid_scenes(tmp_path: Path) -> None:

@@ -182,3 +182,22 @@ def polygon_overlap_depth(poly_a: FloatArray, poly_b: FloatArray) -> float:
         float(np.max(np.min(edge_distances(poly_a, poly_b), axis=0))),
     )
     return max(0.0, -separation)
+
+
+def polygon_overlap_depths(first: FloatArray, second: FloatArray) -> FloatArray:
+    """:func:`polygon_overlap_depth` (m) of many pairs of quadrilaterals at once.
+
+    ``first`` and ``second`` are ``(P, 4, 2)``, counter-clockwise; returns ``(P,)``.
+    The same separating-axis depth, up to the rounding of a different order of operations.
+    """
+    def separations(polygons: FloatArray, others: FloatArray) -> FloatArray:
+        edges = np.roll(polygons, -1, axis=1) - polygons
+        normals = np.stack([edges[..., 1], -edges[..., 0]], axis=-1)  # outward for ccw
+        normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+        offsets = others[:, None, :, :] - polygons[:, :, None, :]  # (P, edge, corner, 2)
+        return np.asarray(np.einsum("pekd,ped->pek", offsets, normals).min(axis=2).max(axis=1),
+                          dtype=np.float64)
+
+    if len(first) == 0:
+        return np.zeros(0)
+    return np.maximum(0.0, -np.maximum(separations(first, second), separations(second, first)))

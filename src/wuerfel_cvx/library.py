@@ -17,6 +17,7 @@ import numpy as np
 
 from .analytic_scenes import ladder_scene, launched_box_scene, slope_scene
 from .errors import InputError
+from .field_scenes import FIELD_SCENES
 from .geometry import FloatArray
 from .scene import Box, Scene, Square, Table
 
@@ -307,6 +308,8 @@ ENTRIES: tuple[SceneEntry, ...] = (
                "v0^2 / (2 mu g)", lambda _: launched_box_scene()),
     SceneEntry("ladder", "a 2 x 0.1 m plank leaning at 60 degrees on a frictionless wall, "
                "floor mu 0.3 (stands above 0.264)", lambda _: ladder_scene()),
+    # the field's scenes, from Solver2D and Box2D v3 (wuerfel_cvx.field_scenes)
+    *(SceneEntry(*row) for row in FIELD_SCENES),
 )
 
 _NAME = re.compile(r"^(?P<base>[a-z][a-z-]*?)(?:-(?P<number>\d+))?$")

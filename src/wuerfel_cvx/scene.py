@@ -47,6 +47,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomli_w
 
 from .bodies import Box, MovingBody, Square, Table, Vec2
 from .errors import InputError
@@ -146,6 +147,21 @@ class Scene:
             data["boxes"] = [_body_dict(b, list(b.size)) for b in self.boxes]
         return data
 
+    def to_toml(self) -> str:
+        """The scene as a TOML file of the schema: :meth:`to_dict`, each vector on one line.
+
+        :func:`tomllib.loads` of it gives :meth:`to_dict` back, so it loads to an equal scene.
+        """
+        data = self.to_dict()
+        groups = {key: data.pop(key) for key in ("tables", "squares", "boxes")
+                  if data.get(key)}  # an empty group stays a `key = []` line
+        lines = [f"{key} = {_toml_value(value)}" for key, value in data.items()]
+        for group, entries in groups.items():
+            for entry in entries:
+                lines += ["", f"[[{group}]]",
+                          *(f"{key} = {_toml_value(value)}" for key, value in entry.items())]
+        return "\n".join(lines) + "\n"
+
     # ------------------------------------------------------------------ arrays
     @property
     def bodies(self) -> tuple[MovingBody, ...]:
@@ -177,6 +193,13 @@ def _body_dict(body: MovingBody, size: float | list[float]) -> dict[str, Any]:
     return _with_friction({"center": list(body.center), "size": size, "angle": body.angle,
                            "mass": body.mass, "velocity": list(body.velocity),
                            "angular_velocity": body.angular_velocity}, body.friction)
+
+
+def _toml_value(value: Any) -> str:
+    """A value of the schema in TOML: :mod:`tomli_w`'s, but a list on one line."""
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(item) for item in value) + "]"
+    return tomli_w.dumps({"v": value}).removeprefix("v = ").rstrip("\n")
 
 
 def _with_friction(entry: dict[str, Any], friction: float) -> dict[str, Any]:

@@ -4,8 +4,8 @@
 
 - *structured* ones edit the parsed scene (wrong types, missing and unknown keys, huge,
   tiny, infinite and NaN numbers, negative sizes and masses, big integers, dates,
-  unicode, nested lists, many squares or boxes, a square's scalar ``size`` on a box and
-  a box's ``[w, h]`` on a square) and write it back with :mod:`tomli_w`;
+  unicode, nested lists, many squares or boxes, a square's ``size`` on a box and back,
+  negative, NaN, huge and non-numeric ``friction``) and write it back with :mod:`tomli_w`;
 - *textual* ones edit the file's bytes (number tokens TOML allows such as ``inf``,
   ``nan``, ``1e309`` and 30-digit integers, deep nesting, flipped and inserted bytes,
   invalid UTF-8, truncation, duplicated lines, megabytes of comments).
@@ -52,7 +52,7 @@ CROSS_CHECK = ("OSQP", "PIQP")
 
 #: Library scenes whose files seed the structured mutations (small: one step is cheap).
 SEED_SCENES = ("tilted-drop", "stack-3", "overlap-recovery", "wall-contact", "rain-4",
-               "plank-drop", "domino-row")
+               "plank-drop", "domino-row", "friction-ramps")
 
 #: Numbers a field may be replaced by: boundaries of :data:`wuerfel_cvx.scene.LIMITS`,
 #: the extremes of doubles, signs, and TOML integers beyond 64 bits.
@@ -74,6 +74,9 @@ ODD_VALUES: tuple[Any, ...] = (
 NUMBER_TOKENS = ("inf", "-inf", "+inf", "nan", "-nan", "1e309", "-1e309", "1e-400",
                  "0x7FFFFFFFFFFFFFFF", "99999999999999999999999999999", "1_000.5", "0o17",
                  "0b101", "1979-05-27", "\"3\"", "true", "[1, 2]", "{ a = 1 }")
+
+#: Values for a ``friction`` key: near its range's ends (0 and 100), and the extreme numbers.
+FRICTION_VALUES: tuple[Any, ...] = (0.3, 100.0, 100.0000001, -0.1, "0.5", [0.5], *EXTREME_NUMBERS)
 
 #: Unicode that a scene's strings and keys may be given.
 UNICODE_TEXT = ("Würfel", "立方体", "\U0001f9ca", "\u0000", "\u202e", "a\tb", "\ud7ff",
@@ -325,6 +328,15 @@ def _add_key(rng: random.Random, data: dict[str, Any]) -> str:
     return f"add key {key!r} beside {where}"
 
 
+def _set_friction(rng: random.Random, data: dict[str, Any]) -> str:
+    """Set (or add) one square's, box's or table's ``friction`` to a :data:`FRICTION_VALUES`."""
+    if not (slots := [slot for slot in _slots(data) if "[" in slot[0]]):  # no entry's key
+        return _set_value(rng, data)
+    where, table, _ = rng.choice(slots)
+    table["friction"] = copy.deepcopy(value := rng.choice(FRICTION_VALUES))
+    return f"set {where.rsplit('.', 1)[0]}.friction = {value!r:.40}"
+
+
 def _unicode_name(rng: random.Random, data: dict[str, Any]) -> str:
     data["name"] = "".join(rng.choice(UNICODE_TEXT) for _ in range(rng.randint(1, 50)))
     return "unicode name"
@@ -341,7 +353,7 @@ def _nest(rng: random.Random, data: dict[str, Any]) -> str:
 
 
 def _many_squares(rng: random.Random, data: dict[str, Any]) -> str:
-    count = rng.choice((40, 40, 400))  # 400: as many as the library's largest scene
+    count = rng.choice((40, 40, 400))  # 400: a large scene (large-pyramid has 5050)
     spread = rng.choice((1.0, 3.0))  # 1.0: touching or overlapping unit squares
     group = rng.choice(("squares", "boxes"))
     bodies = []
@@ -374,7 +386,7 @@ def _empty_groups(rng: random.Random, data: dict[str, Any]) -> str:
 
 _STRUCTURE_EDITS: tuple[Callable[[random.Random, dict[str, Any]], str], ...] = (
     _set_value, _set_value, _set_value, _negate, _delete_key, _add_key, _unicode_name,
-    _nest, _many_squares, _empty_groups, _swap_size_kind,
+    _nest, _many_squares, _empty_groups, _swap_size_kind, _set_friction,
 )
 
 

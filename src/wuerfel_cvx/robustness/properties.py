@@ -5,7 +5,10 @@ height ratio up to 4 either way) of random size, angle, mass (ratio up to 100),
 velocity and spin, placed without overlap above one wide table (top face at y = 0).
 :func:`random_scene` draws one from a :class:`numpy.random.Generator`; the property
 tests draw the same :class:`SquareDraw` numbers with hypothesis and call the same
-builder, :func:`scene_from_draws`.
+builder, :func:`scene_from_draws`.  With ``friction=True`` about half of the bodies, and
+the table, are given a friction coefficient in [0, 1], drawn after all other numbers of
+the scene; it is off by default, so that a seed's scenes stay the frictionless ones the
+reports were made from.
 
 :func:`check_run` checks a trajectory of a ``velocity`` formulation (rigid position
 update) against four invariants.
@@ -30,6 +33,7 @@ collects what fails, for the robustness report.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
@@ -70,6 +74,10 @@ BOX_SHARE = 0.5
 """Probability that a generated body is a box rather than a square."""
 ASPECT_RANGE = (0.25, 4.0)
 """Width over height of a generated box (log-uniform); its area is ``size^2``."""
+FRICTION_SHARE = 0.5
+"""With friction drawn, the probability that a body has any (the others have 0)."""
+FRICTION_RANGE = (0.0, 1.0)
+"""Friction coefficient (1) of a body or the table, with friction drawn."""
 
 
 @dataclass(frozen=True)
@@ -93,15 +101,17 @@ class SquareDraw:
     """Clearance (m) above the table or the bodies already placed below."""
     aspect: float | None = None
     """Width over height of a box (1); ``None`` for a square."""
+    friction: float = 0.0
+    """Friction coefficient (1)."""
 
     def body(self, center: tuple[float, float]) -> Square | Box:
         """The drawn square or box at ``center`` (m)."""
         if self.aspect is None:
             return Square(center, self.size, self.angle, self.mass, self.velocity,
-                          self.angular_velocity)
+                          self.angular_velocity, self.friction)
         stretch = math.sqrt(self.aspect)
         return Box(center, (self.size * stretch, self.size / stretch), self.angle, self.mass,
-                   self.velocity, self.angular_velocity)
+                   self.velocity, self.angular_velocity, self.friction)
 
     def radius(self) -> float:
         """Bounding-circle radius (m): the half diagonal."""
@@ -110,14 +120,16 @@ class SquareDraw:
         return half_diagonal(self.body((0.0, 0.0)))
 
 
-def scene_from_draws(draws: Sequence[SquareDraw], name: str = "generated") -> Scene:
+def scene_from_draws(draws: Sequence[SquareDraw], name: str = "generated",
+                     floor_friction: float = 0.0) -> Scene:
     """Place the drawn squares and boxes above the library's floor without overlap.
 
     Bodies are placed in order; each is kept apart from the floor and from every
     body placed before it by its bounding circle (radius half the diagonal) plus
     its ``gap``: it sits ``gap`` above the floor, or above the highest earlier body
     whose circle it would meet horizontally.  Circles apart means bodies apart, so
-    the scene passes the loader's overlap check for any draws.
+    the scene passes the loader's overlap check for any draws.  ``floor_friction`` is
+    the floor's friction coefficient (1).
     """
     placed: list[tuple[float, float, float]] = []  # x, y, radius
     bodies = []
@@ -129,12 +141,18 @@ def scene_from_draws(draws: Sequence[SquareDraw], name: str = "generated") -> Sc
                 y = max(y, y_other + radius_other + radius + draw.gap)
         placed.append((draw.x, y, radius))
         bodies.append(draw.body((draw.x, y)))
-    return Scene(name, tuple(b for b in bodies if isinstance(b, Square)), (FLOOR,),
+    floor = FLOOR if not floor_friction else dataclasses.replace(FLOOR, friction=floor_friction)
+    return Scene(name, tuple(b for b in bodies if isinstance(b, Square)), (floor,),
                  boxes=tuple(b for b in bodies if isinstance(b, Box)))
 
 
-def random_draws(rng: np.random.Generator, n_squares: int | None = None) -> list[SquareDraw]:
-    """Random square and box parameters in the documented ranges (1..8 bodies if None)."""
+def random_draws(rng: np.random.Generator, n_squares: int | None = None, *,
+                 friction: bool = False) -> list[SquareDraw]:
+    """Random square and box parameters in the documented ranges (1..8 bodies if None).
+
+    With ``friction``, the bodies' friction is drawn after all their other numbers, so
+    those are the same as without it.
+    """
     count = int(rng.integers(1, MAX_SQUARES + 1)) if n_squares is None else n_squares
     draws = []
     for _ in range(count):
@@ -151,13 +169,22 @@ def random_draws(rng: np.random.Generator, n_squares: int | None = None) -> list
             gap=float(rng.uniform(*GAP_RANGE)),
             aspect=aspect if is_box else None,
         ))
+    if friction:
+        draws = [dataclasses.replace(draw, friction=float(rng.uniform(*FRICTION_RANGE)))
+                 if rng.uniform() < FRICTION_SHARE else draw for draw in draws]
     return draws
 
 
 def random_scene(rng: np.random.Generator, n_squares: int | None = None,
-                 name: str = "generated") -> Scene:
-    """A random valid scene: 1 to 8 squares and boxes (or ``n_squares``) above the floor."""
-    return scene_from_draws(random_draws(rng, n_squares), name=name)
+                 name: str = "generated", *, friction: bool = False) -> Scene:
+    """A random valid scene: 1 to 8 squares and boxes (or ``n_squares``) above the floor.
+
+    ``friction`` (off by default) gives about half of the bodies and the floor a friction
+    coefficient (:data:`FRICTION_SHARE`, :data:`FRICTION_RANGE`).
+    """
+    draws = random_draws(rng, n_squares, friction=friction)
+    floor_friction = float(rng.uniform(*FRICTION_RANGE)) if friction else 0.0
+    return scene_from_draws(draws, name=name, floor_friction=floor_friction)
 
 
 # ---------------------------------------------------------------------- invariants
