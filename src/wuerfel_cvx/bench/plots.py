@@ -7,9 +7,9 @@ hold nothing for that plot.  :func:`plot_all` draws every plot that has data.
 
 The plots live by family in :mod:`~wuerfel_cvx.bench.plots_accuracy` (speed against
 accuracy, drift and penetration), :mod:`~wuerfel_cvx.bench.plots_cost` (scaling,
-success, timing) and :mod:`~wuerfel_cvx.bench.plots_friction` (the contact laws); what they select and summarise in :mod:`~wuerfel_cvx.bench.selection`;
-colours, markers and line styles in :mod:`~wuerfel_cvx.bench.styles`.  All of them can be
-imported from here.
+success, timing) and :mod:`~wuerfel_cvx.bench.plots_friction` (the contact laws); what
+they select and summarise in :mod:`~wuerfel_cvx.bench.selection`; colours, markers and
+line styles in :mod:`~wuerfel_cvx.bench.styles`.  All of them can be imported from here.
 """
 
 from __future__ import annotations
@@ -19,13 +19,13 @@ from pathlib import Path
 import pandas as pd
 
 from .plots_accuracy import plot_drift_penetration, plot_pareto, plot_pareto_headline
-from .plots_friction import plot_friction_criteria
 from .plots_cost import (
     plot_scaling,
     plot_success_heatmap,
     plot_success_rates,
     plot_timing_breakdown,
 )
+from .plots_friction import plot_friction_criteria
 from .selection import (
     TOL_ORDER,
     as_float,

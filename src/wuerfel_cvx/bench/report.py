@@ -49,7 +49,8 @@ from .report_time import (
 __all__ = [
     "MISSING", "POINT_TABLE_LIMIT", "README", "accuracy_section", "accuracy_table",
     "common_points", "failures_section", "format_ms", "format_number", "format_rate",
-    "format_ratio", "friction_section", "header_section", "markdown_cell", "markdown_table", "point_time_table",
+    "format_ratio", "friction_section", "header_section", "markdown_cell", "markdown_table",
+    "point_time_table",
     "render_report", "run_dates", "scaling_section", "solver_versions", "speed_section",
     "success_section", "suite_name", "time_means", "write_report",
 ]

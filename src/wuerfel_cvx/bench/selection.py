@@ -90,8 +90,10 @@ def is_value(column: pd.Series, value: str) -> pd.Series:
 
 
 def plain_variant(results: pd.DataFrame) -> pd.Series:
-    """Mask of rows without a variant: fixed tables, five rods, no sleep, one joint QP and
-    the default friction model (or none)."""
+    """Mask of rows without a variant.
+
+    Fixed tables, five rods, no sleep, one joint QP and the default friction model (or none).
+    """
     return (results["table_mass"].isna() & ~results["extra_rod"].fillna(False).astype(bool)
             & ~results["sleep"].fillna(False).astype(bool)
             & ~results["islands"].fillna(False).astype(bool)
