@@ -1,5 +1,8 @@
-"""The friction study's infrastructure: schema 6, the friction_models axis, the runner's
-friction columns, the friction-smoke suite and the report's friction section."""
+"""The friction study's infrastructure.
+
+Schema 6, the friction_models axis, the runner's friction columns, the friction-smoke suite
+and the report's friction section.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +12,7 @@ import hashlib
 import math
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -218,9 +222,9 @@ def test_a_reference_runs_with_its_points_friction_model(tmp_path: Path,
     asked: list[str] = []
     real = runner.simulate
 
-    def recording(*args: object, **kwargs: object) -> object:
+    def recording(*args: Any, **kwargs: Any) -> Any:
         asked.append(str(kwargs.get("friction_model")))
-        return real(*args, **kwargs)  # type: ignore[arg-type]
+        return real(*args, **kwargs)
 
     monkeypatch.setattr(runner, "simulate", recording)
     key = (str(SLOPE), "velocity", DT, DT, "coulomb")
