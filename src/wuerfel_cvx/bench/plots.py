@@ -6,10 +6,10 @@ Every ``plot_*`` function takes the typed results frame (from
 hold nothing for that plot.  :func:`plot_all` draws every plot that has data.
 
 The plots live by family in :mod:`~wuerfel_cvx.bench.plots_accuracy` (speed against
-accuracy, drift and penetration) and :mod:`~wuerfel_cvx.bench.plots_cost` (scaling,
-success, timing); what they select and summarise in :mod:`~wuerfel_cvx.bench.selection`;
-colours, markers and line styles in :mod:`~wuerfel_cvx.bench.styles`.  All of them can be
-imported from here.
+accuracy, drift and penetration), :mod:`~wuerfel_cvx.bench.plots_cost` (scaling,
+success, timing) and :mod:`~wuerfel_cvx.bench.plots_friction` (the contact laws); what
+they select and summarise in :mod:`~wuerfel_cvx.bench.selection`; colours, markers and
+line styles in :mod:`~wuerfel_cvx.bench.styles`.  All of them can be imported from here.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from .plots_cost import (
     plot_success_rates,
     plot_timing_breakdown,
 )
+from .plots_friction import plot_friction_criteria
 from .selection import (
     TOL_ORDER,
     as_float,
@@ -67,6 +68,7 @@ __all__ = [
     "plain_variant",
     "plot_all",
     "plot_drift_penetration",
+    "plot_friction_criteria",
     "plot_pareto",
     "plot_pareto_headline",
     "plot_scaling",
@@ -83,7 +85,8 @@ __all__ = [
 ]
 
 PLOT_STEMS: tuple[str, ...] = ("pareto-headline", "pareto", "drift-penetration", "scaling",
-                               "success", "success-by-scene", "timing-breakdown")
+                               "success", "success-by-scene", "timing-breakdown",
+                               "friction-criteria")
 """File stems written by :func:`plot_all`."""
 
 
@@ -101,6 +104,7 @@ def plot_all(results: pd.DataFrame, series_dir: str | Path, out_dir: str | Path,
         "success": plot_success_rates(results, out_dir),
         "success-by-scene": plot_success_heatmap(results, out_dir),
         "timing-breakdown": plot_timing_breakdown(results, out_dir),
+        "friction-criteria": plot_friction_criteria(results, out_dir),
     }
     return {stem: paths for stem, paths in made.items() if paths}
 

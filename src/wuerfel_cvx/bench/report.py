@@ -5,8 +5,9 @@ draws the plots of :mod:`wuerfel_cvx.bench.plots` next to the README and writes 
 a header stamped with the machine and versions that produced the rows, time per step
 (shifted geometric means over the grid points every compared solver completed), success
 and verified rates, accuracy, the plots that have data, and every failed or errored grid
-point.  The sections are written by :mod:`~wuerfel_cvx.bench.report_time` and
-:mod:`~wuerfel_cvx.bench.report_quality`, in the Markdown of
+point.  The sections are written by :mod:`~wuerfel_cvx.bench.report_time`,
+:mod:`~wuerfel_cvx.bench.report_quality` and :mod:`~wuerfel_cvx.bench.report_friction`
+(shown when the results have friction), in the Markdown of
 :mod:`~wuerfel_cvx.bench.markdown`; their public names can be imported from here.
 """
 
@@ -29,6 +30,7 @@ from .markdown import (
     markdown_cell,
     markdown_table,
 )
+from .report_friction import friction_section
 from .report_quality import (
     accuracy_section,
     accuracy_table,
@@ -47,7 +49,8 @@ from .report_time import (
 __all__ = [
     "MISSING", "POINT_TABLE_LIMIT", "README", "accuracy_section", "accuracy_table",
     "common_points", "failures_section", "format_ms", "format_number", "format_rate",
-    "format_ratio", "header_section", "markdown_cell", "markdown_table", "point_time_table",
+    "format_ratio", "friction_section", "header_section", "markdown_cell", "markdown_table",
+    "point_time_table",
     "render_report", "run_dates", "scaling_section", "solver_versions", "speed_section",
     "success_section", "suite_name", "time_means", "write_report",
 ]
@@ -115,6 +118,7 @@ def render_report(results: pd.DataFrame, suite: str, images: dict[str, list[Path
         speed_section(results, images, out_dir),
         success_section(results, images, out_dir),
         accuracy_section(results, images, out_dir, headline=headline),
+        friction_section(results, images, out_dir),
         scaling_section(results, images, out_dir),
         failures_section(results),
         "## Appendix: columns of results.csv\n\n" + schema.describe(),

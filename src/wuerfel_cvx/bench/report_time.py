@@ -15,6 +15,7 @@ import pandas as pd
 
 from . import plots
 from .markdown import (
+    cell_text,
     format_ms,
     format_number,
     format_ratio,
@@ -24,7 +25,8 @@ from .markdown import (
 )
 from .shgeom import DEFAULT_TIME_SHIFT, shifted_geometric_mean
 
-_POINT_KEY = ["scene", "tol", "dt", "duration", "table_mass", "extra_rod", "sleep", "islands"]
+_POINT_KEY = ["scene", "tol", "dt", "duration", "table_mass", "extra_rod", "sleep", "islands",
+              "friction_model"]
 """Columns that identify a grid point apart from the solver (within one formulation)."""
 
 
@@ -153,18 +155,19 @@ def point_time_table(results: pd.DataFrame) -> str:
     if rows.empty or len(rows) > POINT_TABLE_LIMIT:
         return ""
     rows = rows.sort_values(["scene", "formulation", "solver", "tol", "dt", "table_mass",
-                             "sleep", "islands"], kind="stable", na_position="first")
+                             "sleep", "islands", "friction_model"], kind="stable",
+                            na_position="first")
     table = markdown_table(
         ["scene", "formulation", "solver", "tol", "dt (s)", "table mass (kg)", "sleep",
-         "wall (ms)", "solver (ms)", "step / solver", "islands"],
+         "wall (ms)", "solver (ms)", "step / solver", "islands", "friction model"],
         ([row.scene, row.formulation, row.solver, row.tol, format_number(row.dt),
           table_mass_text(row.table_mass), "yes" if bool(row.sleep) else "no",
           format_ms(row.wall_time_per_step_median),
           format_ms(row.solver_time_per_step_median),
           format_ratio(plots.as_float(row.step_over_solver_median)),
-          "yes" if bool(row.islands) else "no"]
+          "yes" if bool(row.islands) else "no", cell_text(row.friction_model)]
          for row in rows.itertuples()),
-        align="llllllrrrrl")
+        align="llllllrrrrll")
     return ("### Each grid point\n\nMedian whole-step and solver time per step of every "
             "completed grid point, and the median of their per-step ratio (*step / solver*).  "
             "*Table mass*: the seed's heavy-table variant (table corners as variables of "

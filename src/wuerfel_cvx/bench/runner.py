@@ -33,7 +33,15 @@ from ..solvers import SOLVERS
 from ..trajectory import Trajectory
 from ..versions import package_version
 from . import schema
-from .suite import REFERENCE_REFINEMENT, REFERENCE_SOLVER, REFERENCE_TOL, GridPoint
+from .friction_summary import friction_summary
+from .suite import (
+    DEFAULT_FRICTION_MODEL,
+    REFERENCE_REFINEMENT,
+    REFERENCE_SOLVER,
+    REFERENCE_TOL,
+    GridPoint,
+    ReferenceKey,
+)
 
 
 @dataclass(frozen=True)
@@ -47,27 +55,35 @@ class Reference:
     detail: str = ""
 
 
-def reference_file_name(key: tuple[str, str, float, float]) -> str:
-    """File name under ``<out>/references/`` for a reference key."""
-    scene, formulation, dt, duration = key
-    digest = hashlib.sha1(repr(key).encode("utf-8")).hexdigest()[:10]
+def reference_file_name(key: ReferenceKey) -> str:
+    """File name under ``<out>/references/`` for a reference key.
+
+    The default friction model is left out of the name and its digest, so a reference's
+    file keeps the name it had before suites had friction models.
+    """
+    scene, formulation, dt, duration, friction_model = key
+    named = key[:4] if friction_model == DEFAULT_FRICTION_MODEL else key
+    digest = hashlib.sha1(repr(named).encode("utf-8")).hexdigest()[:10]
     name = Path(scene).stem if scene.endswith(".toml") else scene  # a scene file by path
-    return f"{name}-{formulation}-dt{dt:g}-T{duration:g}-{digest}.npz"
+    model = "" if friction_model == DEFAULT_FRICTION_MODEL else f"-{friction_model}"
+    return f"{name}-{formulation}{model}-dt{dt:g}-T{duration:g}-{digest}.npz"
 
 
-def compute_reference(key: tuple[str, str, float, float], path: Path) -> Path:
+def compute_reference(key: ReferenceKey, path: Path) -> Path:
     """Run the dt/8 reference for ``key`` and save it to ``path`` (``.npz``).
 
-    The run uses fixed tables, five rods, :data:`REFERENCE_SOLVER` at :data:`REFERENCE_TOL`.
-    A failed reference is saved too, marked incomplete, so the points that need it say so.
+    The run uses fixed tables, five rods, :data:`REFERENCE_SOLVER` at :data:`REFERENCE_TOL`
+    and the key's friction model.  A failed reference is saved too, marked incomplete, so
+    the points that need it say so.
     """
-    scene, formulation, dt, duration = key
+    scene, formulation, dt, duration, friction_model = key
     fine_dt = dt / REFERENCE_REFINEMENT
     steps = max(1, round(duration / dt)) * REFERENCE_REFINEMENT
     detail = ""
     try:
         trajectory = simulate(scene, dt=fine_dt, steps=steps, solver=REFERENCE_SOLVER,
-                              formulation=formulation, tol=REFERENCE_TOL)
+                              formulation=formulation, tol=REFERENCE_TOL,
+                              friction_model=friction_model)
         complete = True
     except StepFailure as failure:
         assert failure.trajectory is not None
@@ -108,6 +124,7 @@ def run_point(point: GridPoint, reference: Reference | None,
                               verified=False, steps_completed=0)
     row = {**base, **_outcome(trajectory, failure), **_timing(trajectory, point),
            **_accuracy(trajectory, point, reference),
+           **friction_summary(trajectory, peer=point.engine != "wuerfel_cvx"),
            "reference_disagreement": disagreement}
     if series_dir is not None:
         _write_series(trajectory, series_dir / schema.series_file_name(point.point_id))
@@ -145,7 +162,8 @@ def _simulate(point: GridPoint,
                                   tol=point.tol, table_mass=point.table_mass,
                                   extra_rod=point.extra_rod, observer=compare,
                                   sleep=SleepSettings() if point.sleep else None,
-                                  islands=point.islands)
+                                  islands=point.islands,
+                                  friction_model=point.friction_model or DEFAULT_FRICTION_MODEL)
     except StepFailure as failure:
         if failure.trajectory is None:
             raise
@@ -159,7 +177,7 @@ def _configuration(point: GridPoint) -> dict[str, Any]:
         "engine": point.engine, "formulation": point.formulation, "solver": point.solver,
         "tol": point.tol, "dt": point.dt, "duration": point.duration, "steps": point.steps,
         "table_mass": point.table_mass, "extra_rod": point.extra_rod, "sleep": point.sleep,
-        "islands": point.islands,
+        "islands": point.islands, "friction_model": point.friction_model,
         "solver_version": _solver_version(point.solver), **machine(),
         "finished_at": dt_module.datetime.now(dt_module.UTC).isoformat(timespec="seconds"),
         "reference_kind": point.reference,

@@ -22,15 +22,43 @@ from typing import Any, Literal
 import pandas as pd
 
 from ..errors import InputError
+from ..formulations import FORMULATIONS
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 """Version of :data:`COLUMNS`; stored in every row's ``schema_version``."""
 
-ADDED_COLUMNS: dict[int, dict[str, Any]] = {4: {"islands": False},
-                                            5: {"max_overlap_depth": None}}
-"""Per schema version, the columns it added and their value in the rows of older files
-(version 3 had no ``islands`` column: its runs solved one joint QP; version 4 did not
-measure ``max_overlap_depth``, so it is missing there)."""
+FRICTION_FORMULATIONS: frozenset[str] = frozenset(
+    name for name, make in FORMULATIONS.items() if hasattr(make(), "friction_model"))
+"""Formulations that take a friction model (the others, ``seed``, have no friction)."""
+
+
+def _old_friction_model(frame: pd.DataFrame) -> pd.Series:
+    """``friction_model`` of the rows of a file older than version 6.
+
+    Those runs had no friction in any scene, which every friction model treats alike, so
+    the value is what a run of the same configuration writes now: ``ccp`` (the default)
+    for a formulation that takes friction, empty for ``seed`` and the peers.
+    """
+    takes_friction = frame["formulation"].isin(sorted(FRICTION_FORMULATIONS))
+    return pd.Series(["ccp" if flag else None for flag in takes_friction.fillna(False)],
+                     index=frame.index, dtype="string")
+
+
+ADDED_COLUMNS: dict[int, dict[str, Any]] = {
+    4: {"islands": False},
+    5: {"max_overlap_depth": None},
+    6: {"friction_model": _old_friction_model, "friction_steps": None,
+        "max_signorini_violation": None, "max_coulomb_violation": None,
+        "max_dissipation_violation": None, "friction_work": None,
+        "coulomb_iterations_mean": None, "coulomb_iterations_max": None,
+        "coulomb_converged_fraction": None, "coulomb_unconverged_steps": None},
+}
+"""Per schema version, the columns it added and their value in the rows of older files:
+a constant, ``None`` (not measured then: missing), or a function of the older frame giving
+one value per row.  Version 3 had no ``islands`` column: its runs solved one joint QP;
+version 4 did not measure ``max_overlap_depth``; version 5 had no friction, so its
+criteria and fixed-point columns are missing and its ``friction_model`` is that of
+:func:`_old_friction_model`."""
 
 ColumnType = Literal["str", "int", "float", "bool"]
 
@@ -117,6 +145,31 @@ COLUMNS: tuple[Column, ...] = (
     _c("reference_disagreement", "float", "m/s",
        "largest |x - x_ref| (inf-norm) between this solver's step solution and the "
        "tightest CLARABEL's on the same step QP (m/s for velocity, m/s^2 for seed)"),
+    # friction (wuerfel_cvx.criteria, after Le Lidec et al. 2023; empty for peers)
+    _c("friction_model", "str", "",
+       "'ccp' or 'coulomb' for a formulation that takes friction (on a scene without "
+       "friction both are the frictionless model); empty for 'seed' and peers"),
+    _c("friction_steps", "int", "1",
+       "completed steps with a contact with friction, whose criteria were measured; "
+       "empty for peers"),
+    _c("max_signorini_violation", "float", "N s m",
+       "largest |gap| x normal impulse of a contact over the run (an impulse pushing at a "
+       "distance); empty without friction steps"),
+    _c("max_coulomb_violation", "float", "N s",
+       "largest friction impulse beyond mu x normal impulse over the run"),
+    _c("max_dissipation_violation", "float", "J",
+       "largest lambda_t s + mu lambda_n |s| of a contact over the run: friction not "
+       "opposing the slip, or slip inside the cone (0 under maximum dissipation)"),
+    _c("friction_work", "float", "J",
+       "friction impulses' work summed over the run's steps (<= 0 when friction dissipates)"),
+    _c("coulomb_iterations_mean", "float", "1",
+       "mean friction problems per step of the Coulomb fixed point; empty without it"),
+    _c("coulomb_iterations_max", "int", "1",
+       "most friction problems in one step of the Coulomb fixed point; empty without it"),
+    _c("coulomb_converged_fraction", "float", "1",
+       "fraction of the fixed point's steps that converged within its iteration limit"),
+    _c("coulomb_unconverged_steps", "int", "1",
+       "steps whose Coulomb fixed point stopped at its iteration limit unconverged"),
 )
 """Every column, in file order."""
 
@@ -215,8 +268,7 @@ def read_results(path: str | Path, upgrade: bool = True) -> pd.DataFrame:
                              f"version {sorted(claimed)}", source=str(path),
                              field="schema_version")
         frame = frame.assign(schema_version=str(SCHEMA_VERSION),
-                             **{name: None if value is None else _cell(value, _BY_NAME[name])
-                                for name, value in added.items()})
+                             **{name: _old_value(value, name) for name, value in added.items()})
         return validate(frame[list(COLUMN_NAMES)], source=str(path))
     if tuple(header) != COLUMN_NAMES:
         missing = [name for name in COLUMN_NAMES if name not in header]
@@ -226,6 +278,13 @@ def read_results(path: str | Path, upgrade: bool = True) -> pd.DataFrame:
     frame = pd.read_csv(io.StringIO(text), dtype="string", keep_default_na=False,
                         na_values=[""])
     return validate(frame, source=str(path))
+
+
+def _old_value(value: Any, name: str) -> Any:
+    """An added column's value for ``DataFrame.assign``: a cell, ``None`` or a function."""
+    if value is None or callable(value):
+        return value
+    return _cell(value, _BY_NAME[name])
 
 
 def _older_version(header: tuple[str, ...]) -> tuple[int, dict[str, Any]] | None:

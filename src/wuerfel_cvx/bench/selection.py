@@ -90,22 +90,35 @@ def is_value(column: pd.Series, value: str) -> pd.Series:
 
 
 def plain_variant(results: pd.DataFrame) -> pd.Series:
-    """Mask of rows without a variant: fixed tables, five rods, no sleep, one joint QP."""
+    """Mask of rows without a variant.
+
+    Fixed tables, five rods, no sleep, one joint QP and the default friction model (or none).
+    """
     return (results["table_mass"].isna() & ~results["extra_rod"].fillna(False).astype(bool)
             & ~results["sleep"].fillna(False).astype(bool)
-            & ~results["islands"].fillna(False).astype(bool))
+            & ~results["islands"].fillna(False).astype(bool)
+            & ~_other_friction_model(results))
+
+
+def _other_friction_model(results: pd.DataFrame) -> pd.Series:
+    """Mask of rows whose friction model is not the default ``ccp`` (nor missing)."""
+    models = results["friction_model"].astype("string")
+    return (models.notna() & models.ne("ccp")).fillna(False).astype(bool)
 
 
 def variant_labels(results: pd.DataFrame) -> pd.Series:
-    """Short text per row naming its variant (``table 1e+06 kg``, ``sleep``, ``islands``...)."""
+    """Short text per row naming its variant (``table 1e+06 kg``, ``sleep``, ``coulomb``...)."""
     masses = results["table_mass"]
     rods = results["extra_rod"].fillna(False).astype(bool)
     sleeps = results["sleep"].fillna(False).astype(bool)
     islands = results["islands"].fillna(False).astype(bool)
+    models = results["friction_model"].astype("string").fillna("")
+    other = _other_friction_model(results)
     labels = [" ".join(part for part in (
         f"table {mass:.0e} kg" if pd.notna(mass) else "", "extra rod" if rod else "",
-        "sleep" if sleep else "", "islands" if island else "") if part)
-        for mass, rod, sleep, island in zip(masses, rods, sleeps, islands, strict=True)]
+        "sleep" if sleep else "", "islands" if island else "", model if odd else "") if part)
+        for mass, rod, sleep, island, model, odd in zip(masses, rods, sleeps, islands, models,
+                                                        other, strict=True)]
     return pd.Series(labels, index=results.index, dtype=object)
 
 

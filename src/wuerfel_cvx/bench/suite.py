@@ -17,6 +17,8 @@ Cartesian product of its lists::
     extra_rods = [false]
     sleeps = [false]                    # true: islands at rest sleep
     islands = [false]                   # true: one QP per island instead of one joint QP
+    friction_models = ["ccp"]           # "ccp" and/or "coulomb" (scenes with friction)
+    peers = []                          # peer engines; names unknown here are left out
     reference = "dt/8"                  # "dt/8", "rest" or "none"
     compare_every = 1                   # steps between re-solves by the reference solver
     time_limit = 600.0                  # wall seconds per grid point before it is stopped
@@ -25,7 +27,11 @@ Cartesian product of its lists::
     scenes = ["tilted-drop", "stack-3"]
 
 Peer engines (``PYMUNK``, ``MUJOCO``) may appear among the solvers; a peer point has no
-formulation or tolerance of ours, so it is expanded once per scene and dt.
+formulation, tolerance or friction model of ours, so it is expanded once per scene and dt.
+Peers may also be named in ``peers``: a name that is not a peer engine of this
+installation is then left out of the suite, and :attr:`Suite.skipped` says so (among the
+solvers it would be taken for a solver and give an error row).  The sweep skips the
+points of an engine whose package is not installed, naming them.
 """
 
 from __future__ import annotations
@@ -39,6 +45,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
+from ..formulations import FRICTION_MODELS
 from ..peers import PEER_ENGINES
 
 REFERENCE_KINDS = ("dt/8", "rest", "none")
@@ -48,19 +55,27 @@ REFERENCE_KINDS = ("dt/8", "rest", "none")
 REFERENCE_REFINEMENT = 8
 """The reference runs at ``dt / REFERENCE_REFINEMENT``."""
 
+DEFAULT_FRICTION_MODEL = FRICTION_MODELS[0]
+"""The friction model of a grid point that names none; left out of its ``point_id``."""
+
+ReferenceKey = tuple[str, str, float, float, str]
+"""What identifies a dt/8 reference run: scene, formulation, dt (s), duration (s) and
+friction model."""
+
 REFERENCE_SOLVER = "CLARABEL"
 REFERENCE_TOL = "high"
 """The tightest CLARABEL setting (see :data:`wuerfel_cvx.solvers.TOLERANCE_PRESETS`)."""
 
 _LIST_KEYS = {"scenes": str, "formulations": str, "solvers": str, "tols": str,
               "dts": float, "table_masses": (str, float), "extra_rods": bool,
-              "sleeps": bool, "islands": bool}
+              "sleeps": bool, "islands": bool, "friction_models": str, "peers": str}
 _SCALAR_KEYS = {"duration": float, "reference": str, "compare_every": int,
                 "time_limit": float}
 _DEFAULTS: dict[str, Any] = {
     "formulations": ["velocity"], "solvers": ["CLARABEL"], "tols": ["default"],
     "dts": [0.01], "table_masses": ["fixed"], "extra_rods": [False], "sleeps": [False],
-    "islands": [False], "reference": "dt/8",
+    "islands": [False], "friction_models": [DEFAULT_FRICTION_MODEL], "peers": [],
+    "reference": "dt/8",
     "compare_every": 1, "time_limit": 600.0,
 }
 
@@ -93,6 +108,8 @@ class GridPoint:
     """Wall time (s) after which a grid point is stopped and reported as failed."""
     islands: bool = False
     """One QP per island instead of one joint QP (``simulate(..., islands=True)``)."""
+    friction_model: str | None = DEFAULT_FRICTION_MODEL
+    """``simulate(..., friction_model=...)``: ``ccp`` or ``coulomb``; ``None`` for a peer."""
 
     @property
     def engine(self) -> str:
@@ -117,19 +134,23 @@ class GridPoint:
             parts.append("sleep")
         if self.islands:
             parts.append("islands")
+        if self.friction_model not in (None, DEFAULT_FRICTION_MODEL):
+            parts.append(f"friction={self.friction_model}")
         return "|".join(parts)
 
     @property
-    def reference_key(self) -> tuple[str, str, float, float] | None:
+    def reference_key(self) -> ReferenceKey | None:
         """What identifies this point's dt/8 reference run, or ``None`` if it needs none.
 
         Variants (heavy tables, a sixth rod) and peers are compared with the exact model:
-        fixed tables, five rods, and for peers the ``velocity`` formulation.
+        fixed tables, five rods, and for peers the ``velocity`` formulation with the
+        default friction model.  A point's reference uses the point's friction model.
         """
         if self.reference != "dt/8":
             return None
         formulation = "velocity" if self.formulation == "peer" else self.formulation
-        return (self.scene, formulation, self.dt, self.duration)
+        return (self.scene, formulation, self.dt, self.duration,
+                self.friction_model or DEFAULT_FRICTION_MODEL)
 
 
 @dataclass(frozen=True)
@@ -139,6 +160,8 @@ class Suite:
     name: str
     description: str
     points: tuple[GridPoint, ...]
+    skipped: tuple[str, ...] = ()
+    """Why peers named in ``peers`` were left out (one message per engine)."""
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Suite:
@@ -182,12 +205,17 @@ class Suite:
         if not isinstance(grids, list) or not grids:
             raise InputError("needs at least one [[grid]] table", source=source, field="grid")
         points: list[GridPoint] = []
+        skipped: dict[str, str] = {}
         for index, grid in enumerate(grids):
             where = f"grid[{index}]"
             settings = {**defaults, **_checked(grid, source, where)}
+            runnable, left_out = _runnable_peers(settings["peers"])
+            skipped.update(left_out)
+            settings["solvers"] = [*settings["solvers"], *runnable]
             points.extend(_expand(name, settings, source, where))
         unique = list(dict.fromkeys(points))
-        return cls(name, str(data.get("description", "")), tuple(unique))
+        return cls(name, str(data.get("description", "")), tuple(unique),
+                   tuple(skipped.values()))
 
 
 def suite_names() -> list[str]:
@@ -216,6 +244,21 @@ def _checked(table: Any, source: str, where: str) -> dict[str, Any]:
                              source=source, field=field)
         checked[key] = value
     return checked
+
+
+def _runnable_peers(names: list[str]) -> tuple[list[str], dict[str, str]]:
+    """The ``peers`` that are peer engines here, and a message for each one left out.
+
+    An engine whose package is not installed stays: the sweep skips its points and says so.
+    """
+    runnable, left_out = [], {}
+    for name in (str(name).upper() for name in names):
+        if name in PEER_ENGINES:
+            runnable.append(name)
+        else:
+            left_out[name] = (f"peer {name} left out: not a peer engine of this installation "
+                              f"(known: {', '.join(PEER_ENGINES)})")
+    return runnable, left_out
 
 
 def _check_type(value: Any, expected: Any, source: str, field: str) -> None:
@@ -252,19 +295,32 @@ def _expand(suite: str, s: dict[str, Any], source: str, where: str) -> list[Grid
             raise InputError(f"time steps must be positive, got {dt}", source=source,
                              field=f"{where}.dts")
     masses = [_table_mass(m, source, f"{where}.table_masses") for m in s["table_masses"]]
+    models = [_friction_model(m, source, f"{where}.friction_models")
+              for m in s["friction_models"]]
     points = []
-    for scene, formulation, solver, tol, dt, mass, rod, sleep, islands in itertools.product(
-            s["scenes"], s["formulations"], s["solvers"], s["tols"], s["dts"], masses,
-            s["extra_rods"], s["sleeps"], s["islands"]):
+    for (scene, formulation, solver, tol, dt, mass, rod, sleep, islands,
+         model) in itertools.product(s["scenes"], s["formulations"], s["solvers"], s["tols"],
+                                     s["dts"], masses, s["extra_rods"], s["sleeps"],
+                                     s["islands"], models):
         solver = solver.upper()
+        friction_model: str | None = model
         if solver in PEER_ENGINES:
-            formulation, tol, mass, rod, sleep, islands = ("peer", "native", None, False,
-                                                           False, False)
+            formulation, tol, mass, rod, sleep, islands, friction_model = (
+                "peer", "native", None, False, False, False, None)
         points.append(GridPoint(suite, scene, formulation, solver, str(tol), float(dt),
                                 float(duration), mass, bool(rod), bool(sleep),
                                 s["reference"], s["compare_every"],
-                                float(s["time_limit"]), islands=bool(islands)))
+                                float(s["time_limit"]), islands=bool(islands),
+                                friction_model=friction_model))
     return points
+
+
+def _friction_model(value: str, source: str, field: str) -> str:
+    key = value.strip().lower()
+    if key not in FRICTION_MODELS:
+        raise InputError(f"unknown friction model {value!r} (known: {', '.join(FRICTION_MODELS)})",
+                         source=source, field=field)
+    return key
 
 
 def _table_mass(value: str | float, source: str, field: str) -> float | None:

@@ -24,7 +24,7 @@ from ..peers import PEER_ENGINES, available_peers
 from ..solvers import SOLVERS, available_solvers
 from . import schema
 from .runner import Reference, compute_reference, load_reference, reference_file_name, run_point
-from .suite import REFERENCE_REFINEMENT, GridPoint, Suite
+from .suite import REFERENCE_REFINEMENT, GridPoint, ReferenceKey, Suite
 
 RESULTS_FILE = "results.csv"
 
@@ -64,6 +64,8 @@ def run_sweep(suite: Suite, out: str | Path, *, jobs: int = 1, progress: bool | 
     results = out / RESULTS_FILE
     done = _finished_ids(results, suite.name)
     runnable, unavailable = _split_available(suite.points)
+    for message in suite.skipped:
+        note(message)
     for point_id in unavailable:
         note(f"skipped (not installed): {point_id}")
     todo = [p for p in runnable if p.point_id not in done]
@@ -85,9 +87,9 @@ def run_sweep(suite: Suite, out: str | Path, *, jobs: int = 1, progress: bool | 
                         failed)
 
 
-def key_steps(key: tuple[str, str, float, float]) -> int:
+def key_steps(key: ReferenceKey) -> int:
     """Fine steps of a reference run (its share of the progress bar)."""
-    _, _, dt, duration = key
+    _, _, dt, duration, _ = key
     return max(1, round(duration / dt)) * REFERENCE_REFINEMENT
 
 
@@ -117,7 +119,7 @@ def _split_available(points: Iterable[GridPoint]) -> tuple[list[GridPoint], list
 
 
 def _references_needed(points: Iterable[GridPoint],
-                       out: Path) -> dict[tuple[str, str, float, float], Path]:
+                       out: Path) -> dict[ReferenceKey, Path]:
     needed = {}
     for point in points:
         key = point.reference_key
@@ -131,7 +133,7 @@ def _references_needed(points: Iterable[GridPoint],
 Task = tuple[Any, Callable[..., Any], tuple[Any, ...]]
 
 
-def _reference_tasks(references: dict[tuple[str, str, float, float], Path]) -> list[Task]:
+def _reference_tasks(references: dict[ReferenceKey, Path]) -> list[Task]:
     return [(key, _reference_job, (key, path)) for key, path in references.items()]
 
 
@@ -140,7 +142,7 @@ def _point_tasks(points: list[GridPoint], out: Path) -> list[Task]:
     return [(point, _point_job, (point, out)) for point in longest_first]
 
 
-def _reference_job(key: tuple[str, str, float, float], path: Path) -> Path:
+def _reference_job(key: ReferenceKey, path: Path) -> Path:
     try:
         return compute_reference(key, path)
     except Exception:  # e.g. an unknown scene: its grid points report the error
