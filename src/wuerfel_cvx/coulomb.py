@@ -28,16 +28,20 @@ convex, declared in cvxpy, its dual the friction impulse of maximal dissipation 
 (:mod:`wuerfel_cvx.friction_problem`).
 
 *Iteration.*  From ``lambda_t = 0``: contact QP -> ``lambda_n`` -> friction problem ->
-``lambda_t`` -> contact QP ..., until two successive contact QPs' normal impulses differ by at
-most ``tolerance`` times the largest of them.  The closest-approach passes of ``velocity``
-(:meth:`~wuerfel_cvx.formulations.velocity.VelocityFormulation.refine`) interleave: after each
-contact QP its rows are re-linearised about its solution when the formulation asks so, and
-the next contact QP takes the new rows with the current ``lambda_t``.  The fixed point is
-converged only when the formulation also accepts the last contact QP's solution, so the
-step's state, always the last contact QP's, meets the formulation's gap acceptance (and with
-it the penetration bound) exactly as a frictionless step does.  After ``max_iterations``
-friction problems without convergence the step goes on with the last iterate: further passes,
-``lambda_t`` fixed, until the formulation accepts; :attr:`CoulombStep.converged` says so.
+``lambda_t`` -> contact QP ..., until two successive contact QPs' normal impulses differ by
+at most ``tolerance`` times the largest of them.  The closest-approach passes of
+``velocity`` (:meth:`~wuerfel_cvx.formulations.velocity.VelocityFormulation.refine`)
+interleave: after each contact QP its rows are re-linearised about its solution when the
+formulation asks so, and the next contact QP takes the new rows with the current
+``lambda_t``.  The formulation's pass limit counts the passes since ``lambda_t`` last
+changed, so that each friction impulse has the passes a frictionless step has to meet the
+gap acceptance (a limit counted over the whole iteration let steps be accepted by the
+limit, with penetrations beyond the bound).  The fixed point is converged only when the
+formulation also accepts the last contact QP's solution, so the step's state, always the
+last contact QP's, meets the formulation's gap acceptance (and with it the penetration
+bound) exactly as a frictionless step does.  After ``max_iterations`` friction problems
+without convergence the step goes on with the last iterate: further passes, ``lambda_t``
+fixed, until the formulation accepts; :attr:`CoulombStep.converged` says so.
 """
 
 from __future__ import annotations
@@ -130,7 +134,7 @@ def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP
     solved: list[tuple[StepSolution, str]] = []
     answers: list[FrictionAnswer] = []
     previous: FloatArray | None = None
-    linearisations, converged = 1, False
+    linearisations, converged = 1, False  # passes since the friction impulse last changed
     while True:
         contact_qp = with_friction_impulse(base, friction)
         solved.append(solve(contact_qp))
@@ -150,12 +154,14 @@ def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP
             break
         if refined is None and len(answers) >= settings.max_iterations:
             break
-        if len(answers) < settings.max_iterations:
+        new_impulse = len(answers) < settings.max_iterations
+        if new_impulse:
             answers.append(solve_friction_problem(friction_problem(contact_qp, solution,
                                                                    target)))
             friction, previous = answers[-1].friction, normal
+        # the next contact QP is the first pass of a new impulse, or the next pass of this one
+        linearisations = 1 if new_impulse else linearisations + 1
         if refined is not None:
-            linearisations += 1
             base = dataclasses.replace(refined, target=target, _declared=None)
             friction = _carried(friction, contact_qp.contacts, base.contacts)
             previous = None if previous is None else _carried(previous, contact_qp.contacts,

@@ -290,13 +290,14 @@ class PropertySweepResult:
 
 
 def check_scene(scene: Scene, steps: int = 200, dt: float = 0.01, solver: str = "CLARABEL",
-                tol: str | float = "default") -> list[str]:
+                tol: str | float = "default", friction_model: str = "ccp") -> list[str]:
     """Run ``scene`` with the default formulation and return the invariants it breaks.
 
     A step failure or any other exception becomes one line naming it.
     """
     try:
-        trajectory = simulate(scene, dt=dt, steps=steps, solver=solver, tol=tol)
+        trajectory = simulate(scene, dt=dt, steps=steps, solver=solver, tol=tol,
+                              friction_model=friction_model)
     except StepFailure as failure:
         problems = [f"step failure: {failure}"]
         if failure.trajectory is not None and failure.trajectory.n_steps:
@@ -307,15 +308,20 @@ def check_scene(scene: Scene, steps: int = 200, dt: float = 0.01, solver: str = 
     return check_run(trajectory)
 
 
-def run_property_sweep(n_scenes: int, seed: int, steps: int = 200,
-                       dt: float = 0.01) -> PropertySweepResult:
-    """Run ``n_scenes`` generated scenes (generator seeded with ``seed``) and check each."""
+def run_property_sweep(n_scenes: int, seed: int, steps: int = 200, dt: float = 0.01, *,
+                       friction: bool = False,
+                       friction_model: str = "ccp") -> PropertySweepResult:
+    """Run ``n_scenes`` generated scenes (generator seeded with ``seed``) and check each.
+
+    ``friction`` draws friction coefficients (:func:`random_scene`), run with
+    ``friction_model``.
+    """
     started = time.perf_counter()
     rng = np.random.default_rng(seed)
     failures = []
     for index in range(n_scenes):
-        scene = random_scene(rng, name=f"generated-{seed}-{index}")
-        problems = check_scene(scene, steps=steps, dt=dt)
+        scene = random_scene(rng, name=f"generated-{seed}-{index}", friction=friction)
+        problems = check_scene(scene, steps=steps, dt=dt, friction_model=friction_model)
         if problems:
             failures.append(PropertyFailure(index, scene.to_dict(), tuple(problems)))
     return PropertySweepResult(tried=n_scenes, failures=failures,
