@@ -28,6 +28,7 @@ from wuerfel_cvx.analytic_scenes import (
     ladder_static_friction,
     launched_box_scene,
     slope_acceleration,
+    slope_origin,
     slope_scene,
 )
 from wuerfel_cvx.criteria import ccp_forces
@@ -164,7 +165,7 @@ def test_ccp_lifts_a_sliding_box_at_mu_times_its_slip(solver: str) -> None:
     sliding = simulate(slope_scene(angle, 0.2), dt=dt, steps=120, solver=solver)
     normal = np.array([-math.sin(angle), math.cos(angle)])
     along = np.array([math.cos(angle), math.sin(angle)])
-    gap = centres(sliding)[:, 0] @ normal - 0.5
+    gap = (centres(sliding)[:, 0] - np.asarray(slope_origin(angle))) @ normal - 0.5
     slip = np.abs(centre_velocities(sliding)[:, 0] @ along)
     late = slice(60, None)
     assert gap[late] == pytest.approx(0.2 * slip[late] * dt, rel=0.02)

@@ -7,8 +7,10 @@ contact's coefficient is ``sqrt(mu_a mu_b)``, so a body and its table given the 
 ``friction`` meet with that coefficient.
 
 ``slope_scene(angle, friction)``
-    A square resting on a table tilted by ``angle`` (rad).  It slides down the slope with
-    ``a = g (sin angle - mu cos angle)`` when ``mu < tan angle`` and stays put otherwise.
+    A square resting on a 12 m table tilted by ``angle`` (rad, 0 to 1), its lower face on
+    the slope at :func:`slope_origin`, 8 m of slope below it, above the floor.  It slides
+    down the slope with ``a = g (sin angle - mu cos angle)`` when ``mu < tan angle`` and
+    stays put otherwise.
 ``launched_box_scene(speed, friction)``
     A square on a flat table, launched sideways at ``speed`` (m/s).  It stops after
     ``v0^2 / (2 mu g)`` (m), at time ``v0 / (mu g)`` (s).
@@ -36,14 +38,37 @@ LADDER_SIZE = (2.0, 0.1)
 """Length and thickness (m) of the ladder."""
 
 
+SLOPE_BELOW = 8.0
+"""Length (m) of slope below the square of :func:`slope_scene`."""
+
+
+def slope_origin(angle: float) -> tuple[float, float]:
+    """The point (m) of the slope's top face under the middle of the square's lower face.
+
+    High enough that the whole slope is above the floor's top face (``y = 0``).
+    """
+    return 0.0, 1.1 * (math.cos(angle) + SLOPE_BELOW * math.sin(angle)) + 0.1
+
+
 def slope_scene(angle: float = 0.4, friction: float = 0.3) -> Scene:
-    """A unit square at rest on a table tilted by ``angle`` (rad), both of ``friction``."""
+    """A unit square at rest on a table tilted by ``angle`` (rad), both of ``friction``.
+
+    The floor comes first, as in every library scene, frictionless; the slope second.
+    """
+    if not 0.0 <= angle <= 1.0:
+        raise ValueError(f"slope angle must be within 0 and 1 rad, got {angle}")
+    origin = np.asarray(slope_origin(angle))
     normal = np.array([-math.sin(angle), math.cos(angle)])
-    table = Table(center=(float(-0.5 * normal[0]), float(-0.5 * normal[1])), size=(40.0, 1.0),
+    along = np.array([math.cos(angle), math.sin(angle)])
+    length = 12.0
+    table_centre = origin - 0.5 * normal + (0.5 * length - SLOPE_BELOW) * along
+    table = Table(center=(float(table_centre[0]), float(table_centre[1])), size=(length, 1.0),
                   angle=angle, friction=friction)
-    square = Square(center=(float(0.5 * normal[0]), float(0.5 * normal[1])), angle=angle,
+    centre = origin + 0.5 * normal
+    square = Square(center=(float(centre[0]), float(centre[1])), angle=angle,
                     friction=friction)
-    return Scene(name="friction-slope", squares=(square,), tables=(table,))
+    floor = Table(center=(0.0, -0.5), size=(40.0, 1.0))
+    return Scene(name="friction-slope", squares=(square,), tables=(floor, table))
 
 
 def slope_acceleration(angle: float, friction: float) -> float:

@@ -58,7 +58,7 @@ def simulate(
     sleep: SleepSettings | None = None,
     islands: bool = False,
     fallback: Sequence[str] = (),
-    friction_model: str = "ccp",
+    friction_model: str | None = None,
 ) -> Trajectory:
     """Simulate ``steps`` steps of ``dt`` seconds, one QP per step; the trajectory.
 

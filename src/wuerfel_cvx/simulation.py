@@ -35,7 +35,6 @@ from .coulomb import (
 from .criteria import ccp_forces, combine_criteria, contact_criteria, gaps_after
 from .errors import InputError, StepFailure
 from .formulations import (
-    FRICTION_MODELS,
     Formulation,
     StepQP,
     get_formulation,
@@ -97,8 +96,9 @@ class Simulation:
     friction_model:
         How contacts with friction (the scene's ``friction`` keys) are modelled: ``"ccp"``
         (default; Anitescu's cone complementarity, one QP) or ``"coulomb"`` (exact Coulomb
-        friction by a fixed point of QPs).  ``velocity`` and ``rigid`` take both; ``seed``
-        has no friction, and a scene with friction is an :class:`InputError` for it.
+        friction by a fixed point of QPs).  ``None`` (default) is ``"ccp"``, or the model of
+        a formulation object built with one.  ``velocity`` and ``rigid`` take both;
+        ``seed`` has no friction, and a scene with friction is an :class:`InputError` for it.
     tol:
         Tolerance preset (``low``, ``default``, ``high``) or a number.
     table_mass:
@@ -139,7 +139,7 @@ class Simulation:
                  *, table_mass: float | None = None, extra_rod: bool = False,
                  compiled: bool = True, sleep: SleepSettings | None = None,
                  islands: bool = False, fallback: Sequence[str] = (),
-                 friction_model: str = FRICTION_MODELS[0]):
+                 friction_model: str | None = None):
         self.dt = checked_dt(dt)
         self.solvers = [get_solver(name).name for name in (solver, *fallback)]
         tolerance_value(tol)

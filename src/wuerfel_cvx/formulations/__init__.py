@@ -48,13 +48,18 @@ FRICTION_MODELS: tuple[str, ...] = ("ccp", "coulomb")
 exact Coulomb friction by staggered projections (:mod:`wuerfel_cvx.coulomb`)."""
 
 
-def with_friction_model(formulation: Formulation, friction_model: str,
+def with_friction_model(formulation: Formulation, friction_model: str | None,
                         has_friction: bool) -> Formulation:
     """``formulation`` with ``friction_model`` (case-insensitive), or :class:`InputError`.
 
-    A formulation without friction (``seed``) takes the default ``"ccp"`` only for a scene
-    without friction (where every model is the frictionless one).
+    ``None`` keeps the formulation's own model (``"ccp"`` unless it was built with
+    another).  A formulation without friction (``seed``) takes ``None`` or the default
+    ``"ccp"`` only for a scene without friction (where every model is the frictionless one).
     """
+    if friction_model is None:
+        if hasattr(formulation, "friction_model"):
+            return formulation
+        friction_model = FRICTION_MODELS[0]
     key = str(friction_model).strip().lower()
     if key not in FRICTION_MODELS:
         raise InputError(f"unknown friction model '{friction_model}' (available: "
