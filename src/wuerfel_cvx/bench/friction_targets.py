@@ -251,8 +251,8 @@ def _ramp_table(ramps: pd.DataFrame) -> str:
             verdict, measured = "no flat slide to fit", "-"
         else:
             verdict = "met" if abs(error) <= RAMP_TOLERANCE[record["model"]] else "missed"
-            measured = f"{format_number(fitted)} ({100 * error:+.2f} %)"
-        rows.append([record["model"], record["solver"], record["box"],
+            measured = f"{format_number(fitted, 5)} (relative error {error:+.1e})"
+        rows.append([record["model"], record["solver"], int(record["box"]),
                      format_number(record["angle"]), format_number(record["mu"]),
                      format_number(expected), measured,
                      f"{format_number(record['fit_from_s'])} + {format_number(record['fit_s'])}",
@@ -264,7 +264,8 @@ def _ramp_table(ramps: pd.DataFrame) -> str:
 
 
 def _standing_table(standing: pd.DataFrame) -> str:
-    rows = [[record["scene"], record["engine"], record["model"] or "-", record["solver"],
+    rows = [[record["scene"], record["engine"],
+             record["model"] if isinstance(record["model"], str) else "-", record["solver"],
              format_number(record["duration_s"]),
              format_number(record["moved"]), format_number(record["penetration"]),
              "stands" if float(record["moved"]) <= STANDING else "moves",
