@@ -1,0 +1,45 @@
+"""The friction targets' measurements on scenes whose answer is known."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from wuerfel_cvx import simulate
+from wuerfel_cvx.analytic_scenes import slope_acceleration, slope_scene
+from wuerfel_cvx.bench.friction_targets import (
+    RAMP_TOLERANCE,
+    _longest_run,
+    displacement,
+    ramp_rows,
+    render,
+)
+
+pytestmark = pytest.mark.integration
+
+
+def test_longest_run_finds_the_longest_stretch_of_true() -> None:
+    mask = np.array([0, 1, 1, 0, 1, 1, 1, 0, 1], dtype=bool)
+    assert _longest_run(mask) == (4, 7)
+    assert _longest_run(np.zeros(4, dtype=bool)) == (0, 0)
+    assert _longest_run(np.ones(3, dtype=bool)) == (0, 3)
+
+
+def test_ramp_fit_of_a_box_sliding_down_a_slope_is_g_sin_minus_mu_cos() -> None:
+    scene = slope_scene(0.4, 0.3)
+    trajectory = simulate(scene, dt=1.0 / 240.0, steps=120)
+    (row,) = ramp_rows(trajectory, scene)
+    assert row["mu"] == pytest.approx(0.3)
+    assert row["expected"] == pytest.approx(slope_acceleration(0.4, 0.3))
+    assert row["fit_s"] >= 0.4  # the box lies flat from the start: almost the whole run
+    assert row["fitted"] == pytest.approx(row["expected"], rel=RAMP_TOLERANCE["ccp"])
+    # a box that stays put on a steeper friction has moved nothing measurable
+    still = simulate(slope_scene(0.4, 0.6), dt=1.0 / 60.0, steps=60)
+    assert displacement(still, 0.0) <= 1e-4
+    text = render(pd.DataFrame([{"kind": "ramp", "scene": "friction-slope",
+                                 "engine": "wuerfel_cvx", "model": "ccp",
+                                 "solver": "CLARABEL", "outcome": "ok", "wall_s": 1.0,
+                                 "coulomb_steps": np.nan, "coulomb_converged": np.nan,
+                                 **row}]))
+    assert "| ccp | CLARABEL | 0 |" in text and "met" in text
