@@ -20,7 +20,7 @@ import math
 import numpy as np
 import pytest
 
-from test_properties import DT, WEDGED_CORNER
+from test_properties import DT, WEDGED_CORNER, energy_identity_terms
 from wuerfel_cvx import simulate
 from wuerfel_cvx.analytic_scenes import (
     GRAVITY,
@@ -32,10 +32,7 @@ from wuerfel_cvx.analytic_scenes import (
     slope_scene,
 )
 from wuerfel_cvx.criteria import ccp_forces
-from wuerfel_cvx.formulations import VelocityFormulation, step_qp
 from wuerfel_cvx.library import named_scene
-from wuerfel_cvx.metrics import kinetic_energy, potential_energy
-from wuerfel_cvx.model import Model, State
 from wuerfel_cvx.scene import Scene
 from wuerfel_cvx.solve import VERIFY_FACTOR, solve_step_qp
 from wuerfel_cvx.solvers import TOLERANCE_PRESETS
@@ -235,26 +232,11 @@ def test_energy_identity_holds_with_the_friction_cones() -> None:
     ``tests/test_properties.py``, with an independent high-accuracy solve.
     """
     scene = with_friction(Scene.from_dict(WEDGED_CORNER), 0.5, 0.5)
-    model = Model.from_scene(scene)
-    scheme = VelocityFormulation()
     trajectory = simulate(scene, dt=DT, steps=150)
-    masses = np.repeat(model.point_masses, 2)
     rough = 0
     for step in (40, 60, 100, 143):
-        state = State(trajectory.points[step - 1], trajectory.velocities[step - 1])
-        qp = step_qp(scheme, model, state, DT)
-        declared = qp.declared()
-        declared.problem.solve(solver="CLARABEL", tol_gap_abs=1e-12, tol_gap_rel=1e-12,
-                               tol_feas=1e-12)
-        x = np.asarray(declared.variable.value)
-        eq_dual = np.atleast_1d(declared.eq_constraint.dual_value)
-        ineq_dual = np.atleast_1d(declared.ineq_constraint.dual_value)
-        work = 0.5 * ineq_dual @ qp.ineq_rhs - 0.5 * eq_dual @ qp.eq_rhs
-        dissipated = 0.5 * np.sum(masses * (x - state.velocities.ravel()) ** 2)
-        after = scheme.advance(model, state, x, DT)
-        change = (kinetic_energy(model, after) + potential_energy(model, after)
-                  - kinetic_energy(model, state) - potential_energy(model, state))
-        assert change == pytest.approx(work - dissipated, abs=1e-9)
+        qp, change, predicted = energy_identity_terms(scene, trajectory, step)
+        assert change == pytest.approx(predicted, abs=1e-9)
         forces = ccp_forces(qp, solve_step_qp(qp, "CLARABEL", "high"))
         if forces is not None and np.any(forces.friction != 0.0):
             rough += 1

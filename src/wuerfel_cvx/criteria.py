@@ -37,6 +37,7 @@ from .contacts import Contacts
 from .formulations.qp import StepQP
 from .friction import ContactForces
 from .geometry import FloatArray, cross
+from .model import Model
 from .solve import StepSolution
 
 CRITERIA_COLUMNS: tuple[str, ...] = ("signorini_violation_Nsm", "coulomb_violation_Ns",
@@ -65,16 +66,19 @@ def gaps_after(all_points: FloatArray, contacts: Contacts) -> FloatArray:
     return np.asarray(cross(edge, p_k - p_i) / np.linalg.norm(edge, axis=1), dtype=np.float64)
 
 
-def contact_criteria(forces: ContactForces | None, gaps: FloatArray) -> dict[str, float]:
-    """The criteria columns (see the module docstring) of one QP's contacts.
+def contact_criteria(forces: ContactForces | None, model: Model, points_after: FloatArray,
+                     contacts: Contacts) -> dict[str, float]:
+    """The criteria columns (see the module docstring) of one QP's ``contacts``.
 
-    ``gaps`` (m) are the contacts' gaps after the step (:func:`gaps_after`).
+    ``points_after`` (m) are the corners of ``model``'s boxes after the step; the gaps
+    are measured there only when there are forces to weigh them.
     """
     if forces is None:
         return dict.fromkeys(CRITERIA_COLUMNS, math.nan)
-    cone = forces.coefficient * forces.normal
-    if not len(gaps):
+    if not len(contacts):
         return dict.fromkeys(CRITERIA_COLUMNS, 0.0)
+    gaps = gaps_after(model.all_points(points_after), contacts)
+    cone = forces.coefficient * forces.normal
     power = forces.friction * forces.slip
     return {
         "signorini_violation_Nsm": float(np.max(np.abs(gaps) * np.maximum(forces.normal, 0.0))),

@@ -32,7 +32,7 @@ from .coulomb import (
     coulomb_settings,
     fixed_point,
 )
-from .criteria import ccp_forces, combine_criteria, contact_criteria, gaps_after
+from .criteria import ccp_forces, combine_criteria, contact_criteria
 from .errors import InputError, StepFailure
 from .formulations import (
     Formulation,
@@ -186,9 +186,8 @@ class Simulation:
             coulombs.append(coulomb)
             moved = self.formulation.advance(model, state, solution.x, self.dt)
             parts.append((boxes, moved))
-            criteria.append(contact_criteria(
-                ccp_forces(qp, solution) if coulomb is None else coulomb.forces, gaps_after(
-                model.all_points(moved.points), qp.contacts)))
+            forces = ccp_forces(qp, solution) if coulomb is None else coulomb.forces
+            criteria.append(contact_criteria(forces, model, moved.points, qp.contacts))
             qps.append(qp)
             solutions.append(solution)
             primary_statuses.append(primary)

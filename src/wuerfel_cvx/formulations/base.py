@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Protocol
+from dataclasses import dataclass
+from typing import Literal, Protocol
 
 from ..contacts import Contacts
 from ..geometry import FloatArray
@@ -63,3 +64,20 @@ class SinglePass:
                dt: float, passes: int) -> StepQP | None:
         """``None``: the first pass's solution is the step's."""
         return None
+
+
+@dataclass(frozen=True)
+class FrictionSettings:
+    """The friction settings of a formulation that takes friction (``velocity``, ``rigid``)."""
+
+    friction_model: Literal["ccp", "coulomb"] = "ccp"
+    """How contacts with friction are modelled (:mod:`~wuerfel_cvx.formulations.cone`)."""
+    coulomb_max_iterations: int = 50
+    """``friction_model="coulomb"``: most friction problems per step QP
+    (:mod:`wuerfel_cvx.coulomb`); a step that reaches it goes on with its last iterate and is
+    reported as not converged."""
+    coulomb_tolerance: float = 1e-4
+    """``friction_model="coulomb"``: the fixed point is converged when two successive contact
+    QPs' normal impulses differ by at most this fraction of the largest (1).  Ten times the
+    residual check's ``VERIFY_FACTOR * eps`` at the default tolerance, so solver noise does
+    not hold it back, and far below the 1 % of the friction it may leave unsettled."""

@@ -20,7 +20,6 @@ lengths hold to round-off.  Fixed tables only.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
@@ -29,7 +28,7 @@ from ..contacts import Contacts
 from ..errors import InputError
 from ..geometry import FloatArray, cross, rot90
 from ..model import Model, State
-from .base import SinglePass
+from .base import FrictionSettings, SinglePass
 from .cone import contact_cones
 from .motion import rigid_step
 from .qp import StepQP, declare_qp
@@ -37,24 +36,13 @@ from .velocity import VelocityFormulation
 
 
 @dataclass(frozen=True)
-class RigidFormulation(SinglePass):
+class RigidFormulation(SinglePass, FrictionSettings):
     """Velocity-level QP in (u_x, u_y, omega) per square; contacts as in ``velocity``."""
 
     beta: float = 0.2
     """Fraction of a penetration removed per step (1)."""
     contact_margin: float = 0.01
     """Distance (m) within which a point-edge pair is always constrained."""
-    friction_model: Literal["ccp", "coulomb"] = "ccp"
-    """How contacts with friction are modelled (:mod:`~wuerfel_cvx.formulations.cone`)."""
-    coulomb_max_iterations: int = 50
-    """``friction_model="coulomb"``: most friction problems per step QP
-    (:mod:`wuerfel_cvx.coulomb`); a step that reaches it goes on with its last iterate and is
-    reported as not converged."""
-    coulomb_tolerance: float = 1e-4
-    """``friction_model="coulomb"``: the fixed point is converged when two successive contact
-    QPs' normal impulses differ by at most this fraction of the largest (1).  Ten times the
-    residual check's ``VERIFY_FACTOR * eps`` at the default tolerance, so solver noise does
-    not hold it back, and far below the 1 % of the friction it may leave unsettled."""
     name: str = "rigid"
 
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:

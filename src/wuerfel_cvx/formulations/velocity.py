@@ -52,6 +52,7 @@ from ..contacts import Contacts, find_contacts
 from ..geometry import FloatArray
 from ..model import Model, State
 from .approach import closest_approach, rows_along
+from .base import FrictionSettings
 from .cone import ConeRows, contact_cones
 from .motion import rigid_step
 from .qp import StepQP, declare_qp, point_rows
@@ -65,7 +66,7 @@ from .rows import (
 
 
 @dataclass(frozen=True)
-class VelocityFormulation:
+class VelocityFormulation(FrictionSettings):
     """Velocity-level QP with speculative contacts (see the module docstring)."""
 
     beta: float = 0.2
@@ -84,17 +85,6 @@ class VelocityFormulation:
     gap_tolerance: float = 1e-6
     """Closest-approach rows: a pass is accepted once no contact's gap falls below its
     ramp by more than this (m) along the pass's motion."""
-    friction_model: Literal["ccp", "coulomb"] = "ccp"
-    """How contacts with friction are modelled (:mod:`~wuerfel_cvx.formulations.cone`)."""
-    coulomb_max_iterations: int = 50
-    """``friction_model="coulomb"``: most friction problems per step QP
-    (:mod:`wuerfel_cvx.coulomb`); a step that reaches it goes on with its last iterate and is
-    reported as not converged."""
-    coulomb_tolerance: float = 1e-4
-    """``friction_model="coulomb"``: the fixed point is converged when two successive contact
-    QPs' normal impulses differ by at most this fraction of the largest (1).  Ten times the
-    residual check's ``VERIFY_FACTOR * eps`` at the default tolerance, so solver noise does
-    not hold it back, and far below the 1 % of the friction it may leave unsettled."""
     name: str = "velocity"
 
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
@@ -147,6 +137,8 @@ class VelocityFormulation:
         With ``friction_model="coulomb"`` the rows stay normal rows; their
         :class:`ConeRows` tell the fixed point of :mod:`wuerfel_cvx.coulomb` the slips.
         """
+        if not np.any(model.friction > 0.0):  # no friction: no slip rows to build
+            return normal, rhs, None
         row_contact = np.tile(np.arange(len(contacts)), normal.shape[0] // max(len(contacts),
                                                                                  1))
         return contact_cones(model, model.all_points(points), contacts, normal, rhs,
