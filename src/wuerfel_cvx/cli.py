@@ -97,6 +97,14 @@ def build_parser() -> argparse.ArgumentParser:
     robust.add_argument("--out", default="reports/robustness.md",
                         help="report file (default reports/robustness.md)")
 
+    _add_export_parser(commands)
+    commands.add_parser("scenes", help="list the named scenes")
+    commands.add_parser("solvers", help="list the installed solvers")
+    return parser
+
+
+def _add_export_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``export-qps`` subcommand's arguments."""
     export = commands.add_parser(
         "export-qps", help="write a suite's step QPs as a qpbenchmark test set")
     export.add_argument("--suite", required=True, help="suite name or a .toml path")
@@ -108,10 +116,6 @@ def build_parser() -> argparse.ArgumentParser:
                         help="keep the QP of step 1 and of every N-th step after (default 1)")
     export.add_argument("--ours", action="store_true",
                         help="also solve each QP with our solvers and presets (ours.csv)")
-
-    commands.add_parser("scenes", help="list the named scenes")
-    commands.add_parser("solvers", help="list the installed solvers")
-    return parser
 
 
 def package_version() -> str:
