@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from wuerfel_cvx.bench.suite import Suite
@@ -19,6 +20,12 @@ from wuerfel_cvx.qp_export import (
     problem_name,
     qpsolvers_form,
     run_settings,
+)
+from wuerfel_cvx.qp_export.compare import (
+    ours_table,
+    paired_table,
+    qpbenchmark_tables,
+    write_comparison,
 )
 
 pytestmark = pytest.mark.integration
@@ -34,7 +41,7 @@ no row is active); two solvers of the stack's share one run."""
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("qps")
-    export_qps(Suite.from_dict(TINY), out)
+    export_qps(Suite.from_dict(TINY), out, ours=True)
     return out
 
 
@@ -88,7 +95,7 @@ def test_qpbenchmark_runs_the_set_with_two_solvers(exported: Path) -> None:
     test_set = load_test_set(str(exported / "wuerfel_step_qps.py"))
     assert type(test_set).__name__ == "WuerfelStepQps"
     assert test_set.count_problems() == len(manifest(exported))
-    results = Results(exported / "results.csv", test_set)
+    results = Results(exported / "wuerfel_step_qps.csv", test_set)
     for solver in ("clarabel", "piqp"):
         run(test_set, results, only_settings="high_accuracy", only_solver=solver)
     frame = results.df
@@ -96,8 +103,19 @@ def test_qpbenchmark_runs_the_set_with_two_solvers(exported: Path) -> None:
     assert frame["found"].all()
     tolerance = test_set.tolerances["high_accuracy"]
     assert (frame["primal_residual"] < tolerance.primal).all()
-    assert (exported / "results.csv").is_file()
+    assert (exported / "wuerfel_step_qps.csv").is_file()
     sys.modules.pop("wuerfel_step_qps", None)
+
+    # the comparison reads qpbenchmark's rates back through qpbenchmark's own methods
+    tables, _ = qpbenchmark_tables(exported)
+    assert tables["success"].loc["piqp", "high_accuracy"] == 100.0
+    ours = ours_table(pd.read_csv(exported / "ours.csv"))
+    assert ours.loc[("clarabel", "high"), "verified"] == 100.0
+    paired = paired_table(tables, ours, "high_accuracy", "high")
+    assert set(paired.index) >= {"clarabel", "piqp", "osqp"}
+    assert paired.loc["osqp", "qpb success"] != paired.loc["osqp", "qpb success"]  # not run
+    report = write_comparison(exported, exported / "report")
+    assert "## `high_accuracy` (qpbenchmark) beside `high` (ours)" in report.read_text()
 
 
 def test_cli_writes_the_set(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
