@@ -97,9 +97,25 @@ def build_parser() -> argparse.ArgumentParser:
     robust.add_argument("--out", default="reports/robustness.md",
                         help="report file (default reports/robustness.md)")
 
+    _add_export_parser(commands)
     commands.add_parser("scenes", help="list the named scenes")
     commands.add_parser("solvers", help="list the installed solvers")
     return parser
+
+
+def _add_export_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``export-qps`` subcommand's arguments."""
+    export = commands.add_parser(
+        "export-qps", help="write a suite's step QPs as a qpbenchmark test set")
+    export.add_argument("--suite", required=True, help="suite name or a .toml path")
+    export.add_argument("--out", required=True, help="folder of the test set")
+    export.add_argument("--scene", default=None, help="only this scene's runs")
+    export.add_argument("--steps", type=int, default=None,
+                        help="at most this many steps per run (default: the suite's)")
+    export.add_argument("--every", type=int, default=1,
+                        help="keep the QP of step 1 and of every N-th step after (default 1)")
+    export.add_argument("--ours", action="store_true",
+                        help="also solve each QP with our solvers and presets (ours.csv)")
 
 
 def package_version() -> str:
@@ -133,6 +149,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _report(args)
         if args.command == "robustness":
             return _robustness(args, argv)
+        if args.command == "export-qps":
+            return _export_qps(args)
         return _simulate(args)
     except InputError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
@@ -279,6 +297,21 @@ def _robustness(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         command=" ".join([PROG, *words]),
         say=lambda text: print(text, file=sys.stderr))
     print(f"wrote {path}")
+    return 0
+
+
+def _export_qps(args: argparse.Namespace) -> int:
+    from .bench.suite import Suite
+    from .qp_export import export_qps
+
+    if args.steps is not None and args.steps < 1:
+        raise InputError(f"must be a positive integer, got {args.steps}", field="--steps")
+    summary = export_qps(Suite.named(args.suite), Path(args.out), scene=args.scene,
+                         steps=args.steps, every=args.every, ours=args.ours,
+                         say=lambda text: print(text, file=sys.stderr))
+    print(f"wrote {summary.problems} QPs of {summary.runs} runs to {summary.out} "
+          f"({summary.manifest.name}; test set {summary.test_set.name})")
+    print(f"run:  cd {summary.out} && qpbenchmark {summary.test_set.name} list_problems")
     return 0
 
 
