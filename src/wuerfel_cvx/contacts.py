@@ -54,13 +54,19 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from . import contact_kernel
 from .geometry import FloatArray
 from .model import IntArray, Model
 
 #: Lengths closer than this (m) count as equal: two faces' separations (a tie between the
 #: bodies goes to the longer face), and a corner's place along a face's line and the
 #: face's end (a corner this close to the end is on the face).
-TIE_TOLERANCE = 1e-9
+TIE_TOLERANCE = contact_kernel.TIE_TOLERANCE
+
+USE_KERNEL = True
+"""Whether the search runs the compiled narrow phase (:mod:`wuerfel_cvx.contact_kernel`)
+when numba is installed; ``False`` runs the NumPy reference (:func:`narrow_phase`).  Both
+give the same contacts, bit for bit."""
 
 
 @dataclass(frozen=True)
@@ -274,6 +280,23 @@ def find_contacts(
     return _search(model, points, reach)
 
 
+def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
+                 reach: FloatArray) -> tuple[IntArray, IntArray, IntArray, FloatArray]:
+    """Held contacts of the ordered pairs: pair index, corner, edge index, distance (m).
+
+    ``corners`` ``(n_bodies, 4, 2)`` (m), ``edge_body`` and ``point_body`` ``(P,)`` as
+    from :func:`body_pairs`, ``reach`` ``(n_bodies,)`` (m).  The manifold rule of the
+    module docstring, batched in NumPy (the reference of
+    :func:`wuerfel_cvx.contact_kernel.narrow_phase`); rows in pair-major order.
+    """
+    distances = pair_distances(corners, edge_body, point_body)
+    pair_margin = reach[edge_body] + reach[point_body]
+    edge, keep = choose_edges(corners, edge_body, point_body, distances, pair_margin)
+    chosen = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]  # (4 corners, P)
+    pair_index, corner = np.nonzero(keep.T)  # pair-major order
+    return pair_index, corner, edge[corner, pair_index], chosen[corner, pair_index]
+
+
 def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
     all_points = model.all_points(points)
     pairs = body_pairs(model, all_points, reach)
@@ -281,12 +304,9 @@ def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
         return Contacts.empty()
     edge_body, point_body = pairs[:, 0], pairs[:, 1]
     corners = all_points.reshape(-1, 4, 2)
-    distances = pair_distances(corners, edge_body, point_body)
-    pair_margin = reach[edge_body] + reach[point_body]
-    edge, keep = choose_edges(corners, edge_body, point_body, distances, pair_margin)
-    chosen = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]  # (4 corners, P)
-    pair_index, corner = np.nonzero(keep.T)  # pair-major order
-    edge_index = edge[corner, pair_index]
+    narrow = contact_kernel.narrow_phase if USE_KERNEL and contact_kernel.AVAILABLE else \
+        narrow_phase
+    pair_index, corner, edge_index, distance = narrow(corners, edge_body, point_body, reach)
     w = edge_body[pair_index]
     return Contacts(
         point=4 * point_body[pair_index] + corner,
@@ -294,5 +314,5 @@ def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
         edge_j=4 * w + edge_index,
         point_body=point_body[pair_index],
         edge_body=w,
-        distance=chosen[corner, pair_index],
+        distance=distance,
     )
