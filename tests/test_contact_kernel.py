@@ -21,7 +21,7 @@ from test_contacts_fast import (
     random_model,
     random_points,
 )
-from wuerfel_cvx import contact_kernel, contacts, simulate
+from wuerfel_cvx import _numba, contact_kernel, contacts, simulate
 from wuerfel_cvx.model import Model, State
 
 pytestmark = [pytest.mark.integration,
@@ -78,7 +78,7 @@ def test_a_run_is_bit_identical_on_either_narrow_phase(monkeypatch: pytest.Monke
                                                         scene: str, steps: int) -> None:
     runs = []
     for use_kernel in (False, True):
-        monkeypatch.setattr(contacts, "USE_KERNEL", use_kernel)
+        monkeypatch.setattr(_numba, "enabled", use_kernel)
         runs.append(simulate(scene, dt=0.01, steps=steps, solver="OSQP"))
     assert np.array_equal(runs[0].points, runs[1].points)
     assert np.array_equal(runs[0].velocities, runs[1].velocities)

@@ -20,11 +20,10 @@ the NumPy path, which stays the reference.  Without numba (an optional dependenc
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import Any, TypeVar
-
 import numpy as np
 
+from . import _numba
+from ._numba import compiled
 from .geometry import FloatArray
 from .model import IntArray
 
@@ -32,25 +31,11 @@ from .model import IntArray
 #: :data:`wuerfel_cvx.contacts.TIE_TOLERANCE`, which is this number); the kernel compiles it in.
 TIE_TOLERANCE = 1e-9
 
-try:  # numba is optional: the NumPy path is the reference and the fallback
-    import numba
-except ImportError:  # pragma: no cover - exercised where numba is not installed
-    numba = None  # type: ignore[assignment]
-
-AVAILABLE = numba is not None
+AVAILABLE = _numba.AVAILABLE
 """Whether the compiled narrow phase can run (numba is importable)."""
 
-_Function = TypeVar("_Function", bound=Callable[..., Any])
 
-
-def _compiled(function: _Function) -> _Function:
-    """``function`` compiled by numba (machine code cached on disk), or itself without numba."""
-    if numba is None:  # pragma: no cover
-        return function
-    return numba.njit(cache=True, nogil=True)(function)  # type: ignore[return-value]
-
-
-@_compiled
+@compiled
 def _distances(corners: FloatArray, w: int, q: int, out: FloatArray) -> None:
     """``out[k, e]``: corner ``k`` of body ``q`` from edge ``e`` of body ``w`` (m)."""
     for e in range(4):
@@ -64,7 +49,7 @@ def _distances(corners: FloatArray, w: int, q: int, out: FloatArray) -> None:
             out[k, e] = (edge_x * offset_y - edge_y * offset_x) / length
 
 
-@_compiled
+@compiled
 def _best_faces(distances: FloatArray) -> tuple[IntArray, FloatArray]:
     """Each ordered pair's face of largest separation, and that separation (m)."""
     n_pairs = distances.shape[0]
@@ -81,7 +66,7 @@ def _best_faces(distances: FloatArray) -> tuple[IntArray, FloatArray]:
     return best_face, best
 
 
-@_compiled
+@compiled
 def _length(corners: FloatArray, body: int, start: int, end: int) -> float:
     """Length (m) of the segment from corner ``start`` to corner ``end`` of ``body``."""
     x = corners[body, end, 0] - corners[body, start, 0]
@@ -89,7 +74,7 @@ def _length(corners: FloatArray, body: int, start: int, end: int) -> float:
     return math.sqrt(x * x + y * y)
 
 
-@_compiled
+@compiled
 def _is_reference(corners: FloatArray, edge_body: IntArray, best_face: IntArray,
                   best: FloatArray) -> np.ndarray:
     """For each ordered pair, whether its edge body holds the pair's reference face."""
@@ -107,7 +92,7 @@ def _is_reference(corners: FloatArray, edge_body: IntArray, best_face: IntArray,
     return reference
 
 
-@_compiled
+@compiled
 def _incident_face(corners: FloatArray, w: int, q: int, reference_face: int) -> int:
     """The face of body ``w`` whose outward normal is most anti-parallel to ``q``'s face."""
     g = (reference_face + 1) % 4
@@ -127,7 +112,7 @@ def _incident_face(corners: FloatArray, w: int, q: int, reference_face: int) -> 
     return incident
 
 
-@_compiled
+@compiled
 def _narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
                   reach: FloatArray) -> tuple[IntArray, IntArray, IntArray, FloatArray]:
     """Held (pair, corner, edge, distance) of the ordered pairs, pair-major."""

@@ -54,7 +54,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from . import contact_kernel
+from . import _numba, contact_kernel
 from .geometry import FloatArray
 from .model import IntArray, Model
 
@@ -62,11 +62,6 @@ from .model import IntArray, Model
 #: bodies goes to the longer face), and a corner's place along a face's line and the
 #: face's end (a corner this close to the end is on the face).
 TIE_TOLERANCE = contact_kernel.TIE_TOLERANCE
-
-USE_KERNEL = True
-"""Whether the search runs the compiled narrow phase (:mod:`wuerfel_cvx.contact_kernel`)
-when numba is installed; ``False`` runs the NumPy reference (:func:`narrow_phase`).  Both
-give the same contacts, bit for bit."""
 
 
 @dataclass(frozen=True)
@@ -304,8 +299,8 @@ def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
         return Contacts.empty()
     edge_body, point_body = pairs[:, 0], pairs[:, 1]
     corners = all_points.reshape(-1, 4, 2)
-    narrow = contact_kernel.narrow_phase if USE_KERNEL and contact_kernel.AVAILABLE else \
-        narrow_phase
+    # the compiled narrow phase where numba is installed; the same contacts, bit for bit
+    narrow = contact_kernel.narrow_phase if _numba.enabled else narrow_phase
     pair_index, corner, edge_index, distance = narrow(corners, edge_body, point_body, reach)
     w = edge_body[pair_index]
     return Contacts(
