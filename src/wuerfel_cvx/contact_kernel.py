@@ -20,6 +20,7 @@ the NumPy path, which stays the reference.  Without numba (an optional dependenc
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
 from . import _numba

@@ -36,9 +36,9 @@ def _sort_row(columns: IntArray, values: FloatArray, count: int) -> None:
 @compiled
 def point_rows(index: IntArray, gradient: FloatArray,
                ) -> tuple[FloatArray, IntArray, IntArray, bool]:
-    """CSR ``(data, indices, indptr)`` of the rows of ``index`` ``(R, B)``, ``gradient`` ``(R, B, 2)``.
+    """CSR ``(data, indices, indptr)`` of the rows of gradient blocks.
 
-    Column ``2 index + axis``; an index ``< 0`` contributes nothing; each row's entries
+    ``index`` ``(R, B)`` the blocks' points, ``gradient`` ``(R, B, 2)`` their gradients.  Column ``2 index + axis``; an index ``< 0`` contributes nothing; each row's entries
     sorted by column, stably.  The last value is ``False`` when a point occurs twice in a
     row: the arrays are then not canonical, and the caller sums them as the NumPy path does.
     """
@@ -65,7 +65,7 @@ def point_rows(index: IntArray, gradient: FloatArray,
 
 
 @compiled
-def body_rows(data: FloatArray, indices: IntArray, indptr: IntArray, turned: FloatArray,
+def body_rows(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, turned: FloatArray,
               ) -> tuple[FloatArray, IntArray, IntArray]:
     """CSR ``(data, indices, indptr)`` (int32 indices) of corner rows times the corner map.
 
