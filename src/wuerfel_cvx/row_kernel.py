@@ -38,7 +38,8 @@ def point_rows(index: IntArray, gradient: FloatArray,
                ) -> tuple[FloatArray, IntArray, IntArray, bool]:
     """CSR ``(data, indices, indptr)`` of the rows of gradient blocks.
 
-    ``index`` ``(R, B)`` the blocks' points, ``gradient`` ``(R, B, 2)`` their gradients.  Column ``2 index + axis``; an index ``< 0`` contributes nothing; each row's entries
+    ``index`` ``(R, B)`` the blocks' points, ``gradient`` ``(R, B, 2)`` their gradients.
+    Column ``2 index + axis``; an index ``< 0`` contributes nothing; each row's entries
     sorted by column, stably.  The last value is ``False`` when a point occurs twice in a
     row: the arrays are then not canonical, and the caller sums them as the NumPy path does.
     """
