@@ -27,6 +27,7 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
+from . import _numba, residual_kernel
 from .backends import native_backend
 from .compiled import COMPILED, DECLARED, DIRECT, CompiledQPCache, structure_key
 from .errors import StepFailure
@@ -88,7 +89,17 @@ class StepSolution:
 
 def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
                   ineq_dual: FloatArray) -> Residuals:
-    """Relative primal, dual and complementarity residuals of ``(x, y, z)``."""
+    """Relative primal, dual and complementarity residuals of ``(x, y, z)``.
+
+    With numba, a QP without a coupling cost and without upper bounds is checked by the
+    compiled loop of :mod:`wuerfel_cvx.residual_kernel`, with the same numbers bit for bit.
+    """
+    if _numba.enabled and qp.cost_factor is None and qp.ineq_upper is None:
+        eq, ineq = qp.eq_matrix, qp.ineq_matrix
+        return Residuals(*residual_kernel.residuals(
+            qp.weights, qp.target, x, eq.data, eq.indices, eq.indptr, qp.eq_rhs,
+            np.asarray(eq_dual, dtype=np.float64), ineq.data, ineq.indices, ineq.indptr,
+            qp.ineq_rhs, np.asarray(ineq_dual, dtype=np.float64)))
     objective_grad = qp.objective_gradient(x)
     eq_term = _transposed_product(qp.eq_matrix, eq_dual)
     ineq_term = _transposed_product(qp.ineq_matrix, ineq_dual)
