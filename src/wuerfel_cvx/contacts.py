@@ -55,7 +55,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from . import _numba, contact_kernel
-from .geometry import FloatArray
+from .geometry import FloatArray, corner_mean
 from .model import IntArray, Model
 
 #: Lengths closer than this (m) count as equal: two faces' separations (a tie between the
@@ -142,7 +142,7 @@ def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntAr
     """
     n, t = model.n_boxes, model.n_tables
     corners = all_points.reshape(-1, 4, 2)
-    centers = corners.mean(axis=1)
+    centers = corner_mean(corners)
     radii = _lengths(corners - centers[:, None, :]).max(axis=1)
     bound = radii + reach
     found = [np.zeros((0, 2), dtype=np.int64)]

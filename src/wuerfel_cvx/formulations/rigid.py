@@ -27,7 +27,7 @@ import scipy.sparse as sp
 from .. import _numba, row_kernel
 from ..contacts import Contacts
 from ..errors import InputError
-from ..geometry import FloatArray, cross, rot90
+from ..geometry import FloatArray, corner_mean, cross, rot90
 from ..model import Model, State
 from .base import FrictionSettings, SinglePass
 from .cone import contact_cones
@@ -164,4 +164,4 @@ def body_velocities(points: FloatArray, velocities: FloatArray,
 
 def _offsets(points: FloatArray) -> FloatArray:
     corners = points.reshape(-1, 4, 2)
-    return np.asarray(corners - corners.mean(axis=1, keepdims=True), dtype=np.float64)
+    return np.asarray(corners - corner_mean(corners)[:, None], dtype=np.float64)
