@@ -28,7 +28,7 @@ def _largest(values: FloatArray) -> float:
     """``max |values|`` as ``np.max(np.abs(values))`` (NaN if any is NaN); 0.0 if empty."""
     if values.shape[0] == 0:
         return 0.0
-    top = abs(values[0])
+    top = float(abs(values[0]))
     for k in range(1, values.shape[0]):
         magnitude = abs(values[k])
         if magnitude != magnitude or top != top:
@@ -84,8 +84,10 @@ def residuals(weights: FloatArray, target: FloatArray, x: FloatArray,
               eq_rhs: FloatArray, eq_dual: FloatArray,
               ineq_data: FloatArray, ineq_indices: np.ndarray, ineq_indptr: np.ndarray,
               ineq_rhs: FloatArray, ineq_dual: FloatArray) -> tuple[float, float, float]:
-    """Relative primal, dual and complementarity residuals of ``min sum w (x - t)^2``
-    s.t. ``E x = e``, ``G x >= h`` at ``(x, y, z)`` (:func:`wuerfel_cvx.solve.kkt_residuals`).
+    """Relative primal, dual and complementarity residuals at ``(x, y, z)``.
+
+    Of ``min sum w (x - t)^2`` s.t. ``E x = e``, ``G x >= h``, as
+    :func:`wuerfel_cvx.solve.kkt_residuals` defines them (dimensionless).
     """
     n = x.shape[0]
     gradient = np.empty(n)
