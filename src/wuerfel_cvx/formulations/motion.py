@@ -54,8 +54,11 @@ class BodyMotion:
         turned = self.angle[body] + self.spin[body] * tau
         reference = self.reference[body, corner]
         cos, sin = np.cos(turned), np.sin(turned)
-        return np.stack([cos * reference[..., 0] - sin * reference[..., 1],
-                         sin * reference[..., 0] + cos * reference[..., 1]], axis=-1)
+        x, y = reference[..., 0], reference[..., 1]
+        offsets = np.empty(np.broadcast_shapes(cos.shape, x.shape) + (2,))
+        np.subtract(cos * x, sin * y, out=offsets[..., 0])
+        np.add(sin * x, cos * y, out=offsets[..., 1])
+        return offsets
 
     def positions(self, body: IntArray, corner: IntArray, tau: FloatArray) -> FloatArray:
         """Positions ``(m, 2)`` (m) of corner ``corner`` of ``body`` at ``tau`` (s)."""
