@@ -1,4 +1,4 @@
-"""The contact search's narrow phase as one compiled loop (numba), when numba is installed.
+"""The contact search as compiled loops (numba), when numba is installed.
 
 :func:`wuerfel_cvx.contacts.narrow_phase` is a batch of some sixty NumPy operations on
 ``(4 corners, 4 edges, pairs)`` arrays.  On the scenes of a few dozen bodies each of them
@@ -6,15 +6,17 @@ costs more in NumPy's per-call overhead than in arithmetic, so the search is dom
 overhead.  :func:`narrow_phase` here runs the same manifold rule over the same pairs as
 one loop compiled by numba: per ordered pair the sixteen signed distances, the best face,
 then, once both orders of a pair are known, the reference side, the incident face and the
-held corners.
+held corners.  The broad phase keeps its tree query (:class:`scipy.spatial.cKDTree`, whose
+order of candidate pairs the contacts' order follows); :func:`bounds` and
+:func:`pairs_within` compute the bounding circles and filter the candidates around it.
 
 It is the same arithmetic in the same order as the NumPy path (each distance
 ``(e_x o_y - e_y o_x) / |e|``, each projection ``(o_x a_x + o_y a_y) / |a|``, ``hypot`` from
 the C library as NumPy's), with numba's default strict IEEE semantics (no fast-math, no
-fused multiply-add), so for finite corners it returns the same contacts in the same order
-with the same distances, bit for bit; ``tests/test_contact_kernel.py`` checks this against
-the NumPy path, which stays the reference.  Without numba (an optional dependency, the
-``fast`` extra) :data:`AVAILABLE` is false and the NumPy path runs.
+fused multiply-add), so for finite corners it returns the same pairs and contacts in the
+same order with the same distances, bit for bit; ``tests/test_contact_kernel.py`` checks
+this against the NumPy path, which stays the reference.  Without numba (an optional
+dependency, the ``fast`` extra) :data:`AVAILABLE` is false and the NumPy path runs.
 """
 
 from __future__ import annotations
@@ -154,6 +156,76 @@ def _narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray
                 edge_out[count], distance_out[count] = face, distance
                 count += 1
     return pair_out[:count], corner_out[:count], edge_out[:count], distance_out[:count]
+
+
+@compiled
+def _bounds(corners: FloatArray, reach: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Each body's centre ``(n_bodies, 2)`` (m) and bounding radius plus reach (m)."""
+    n_bodies = corners.shape[0]
+    centers = np.empty((n_bodies, 2))
+    bound = np.empty(n_bodies)
+    for b in range(n_bodies):
+        for axis in range(2):  # summed corner by corner, as NumPy's reduction over axis 1
+            centers[b, axis] = (((corners[b, 0, axis] + corners[b, 1, axis])
+                                 + corners[b, 2, axis]) + corners[b, 3, axis]) / 4.0
+        radius = 0.0
+        for k in range(4):
+            x = corners[b, k, 0] - centers[b, 0]
+            y = corners[b, k, 1] - centers[b, 1]
+            length = math.sqrt(x * x + y * y)
+            if k == 0 or length > radius:
+                radius = length
+        bound[b] = radius + reach[b]
+    return centers, bound
+
+
+@compiled
+def _pairs(centers: FloatArray, bound: FloatArray, candidates: IntArray,
+           n_boxes: int) -> IntArray:
+    """The candidate square pairs within reach, then the square-table pairs, then reversed."""
+    n_bodies = centers.shape[0]
+    kept = np.empty((candidates.shape[0] + n_boxes * (n_bodies - n_boxes), 2), dtype=np.int64)
+    count = 0
+    for p in range(candidates.shape[0]):
+        a, b = candidates[p, 0], candidates[p, 1]
+        x = centers[a, 0] - centers[b, 0]
+        y = centers[a, 1] - centers[b, 1]
+        if math.sqrt(x * x + y * y) <= bound[a] + bound[b]:
+            kept[count, 0], kept[count, 1] = a, b
+            count += 1
+    for a in range(n_boxes):
+        for b in range(n_boxes, n_bodies):
+            x = centers[a, 0] - centers[b, 0]
+            y = centers[a, 1] - centers[b, 1]
+            if math.sqrt(x * x + y * y) <= bound[a] + bound[b]:
+                kept[count, 0], kept[count, 1] = a, b
+                count += 1
+    pairs = np.empty((2 * count, 2), dtype=np.int64)
+    for p in range(count):
+        pairs[p, 0], pairs[p, 1] = kept[p, 0], kept[p, 1]
+        pairs[count + p, 0], pairs[count + p, 1] = kept[p, 1], kept[p, 0]
+    return pairs
+
+
+def bounds(corners: FloatArray, reach: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Body centres ``(n_bodies, 2)`` (m) and bounds ``(n_bodies,)`` (m) of the broad phase.
+
+    As :func:`wuerfel_cvx.contacts.body_pairs` computes them: the corner mean, and the
+    largest corner distance from it plus ``reach``.
+    """
+    return _bounds(np.ascontiguousarray(corners, dtype=np.float64),
+                   np.ascontiguousarray(reach, dtype=np.float64))
+
+
+def pairs_within(centers: FloatArray, bound: FloatArray, candidates: IntArray,
+                 n_boxes: int) -> IntArray:
+    """The ordered pairs of :func:`wuerfel_cvx.contacts.body_pairs` from the tree's candidates.
+
+    ``candidates`` ``(C, 2)``: square pairs from the tree query; squares are bodies
+    ``0 .. n_boxes - 1``, tables the rest.  Kept in the order of the NumPy path.
+    """
+    return _pairs(centers, bound, np.ascontiguousarray(candidates, dtype=np.int64),
+                  int(n_boxes))
 
 
 def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
