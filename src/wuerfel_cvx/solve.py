@@ -279,6 +279,11 @@ def _non_finite_data(qp: StepQP) -> str:
               "eq_rhs": qp.eq_rhs, "ineq_matrix": qp.ineq_matrix.data, "ineq_rhs": qp.ineq_rhs}
     if qp.cost_factor is not None:
         arrays["cost_factor"] = qp.cost_factor.data
+    # a NaN or an infinity makes its array's sum non-finite, so finite sums clear them all
+    # at one reduction each; a non-finite sum (possibly an overflow) is looked at closely
+    if qp.ineq_upper is None and all(math.isfinite(np.add.reduce(values))
+                                     for values in arrays.values()):
+        return ""
     bad = [name for name, values in arrays.items() if not np.all(np.isfinite(values))]
     if qp.ineq_upper is not None and not np.all(np.isfinite(qp.ineq_upper)
                                                 | (qp.ineq_upper == np.inf)):
