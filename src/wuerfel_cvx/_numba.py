@@ -32,4 +32,7 @@ def compiled(function: _Function) -> _Function:
     """``function`` compiled by numba (machine code cached on disk), or itself without numba."""
     if numba is None:  # pragma: no cover
         return function
-    return numba.njit(cache=True, nogil=True)(function)  # type: ignore[return-value]
+    try:
+        return numba.njit(cache=True, nogil=True)(function)  # type: ignore[return-value]
+    except RuntimeError:  # pragma: no cover - no writable cache directory: compile per process
+        return numba.njit(cache=False, nogil=True)(function)  # type: ignore[return-value]
