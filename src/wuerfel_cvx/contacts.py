@@ -54,13 +54,14 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from .geometry import FloatArray
+from . import _numba, contact_kernel
+from .geometry import FloatArray, corner_mean
 from .model import IntArray, Model
 
 #: Lengths closer than this (m) count as equal: two faces' separations (a tie between the
 #: bodies goes to the longer face), and a corner's place along a face's line and the
 #: face's end (a corner this close to the end is on the face).
-TIE_TOLERANCE = 1e-9
+TIE_TOLERANCE = contact_kernel.TIE_TOLERANCE
 
 
 @dataclass(frozen=True)
@@ -141,7 +142,13 @@ def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntAr
     """
     n, t = model.n_boxes, model.n_tables
     corners = all_points.reshape(-1, 4, 2)
-    centers = corners.mean(axis=1)
+    if _numba.enabled:  # the same pairs in the same order, by compiled loops
+        centers, bound = contact_kernel.bounds(corners, reach)
+        candidates = (cKDTree(centers[:n]).query_pairs(r=2.0 * float(bound[:n].max()),
+                                                       output_type="ndarray")
+                      if n > 1 else np.zeros((0, 2), dtype=np.int64))
+        return contact_kernel.pairs_within(centers, bound, candidates, n)
+    centers = corner_mean(corners)
     radii = _lengths(corners - centers[:, None, :]).max(axis=1)
     bound = radii + reach
     found = [np.zeros((0, 2), dtype=np.int64)]
@@ -274,6 +281,23 @@ def find_contacts(
     return _search(model, points, reach)
 
 
+def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
+                 reach: FloatArray) -> tuple[IntArray, IntArray, IntArray, FloatArray]:
+    """Held contacts of the ordered pairs: pair index, corner, edge index, distance (m).
+
+    ``corners`` ``(n_bodies, 4, 2)`` (m), ``edge_body`` and ``point_body`` ``(P,)`` as
+    from :func:`body_pairs`, ``reach`` ``(n_bodies,)`` (m).  The manifold rule of the
+    module docstring, batched in NumPy (the reference of
+    :func:`wuerfel_cvx.contact_kernel.narrow_phase`); rows in pair-major order.
+    """
+    distances = pair_distances(corners, edge_body, point_body)
+    pair_margin = reach[edge_body] + reach[point_body]
+    edge, keep = choose_edges(corners, edge_body, point_body, distances, pair_margin)
+    chosen = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]  # (4 corners, P)
+    pair_index, corner = np.nonzero(keep.T)  # pair-major order
+    return pair_index, corner, edge[corner, pair_index], chosen[corner, pair_index]
+
+
 def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
     all_points = model.all_points(points)
     pairs = body_pairs(model, all_points, reach)
@@ -281,12 +305,9 @@ def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
         return Contacts.empty()
     edge_body, point_body = pairs[:, 0], pairs[:, 1]
     corners = all_points.reshape(-1, 4, 2)
-    distances = pair_distances(corners, edge_body, point_body)
-    pair_margin = reach[edge_body] + reach[point_body]
-    edge, keep = choose_edges(corners, edge_body, point_body, distances, pair_margin)
-    chosen = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]  # (4 corners, P)
-    pair_index, corner = np.nonzero(keep.T)  # pair-major order
-    edge_index = edge[corner, pair_index]
+    # the compiled narrow phase where numba is installed; the same contacts, bit for bit
+    narrow = contact_kernel.narrow_phase if _numba.enabled else narrow_phase
+    pair_index, corner, edge_index, distance = narrow(corners, edge_body, point_body, reach)
     w = edge_body[pair_index]
     return Contacts(
         point=4 * point_body[pair_index] + corner,
@@ -294,5 +315,5 @@ def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
         edge_j=4 * w + edge_index,
         point_body=point_body[pair_index],
         edge_body=w,
-        distance=chosen[corner, pair_index],
+        distance=distance,
     )

@@ -27,6 +27,7 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
+from . import _numba, residual_kernel
 from .backends import native_backend
 from .compiled import COMPILED, DECLARED, DIRECT, CompiledQPCache, structure_key
 from .errors import StepFailure
@@ -88,7 +89,17 @@ class StepSolution:
 
 def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
                   ineq_dual: FloatArray) -> Residuals:
-    """Relative primal, dual and complementarity residuals of ``(x, y, z)``."""
+    """Relative primal, dual and complementarity residuals of ``(x, y, z)``.
+
+    With numba, a QP without a coupling cost and without upper bounds is checked by the
+    compiled loop of :mod:`wuerfel_cvx.residual_kernel`, with the same numbers bit for bit.
+    """
+    if _numba.enabled and qp.cost_factor is None and qp.ineq_upper is None:
+        eq, ineq = qp.eq_matrix, qp.ineq_matrix
+        return Residuals(*residual_kernel.residuals(
+            qp.weights, qp.target, x, eq.data, eq.indices, eq.indptr, qp.eq_rhs,
+            np.asarray(eq_dual, dtype=np.float64), ineq.data, ineq.indices, ineq.indptr,
+            qp.ineq_rhs, np.asarray(ineq_dual, dtype=np.float64)))
     objective_grad = qp.objective_gradient(x)
     eq_term = _transposed_product(qp.eq_matrix, eq_dual)
     ineq_term = _transposed_product(qp.ineq_matrix, ineq_dual)
@@ -268,6 +279,11 @@ def _non_finite_data(qp: StepQP) -> str:
               "eq_rhs": qp.eq_rhs, "ineq_matrix": qp.ineq_matrix.data, "ineq_rhs": qp.ineq_rhs}
     if qp.cost_factor is not None:
         arrays["cost_factor"] = qp.cost_factor.data
+    # a NaN or an infinity makes its array's sum non-finite, so finite sums clear them all
+    # at one reduction each; a non-finite sum (possibly an overflow) is looked at closely
+    if qp.ineq_upper is None and all(math.isfinite(np.add.reduce(values))
+                                     for values in arrays.values()):
+        return ""
     bad = [name for name, values in arrays.items() if not np.all(np.isfinite(values))]
     if qp.ineq_upper is not None and not np.all(np.isfinite(qp.ineq_upper)
                                                 | (qp.ineq_upper == np.inf)):

@@ -21,7 +21,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ..geometry import FloatArray, rot90
+from ..geometry import FloatArray, corner_mean, rot90
 from ..model import IntArray, Model, State
 
 
@@ -54,8 +54,11 @@ class BodyMotion:
         turned = self.angle[body] + self.spin[body] * tau
         reference = self.reference[body, corner]
         cos, sin = np.cos(turned), np.sin(turned)
-        return np.stack([cos * reference[..., 0] - sin * reference[..., 1],
-                         sin * reference[..., 0] + cos * reference[..., 1]], axis=-1)
+        x, y = reference[..., 0], reference[..., 1]
+        offsets = np.empty(np.broadcast_shapes(cos.shape, x.shape) + (2,))
+        np.subtract(cos * x, sin * y, out=offsets[..., 0])
+        np.add(sin * x, cos * y, out=offsets[..., 1])
+        return offsets
 
     def positions(self, body: IntArray, corner: IntArray, tau: FloatArray) -> FloatArray:
         """Positions ``(m, 2)`` (m) of corner ``corner`` of ``body`` at ``tau`` (s)."""
@@ -70,7 +73,7 @@ def body_motion(model: Model, points: FloatArray, velocities: FloatArray) -> Bod
     """
     center, angle, center_velocity, spin = _fit(model.reference_corners, points, velocities)
     tables = model.table_points.reshape(-1, 4, 2)
-    table_center = tables.mean(axis=1)
+    table_center = corner_mean(tables)
     t = tables.shape[0]
     return BodyMotion(
         center=np.concatenate([center, table_center]),
@@ -107,14 +110,14 @@ def _fit(reference: FloatArray, points: FloatArray, velocities: FloatArray,
     """
     corners = points.reshape(-1, 4, 2)
     vel = velocities.reshape(-1, 4, 2)
-    center = corners.mean(axis=1)
+    center = corner_mean(corners)
     offsets = corners - center[:, None, :]
     angle = np.arctan2(
         np.sum(reference[..., 0] * offsets[..., 1] - reference[..., 1] * offsets[..., 0], axis=1),
         np.sum(reference * offsets, axis=(1, 2)),
     )
     fitted = _rotated(angle, reference)
-    center_velocity = vel.mean(axis=1)
+    center_velocity = corner_mean(vel)
     relative = vel - center_velocity[:, None, :]
     spin = (np.sum(fitted[..., 0] * relative[..., 1] - fitted[..., 1] * relative[..., 0], axis=1)
             / np.sum(fitted * fitted, axis=(1, 2)))
@@ -125,4 +128,7 @@ def _rotated(angles: FloatArray, reference: FloatArray) -> FloatArray:
     """``reference`` ``(n, 4, 2)`` with body ``k`` turned by ``angles[k]`` (rad)."""
     cos, sin = np.cos(angles)[:, None], np.sin(angles)[:, None]
     x, y = reference[..., 0], reference[..., 1]
-    return np.stack([cos * x - sin * y, sin * x + cos * y], axis=-1)
+    turned = np.empty(reference.shape)
+    np.subtract(cos * x, sin * y, out=turned[..., 0])
+    np.add(sin * x, cos * y, out=turned[..., 1])
+    return turned

@@ -24,9 +24,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sp
 
+from .. import _numba, row_kernel
 from ..contacts import Contacts
 from ..errors import InputError
-from ..geometry import FloatArray, cross, rot90
+from ..geometry import FloatArray, corner_mean, cross, rot90
 from ..model import Model, State
 from .base import FrictionSettings, SinglePass
 from .cone import contact_cones
@@ -108,11 +109,17 @@ def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
     """
     n_rows = corner_rows.shape[0]
     turned = rot90(_offsets(points)).reshape(-1)  # per corner coordinate (4 n * 2,)
+    n_cols = 3 * (corner_rows.shape[1] // 8)
+    if _numba.enabled:  # the same arrays, written by a compiled loop
+        matrix = sp.csr_array(row_kernel.body_rows(corner_rows.data, corner_rows.indices,
+                                                   corner_rows.indptr, turned),
+                              shape=(n_rows, n_cols))
+        matrix.has_canonical_format = True
+        return matrix
     row = np.repeat(np.arange(n_rows, dtype=np.int64), np.diff(corner_rows.indptr))
     col = corner_rows.indices.astype(np.int64)
     value = corner_rows.data
     body, axis = col // 8, col % 2
-    n_cols = 3 * (corner_rows.shape[1] // 8)
     out_row = np.concatenate([row, row])
     out_col = np.concatenate([3 * body + axis, 3 * body + 2])
     out_value = np.concatenate([value * 1.0, value * turned[col]])
@@ -157,4 +164,4 @@ def body_velocities(points: FloatArray, velocities: FloatArray,
 
 def _offsets(points: FloatArray) -> FloatArray:
     corners = points.reshape(-1, 4, 2)
-    return np.asarray(corners - corners.mean(axis=1, keepdims=True), dtype=np.float64)
+    return np.asarray(corners - corner_mean(corners)[:, None], dtype=np.float64)

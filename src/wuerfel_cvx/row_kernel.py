@@ -1,0 +1,106 @@
+"""Row assembly as compiled loops (numba), when numba is installed.
+
+:func:`wuerfel_cvx.formulations.qp.point_rows` (gradient blocks to a canonical CSR matrix)
+and :func:`wuerfel_cvx.formulations.rigid.body_rows` (corner rows times the rigid corner
+map) are batches of NumPy operations (stack, repeat, a stable argsort, cumulative sums)
+whose per-call overhead outweighs their arithmetic on the rows of a small scene.  The
+kernels here write the same CSR arrays row by row: entries sorted by column with a stable
+insertion sort (a row has a handful of entries), a cell's entries summed from 0.0 in the
+order the NumPy path sums them.  So they return the very arrays of the NumPy paths, bit for
+bit (``tests/test_row_kernel.py``), which stay the reference and the fallback without numba.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._numba import AVAILABLE, compiled
+from .geometry import FloatArray
+from .model import IntArray
+
+__all__ = ["AVAILABLE", "body_rows", "point_rows"]
+
+
+@compiled
+def _sort_row(columns: IntArray, values: FloatArray, count: int) -> None:
+    """Sort the first ``count`` entries by column, stably (insertion sort, in place)."""
+    for a in range(1, count):
+        column, value = columns[a], values[a]
+        b = a - 1
+        while b >= 0 and columns[b] > column:
+            columns[b + 1], values[b + 1] = columns[b], values[b]
+            b -= 1
+        columns[b + 1], values[b + 1] = column, value
+
+
+@compiled
+def point_rows(index: IntArray, gradient: FloatArray,
+               ) -> tuple[FloatArray, IntArray, IntArray, bool]:
+    """CSR ``(data, indices, indptr)`` of the rows of gradient blocks.
+
+    ``index`` ``(R, B)`` the blocks' points, ``gradient`` ``(R, B, 2)`` their gradients.
+    Column ``2 index + axis``; an index ``< 0`` contributes nothing; each row's entries
+    sorted by column, stably.  The last value is ``False`` when a point occurs twice in a
+    row: the arrays are then not canonical, and the caller sums them as the NumPy path does.
+    """
+    n_rows, n_blocks = index.shape
+    data = np.empty(2 * n_rows * n_blocks)
+    indices = np.empty(2 * n_rows * n_blocks, dtype=np.int64)
+    indptr = np.zeros(n_rows + 1, dtype=np.int64)
+    canonical = True
+    count = 0
+    for r in range(n_rows):
+        start = count
+        for b in range(n_blocks):
+            if index[r, b] >= 0:
+                for axis in range(2):
+                    indices[count] = 2 * index[r, b] + axis
+                    data[count] = gradient[r, b, axis]
+                    count += 1
+        _sort_row(indices[start:count], data[start:count], count - start)
+        for k in range(start + 1, count):
+            if indices[k] == indices[k - 1]:
+                canonical = False
+        indptr[r + 1] = count
+    return data[:count], indices[:count], indptr, canonical
+
+
+@compiled
+def body_rows(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, turned: FloatArray,
+              ) -> tuple[FloatArray, IntArray, IntArray]:
+    """CSR ``(data, indices, indptr)`` (int32 indices) of corner rows times the corner map.
+
+    ``data``, ``indices``, ``indptr``: canonical CSR rows over corner coordinates;
+    ``turned`` ``(8 n,)``: ``rot90(r_c)`` per corner coordinate.  An entry ``v`` in column
+    ``c`` (square ``c // 8``, axis ``c % 2``) adds ``v`` to column ``3 (c // 8) + c % 2``
+    and ``v turned[c]`` to column ``3 (c // 8) + 2``; a cell sums its entries from 0.0 in
+    the row's column order (see :func:`wuerfel_cvx.formulations.rigid.body_rows`).
+    """
+    n_rows = indptr.shape[0] - 1
+    out_data = np.empty(2 * data.shape[0])
+    out_indices = np.empty(2 * data.shape[0], dtype=np.int32)
+    out_indptr = np.zeros(n_rows + 1, dtype=np.int32)
+    width = 2 * int(np.max(np.diff(indptr))) if n_rows else 0
+    columns = np.empty(max(width, 1), dtype=np.int64)
+    values = np.empty(max(width, 1))
+    count = 0
+    for r in range(n_rows):
+        m = 0
+        for k in range(indptr[r], indptr[r + 1]):  # the translation entries, then the turns
+            columns[m], values[m] = 3 * (indices[k] // 8) + indices[k] % 2, data[k] * 1.0
+            m += 1
+        for k in range(indptr[r], indptr[r + 1]):
+            columns[m], values[m] = 3 * (indices[k] // 8) + 2, data[k] * turned[indices[k]]
+            m += 1
+        _sort_row(columns, values, m)
+        k = 0
+        while k < m:
+            total = 0.0
+            column = columns[k]
+            while k < m and columns[k] == column:
+                total += values[k]
+                k += 1
+            out_indices[count], out_data[count] = column, total
+            count += 1
+        out_indptr[r + 1] = count
+    return out_data[:count], out_indices[:count], out_indptr
