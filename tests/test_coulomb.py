@@ -15,9 +15,9 @@ import pytest
 
 from wuerfel_cvx import simulate
 from wuerfel_cvx.contacts import find_contacts
-from wuerfel_cvx.coulomb import CoulombNotConverged, with_friction_impulse
+from wuerfel_cvx.coulomb import CoulombNotConverged, FrictionMemory, with_friction_impulse
 from wuerfel_cvx.errors import StepFailure
-from wuerfel_cvx.formulations import VelocityFormulation
+from wuerfel_cvx.formulations import VelocityFormulation, get_formulation
 from wuerfel_cvx.friction_problem import (
     FrictionCache,
     FrictionProblem,
@@ -330,3 +330,25 @@ def test_a_warm_started_fixed_point_moves_as_a_cold_one_in_fewer_iterations(
     assert np.max(np.abs(warm.points - cold.points)) <= bound
     iterations = [int(run.metrics["coulomb_iterations"].sum()) for run in runs]
     assert iterations[1] < iterations[0]
+
+
+@pytest.mark.unit
+def test_an_island_finds_the_impulses_its_contacts_had_in_the_whole_model() -> None:
+    scene = dataclasses.replace(  # two boxes side by side on one table: two islands
+        flat(0.0, 0.5), squares=(Square(center=(-2.0, 0.5), size=1.0, friction=0.5),
+                                 Square(center=(2.0, 0.5), size=1.0, friction=0.5)))
+    model = Model.from_scene(scene)
+    state = State.initial(scene)
+    contacts = find_contacts(model, state.points,
+                             get_formulation("velocity").body_reach(model, state, DT))
+    impulses = np.arange(1.0, len(contacts) + 1.0)
+    memory = FrictionMemory(dict(zip(
+        zip(contacts.point.tolist(), contacts.edge_i.tolist(), contacts.edge_j.tolist()),
+        impulses.tolist(), strict=True)))
+    second = np.array([1])
+    island = contacts.restricted(second, model.n_boxes, model.n_tables)
+    bodies = np.concatenate([second, model.n_boxes + np.arange(model.n_tables)])
+    of_second = impulses[(contacts.point_body == 1) | (contacts.edge_body == 1)]
+    assert len(island) == len(of_second) > 0
+    np.testing.assert_array_equal(memory.initial(island, bodies), of_second)
+    assert not np.any(memory.initial(island, None) == of_second)  # unmapped: wrong contacts
