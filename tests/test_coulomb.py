@@ -342,9 +342,9 @@ def test_an_island_finds_the_impulses_its_contacts_had_in_the_whole_model() -> N
     contacts = find_contacts(model, state.points,
                              get_formulation("velocity").body_reach(model, state, DT))
     impulses = np.arange(1.0, len(contacts) + 1.0)
-    memory = FrictionMemory(dict(zip(
-        zip(contacts.point.tolist(), contacts.edge_i.tolist(), contacts.edge_j.tolist()),
-        impulses.tolist(), strict=True)))
+    keys = zip(contacts.point.tolist(), contacts.edge_i.tolist(), contacts.edge_j.tolist(),
+               strict=True)
+    memory = FrictionMemory(dict(zip(keys, impulses.tolist(), strict=True)))
     second = np.array([1])
     island = contacts.restricted(second, model.n_boxes, model.n_tables)
     bodies = np.concatenate([second, model.n_boxes + np.arange(model.n_tables)])
