@@ -15,9 +15,9 @@ import pytest
 
 from wuerfel_cvx import simulate
 from wuerfel_cvx.contacts import find_contacts
-from wuerfel_cvx.coulomb import CoulombNotConverged, with_friction_impulse
+from wuerfel_cvx.coulomb import CoulombNotConverged, FrictionMemory, with_friction_impulse
 from wuerfel_cvx.errors import StepFailure
-from wuerfel_cvx.formulations import VelocityFormulation
+from wuerfel_cvx.formulations import VelocityFormulation, get_formulation
 from wuerfel_cvx.friction_problem import (
     FrictionCache,
     FrictionProblem,
@@ -247,8 +247,10 @@ def test_a_launched_box_stops_after_v0_squared_over_two_mu_g() -> None:
     # the stop is resolved to one step: the distance to within v0 dt
     assert centre[-1, 0] - centre[0, 0] == pytest.approx(v0**2 / (2 * mu * G), abs=v0 * DT)
     speed = traj.velocities.reshape(len(traj.points), 4, 2).mean(axis=1)[:, 0]
-    # at rest once stopped: no creep at the fixed point's tolerance, tol g dt = 4e-6 m/s
-    resting = 0.25 * VelocityFormulation().coulomb_tolerance * G * DT
+    # at rest once stopped: no creep beyond the fixed point's tolerance.  It stops when the
+    # normal impulse (m g dt) is settled to tol of itself, so the friction impulse, at most mu
+    # times it, is settled to mu tol m g dt: a speed of mu tol g dt = 2e-6 m/s
+    resting = mu * VelocityFormulation().coulomb_tolerance * G * DT
     moving = traj.times[np.abs(speed) > resting]
     assert moving.max() == pytest.approx(stop_time, abs=DT)
     assert traj.metrics["coulomb_converged"].all()
@@ -306,3 +308,47 @@ def test_a_step_reports_its_contact_forces_inside_the_cone() -> None:
     assert np.all(np.abs(forces.friction) <= forces.coefficient * forces.normal + tolerance)
     assert np.all(np.abs(forces.slip) > 0.0)
     assert np.all(forces.friction * forces.slip < 0.0)  # opposes the slip
+
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("scene", [slope(0.4, 0.5), slope(0.5, 0.3)],
+                         ids=["sticking", "sliding"])
+def test_a_warm_started_fixed_point_moves_as_a_cold_one_in_fewer_iterations(
+        scene: Scene) -> None:
+    steps = 60
+    runs = [simulate(scene, dt=DT, steps=steps,
+                     formulation=VelocityFormulation(friction_model="coulomb",
+                                                     coulomb_warm_start=warm))
+            for warm in (False, True)]
+    cold, warm = runs
+    assert cold.metrics["coulomb_converged"].all() and warm.metrics["coulomb_converged"].all()
+    # each run's friction impulse is settled to mu tol of the normal one (m g dt), a speed of
+    # mu tol g dt per step; over T = steps dt the two may part by at most mu tol g T^2
+    mu = max(body.friction for body in scene.squares)
+    bound = mu * VelocityFormulation().coulomb_tolerance * G * (steps * DT) ** 2
+    assert np.max(np.abs(warm.points - cold.points)) <= bound
+    iterations = [int(run.metrics["coulomb_iterations"].sum()) for run in runs]
+    assert iterations[1] < iterations[0]
+
+
+@pytest.mark.unit
+def test_an_island_finds_the_impulses_its_contacts_had_in_the_whole_model() -> None:
+    scene = dataclasses.replace(  # two boxes side by side on one table: two islands
+        flat(0.0, 0.5), squares=(Square(center=(-2.0, 0.5), size=1.0, friction=0.5),
+                                 Square(center=(2.0, 0.5), size=1.0, friction=0.5)))
+    model = Model.from_scene(scene)
+    state = State.initial(scene)
+    contacts = find_contacts(model, state.points,
+                             get_formulation("velocity").body_reach(model, state, DT))
+    impulses = np.arange(1.0, len(contacts) + 1.0)
+    keys = zip(contacts.point.tolist(), contacts.edge_i.tolist(), contacts.edge_j.tolist(),
+               strict=True)
+    memory = FrictionMemory(dict(zip(keys, impulses.tolist(), strict=True)))
+    second = np.array([1])
+    island = contacts.restricted(second, model.n_boxes, model.n_tables)
+    bodies = np.concatenate([second, model.n_boxes + np.arange(model.n_tables)])
+    of_second = impulses[(contacts.point_body == 1) | (contacts.edge_body == 1)]
+    assert len(island) == len(of_second) > 0
+    np.testing.assert_array_equal(memory.initial(island, bodies), of_second)
+    assert not np.any(memory.initial(island, None) == of_second)  # unmapped: wrong contacts

@@ -27,21 +27,23 @@ convex, declared in cvxpy, its dual the friction impulse of maximal dissipation 
 ``|lambda_t| <= mu lambda_n``, and checked by its own residuals
 (:mod:`wuerfel_cvx.friction_problem`).
 
-*Iteration.*  From ``lambda_t = 0``: contact QP -> ``lambda_n`` -> friction problem ->
-``lambda_t`` -> contact QP ..., until two successive contact QPs' normal impulses differ by
-at most ``tolerance`` times the largest of them.  The closest-approach passes of
-``velocity`` (:meth:`~wuerfel_cvx.formulations.velocity.VelocityFormulation.refine`)
-interleave: after each contact QP its rows are re-linearised about its solution when the
-formulation asks so, and the next contact QP takes the new rows with the current
-``lambda_t``.  The formulation's pass limit counts the passes since ``lambda_t`` last
-changed, so that each friction impulse has the passes a frictionless step has to meet the
-gap acceptance (a limit counted over the whole iteration let steps be accepted by the
-limit, with penetrations beyond the bound).  The fixed point is converged only when the
-formulation also accepts the last contact QP's solution, so the step's state, always the
-last contact QP's, meets the formulation's gap acceptance (and with it the penetration
-bound) exactly as a frictionless step does.  After ``max_iterations`` friction problems
-without convergence the step goes on with the last iterate: further passes, ``lambda_t``
-fixed, until the formulation accepts; :attr:`CoulombStep.converged` says so.
+*Iteration.* From ``lambda_t = 0``, or from the impulses the same contacts had at the end of
+the step before (``coulomb_warm_start``, :class:`FrictionMemory`): contact QP ->
+``lambda_n`` -> friction problem -> ``lambda_t`` -> contact QP ..., until two successive
+contact QPs' normal impulses differ by at most ``tolerance`` times the largest of them. The
+closest-approach passes of ``velocity``
+(:meth:`~wuerfel_cvx.formulations.velocity.VelocityFormulation.refine`) interleave: after
+each contact QP its rows are re-linearised about its solution when the formulation asks so,
+and the next contact QP takes the new rows with the current ``lambda_t``. The formulation's
+pass limit counts the passes since ``lambda_t`` last changed, so that each friction impulse
+has the passes a frictionless step has to meet the gap acceptance (a limit counted over the
+whole iteration let steps be accepted by the limit, with penetrations beyond the bound). The
+fixed point is converged only when the formulation also accepts the last contact QP's
+solution, so the step's state, always the last contact QP's, meets the formulation's gap
+acceptance (and with it the penetration bound) exactly as a frictionless step does. After
+``max_iterations`` friction problems without convergence the step goes on with the last
+iterate: further passes, ``lambda_t`` fixed, until the formulation accepts;
+:attr:`CoulombStep.converged` says so.
 """
 
 from __future__ import annotations
@@ -62,7 +64,7 @@ from .formulations import Formulation, StepQP
 from .friction import ContactForces
 from .friction_problem import FrictionAnswer, FrictionProblem, friction_problem, normal_impulses
 from .geometry import FloatArray
-from .model import Model, State
+from .model import IntArray, Model, State
 from .solve import StepSolution
 from .trajectory import NULLABLE_COLUMNS
 
@@ -122,15 +124,17 @@ class CoulombSettings:
 def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP, dt: float,
                 solve: ContactSolve, solve_friction_problem: Callable[[FrictionProblem],
                                                                       FrictionAnswer],
-                settings: CoulombSettings) -> CoulombStep:
+                settings: CoulombSettings, initial: FloatArray | None = None) -> CoulombStep:
     """Iterate contact QP and friction problem from ``qp`` (see the module docstring).
 
     ``qp`` is the formulation's first pass, with ``qp.cones`` (its contacts with friction);
     ``solve`` solves a contact QP and ``solve_friction_problem`` a friction problem (each
-    raising :class:`StepFailure` when no solver can).
+    raising :class:`StepFailure` when no solver can).  ``initial`` is the friction impulse
+    (N s) per contact of ``qp`` the first contact QP holds (zero when ``None``).
     """
     target = qp.target
-    base, friction = qp, np.zeros(len(qp.contacts))
+    base = qp
+    friction = np.zeros(len(qp.contacts)) if initial is None else np.asarray(initial, float)
     solved: list[tuple[StepSolution, str]] = []
     answers: list[FrictionAnswer] = []
     previous: FloatArray | None = None
@@ -206,6 +210,45 @@ def _carried(values: FloatArray, old: Contacts, new: Contacts) -> FloatArray:
 
 def _inf(values: FloatArray) -> float:
     return float(np.max(np.abs(values))) if np.size(values) else 0.0
+
+
+ContactKey = tuple[int, int, int]
+"""A contact across steps: its point and its edge's two points, in the whole model's numbering."""
+
+
+@dataclass
+class FrictionMemory:
+    """The friction impulses (N s) of the last step's contacts, by :data:`ContactKey`.
+
+    What ``coulomb_warm_start`` starts the next step's fixed point from.  An island QP
+    numbers its bodies on its own (:meth:`~wuerfel_cvx.contacts.Contacts.restricted`);
+    ``bodies`` maps them back, the whole model's body of each of its bodies, tables
+    included (``None``: the QP is over every body).
+    """
+
+    impulses: dict[ContactKey, float] = dataclasses.field(default_factory=dict)
+
+    def initial(self, contacts: Contacts, bodies: IntArray | None) -> FloatArray:
+        """The remembered impulse of each of ``contacts`` (0 for a new contact)."""
+        return np.array([self.impulses.get(key, 0.0) for key in _keys(contacts, bodies)])
+
+    def remember(self, steps: Sequence[tuple[CoulombStep, IntArray | None]]) -> None:
+        """Keep the impulses the fixed points of one step ended with, forget the rest."""
+        self.impulses = {}
+        for outcome, bodies in steps:
+            self.impulses.update(zip(_keys(outcome.qp.contacts, bodies),
+                                     map(float, outcome.forces.friction), strict=True))
+
+
+def _keys(contacts: Contacts, bodies: IntArray | None) -> list[ContactKey]:
+    """The :data:`ContactKey` of each contact, numbered by ``bodies`` (see FrictionMemory)."""
+    def whole(points: IntArray) -> IntArray:
+        if bodies is None:
+            return points
+        return np.asarray(4 * bodies[points // 4] + points % 4, dtype=np.int64)
+
+    return list(zip(whole(contacts.point).tolist(), whole(contacts.edge_i).tolist(),
+                    whole(contacts.edge_j).tolist(), strict=True))
 
 
 class CoulombNotConverged(RuntimeWarning):

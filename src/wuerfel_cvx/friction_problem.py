@@ -36,6 +36,7 @@ import scipy.sparse as sp
 from .errors import StepFailure
 from .formulations import StepQP
 from .geometry import FloatArray
+from .scaling import scaled_qp, weights_scale
 from .solve import SOLVED, VERIFY_FACTOR, StepSolution
 from .solvers import get_solver, tolerance_value
 
@@ -247,13 +248,18 @@ def solve_friction(problem: FrictionProblem, solver: str, tol: str | float, step
     """Solve ``problem`` with ``solver`` through cvxpy and check it (:func:`friction_residuals`).
 
     With a ``cache``, a repeated structure is solved through its parametrised problem.
+    Light bodies' problems are solved with their weights and bounds scaled up, as the
+    step QPs are (:func:`~wuerfel_cvx.scaling.weights_scale`), and checked unscaled.
     Raises :class:`StepFailure` (with ``step``) if the solver raises, reports a status other
     than optimal, returns non-finite numbers, or claims an inaccurate optimum that fails the
     check; an optimum that fails the check is returned with ``verified=False``.
     """
     spec = get_solver(solver)
     eps = tolerance_value(tol)
-    handles = declare_friction(problem) if cache is None else cache.declared_for(problem)
+    weight_scale = weights_scale(problem.qp)  # 1 unless the bodies are light
+    seen = problem if weight_scale == 1.0 else FrictionProblem(
+        scaled_qp(problem.qp, 1.0, weight_scale), problem.target, problem.bound * weight_scale)
+    handles = declare_friction(seen) if cache is None else cache.declared_for(seen)
     declared, x, slip_constraint = handles.problem, handles.x, handles.slip_constraint
     eq_constraint = handles.eq_constraint
     started = time.perf_counter()
@@ -272,9 +278,10 @@ def solve_friction(problem: FrictionProblem, solver: str, tol: str | float, step
     if status not in SOLVED or x.value is None or slip_constraint.dual_value is None:
         raise StepFailure(step, spec.name, status, "friction problem")
     values = np.asarray(x.value, dtype=np.float64)
-    friction = -0.5 * np.atleast_1d(np.asarray(slip_constraint.dual_value, dtype=np.float64))
-    eq_dual = (np.zeros(0) if eq_constraint is None else
-               np.atleast_1d(np.asarray(eq_constraint.dual_value, dtype=np.float64)))
+    friction = (-0.5 / weight_scale) * np.atleast_1d(np.asarray(slip_constraint.dual_value,
+                                                                 dtype=np.float64))
+    eq_dual = (np.zeros(0) if eq_constraint is None else np.atleast_1d(
+        np.asarray(eq_constraint.dual_value, dtype=np.float64)) / weight_scale)
     if not (np.all(np.isfinite(values)) and np.all(np.isfinite(friction))
             and np.all(np.isfinite(eq_dual))):
         raise StepFailure(step, spec.name, status, "friction problem: non-finite solution")

@@ -28,6 +28,7 @@ from .compiled import CompiledQPCache
 from .contacts import Contacts, find_contacts
 from .coulomb import (
     CoulombStep,
+    FrictionMemory,
     coulomb_columns,
     coulomb_settings,
     fixed_point,
@@ -42,7 +43,7 @@ from .formulations import (
 )
 from .friction import ContactForces
 from .friction_problem import FrictionCache, solve_friction_with_fallback
-from .model import Model, State
+from .model import IntArray, Model, State
 from .recorder import TrajectoryRecorder, physical_metrics, run_info
 from .scene import Scene
 from .sleep import IslandPlanner, SleepSettings, merge, restrict
@@ -152,6 +153,7 @@ class Simulation:
         self._coulomb = (getattr(self.formulation, "friction_model", None) == "coulomb"
                          and bool(np.any(self.model.friction > 0.0)))
         self._coulomb_warned = False  # a run warns of its first unconverged step only
+        self._friction_memory = FrictionMemory()
         self.planner = IslandPlanner(self.model.n_boxes, sleep, islands)
         self.state = State.initial(scene)
         self.step_index = 0
@@ -177,13 +179,19 @@ class Simulation:
         build_time, mark = self._search_time, started
         most_passes, criteria = 0, []
         coulombs: list[CoulombStep | None] = []
+        remembered: list[tuple[CoulombStep, IntArray | None]] = []
         for boxes in plan.groups:
             model, state, contacts = restrict(self.model, self.state, self.contacts, boxes)
             qp = self.formulation.build(model, state, contacts, self.dt)
             build_time += time.perf_counter() - mark
-            qp, solution, primary, passes, coulomb = self._solve_passes(step, model, state, qp)
+            bodies = None if boxes is None else np.concatenate(
+                [boxes, self.model.n_boxes + np.arange(self.model.n_tables)])
+            qp, solution, primary, passes, coulomb = self._solve_passes(step, model, state, qp,
+                                                                        bodies)
             most_passes = max(most_passes, passes)
             coulombs.append(coulomb)
+            if coulomb is not None:
+                remembered.append((coulomb, bodies))
             moved = self.formulation.advance(model, state, solution.x, self.dt)
             parts.append((boxes, moved))
             forces = ccp_forces(qp, solution) if coulomb is None else coulomb.forces
@@ -196,6 +204,7 @@ class Simulation:
         if not (np.all(np.isfinite(state.points)) and np.all(np.isfinite(state.velocities))):
             raise StepFailure(step, self.solvers[0], solutions[-1].status, "non-finite state")
         self.planner.record(state.velocities, self.dt)
+        self._friction_memory.remember(remembered)
         step_time = self._search_time + time.perf_counter() - started
         combined = combine_solutions(solutions)
         primary_status = first_failed_status(solutions, primary_statuses, combined)
@@ -220,6 +229,7 @@ class Simulation:
 
     # ------------------------------------------------------------------ parts of a step
     def _solve_passes(self, step: int, model: Model, state: State, qp: StepQP,
+                      bodies: IntArray | None,
                       ) -> tuple[StepQP, StepSolution, str, int, CoulombStep | None]:
         """Solve ``qp`` and the formulation's further passes.
 
@@ -228,7 +238,9 @@ class Simulation:
         residuals and status are the last pass's, whose solution is taken), the first failed
         status of the run's own solver over the passes, and the number of passes.  With
         ``friction_model="coulomb"`` and contacts with friction, the passes are those of the
-        Coulomb fixed point (:mod:`wuerfel_cvx.coulomb`), returned last (else ``None``); its
+        Coulomb fixed point (:mod:`wuerfel_cvx.coulomb`), returned last (else ``None``),
+        started from the last step's impulses (``bodies``: the island's bodies in the whole
+        model's numbering, :class:`~wuerfel_cvx.coulomb.FrictionMemory`); its
         friction problems' times and iterations are in the sums, and a friction problem that
         fails its own check makes the step unverified.
         """
@@ -241,7 +253,9 @@ class Simulation:
                 self.formulation, model, state, qp, self.dt, solve,
                 lambda problem: solve_friction_with_fallback(problem, self.solvers, self.tol,
                                                              step, self._friction_cache),
-                coulomb_settings(self.formulation))
+                coulomb_settings(self.formulation),
+                self._friction_memory.initial(qp.contacts, bodies)
+                if getattr(self.formulation, "coulomb_warm_start", False) else None)
             qp, solved = coulomb.qp, coulomb.solved
         else:
             solved = [solve(qp)]

@@ -33,7 +33,7 @@ from .compiled import COMPILED, DECLARED, DIRECT, CompiledQPCache, structure_key
 from .errors import StepFailure
 from .formulations.qp import DeclaredQP, StepQP
 from .geometry import FloatArray
-from .scaling import scaled_qp, unknowns_scale
+from .scaling import scaled_qp, unknowns_scale, weights_scale
 from .solvers import SolverSpec, get_solver, tolerance_value
 
 #: A solution is verified when its relative residuals are below this multiple of ``eps``.
@@ -136,9 +136,9 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     """Solve ``qp`` with ``solver`` at tolerance ``tol`` and verify the result.
 
     The solver sees ``qp`` in units that keep its data at most
-    :data:`~wuerfel_cvx.scaling.SCALE_LIMIT` in magnitude (:mod:`wuerfel_cvx.scaling`; ``qp``
-    itself for ordinary data); the solution and multipliers are mapped back and checked on
-    ``qp``.
+    :data:`~wuerfel_cvx.scaling.SCALE_LIMIT` in magnitude and its largest weight at least
+    :data:`~wuerfel_cvx.scaling.WEIGHT_FLOOR` (:mod:`wuerfel_cvx.scaling`; ``qp`` itself for
+    ordinary data); the solution and multipliers are mapped back and checked on ``qp``.
 
     With a ``cache``, a QP whose structure repeats is solved through its compiled,
     parametrised problem (:mod:`wuerfel_cvx.compiled`); without, it is declared afresh.
@@ -156,10 +156,11 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     if bad_data:  # no solver is handed NaN or inf (some would panic or return garbage)
         raise StepFailure(step, spec.name, INVALID_DATA, f"non-finite {bad_data}")
     scale = unknowns_scale(qp)  # 1 (qp as it is) unless its data are large
+    weight_scale = weights_scale(qp)  # 1 unless its bodies are light
     started = time.perf_counter()
     try:
         # inside the try: applying a compiled structure's parameters can raise too
-        answer = _solve(scaled_qp(qp, scale), spec, options, cache)
+        answer = _solve(scaled_qp(qp, scale, weight_scale), spec, options, cache)
     except cp.error.SolverError as exc:
         raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
     except Exception as exc:  # a solver library raising anything is a failed step
@@ -171,9 +172,10 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     x = scale * np.asarray(answer.x, dtype=np.float64)  # exact: scale is a power of two
     if not np.all(np.isfinite(x)):
         raise StepFailure(step, spec.name, status, "solution has non-finite entries")
-    ineq_dual = scale * np.asarray(answer.ineq_dual, dtype=np.float64)
+    dual_scale = scale / weight_scale  # exact: a ratio of powers of two
+    ineq_dual = dual_scale * np.asarray(answer.ineq_dual, dtype=np.float64)
     # checked on the original QP, whatever units the solver saw
-    residuals = kkt_residuals(qp, x, scale * answer.eq_dual, ineq_dual)
+    residuals = kkt_residuals(qp, x, dual_scale * np.asarray(answer.eq_dual), ineq_dual)
     verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
     if status == cp.OPTIMAL_INACCURATE and not verified:
         raise StepFailure(step, spec.name, status,

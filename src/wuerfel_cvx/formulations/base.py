@@ -81,3 +81,7 @@ class FrictionSettings:
     QPs' normal impulses differ by at most this fraction of the largest (1).  Ten times the
     residual check's ``VERIFY_FACTOR * eps`` at the default tolerance, so solver noise does
     not hold it back, and far below the 1 % of the friction it may leave unsettled."""
+    coulomb_warm_start: bool = True
+    """``friction_model="coulomb"``: start each step's fixed point from the friction impulses
+    its contacts had at the end of the step before (a contact is the same when its point and
+    edge are), instead of from zero."""
