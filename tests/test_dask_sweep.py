@@ -229,7 +229,7 @@ def test_an_unreachable_scheduler_is_an_input_error(tmp_path: Path) -> None:
 
 
 class _FailedTask:
-    """What ``as_completed`` hands over for a task whose workers kept dying."""
+    """What ``as_completed`` hands over for a task that failed with ``failure``."""
 
     status = "error"
 
@@ -239,14 +239,21 @@ class _FailedTask:
     def exception(self) -> BaseException:
         return self.failure
 
+    def result(self) -> Any:
+        raise self.failure
 
-@pytest.mark.unit
-def test_a_point_that_kills_its_workers_becomes_an_error_row() -> None:
+
+def test_a_point_that_kills_its_workers_becomes_an_error_row_and_other_failures_stop(
+) -> None:
+    distributed = pytest.importorskip("distributed")
     from wuerfel_cvx.bench.dask_sweep import _point_result
 
     point = GridPoint("s", "stack-2", "velocity", "OSQP", "default", 0.01, 0.1)
-    died = RuntimeError("Attempted to run task on 3 different workers, all of which died")
+    died = distributed.KilledWorker("point-1", SimpleNamespace(address="tcp://127.0.0.1:1"), 3)
     result = _point_result(_FailedTask(died), point)  # type: ignore[arg-type]
     assert isinstance(result, PointResult) and result.series is None
     assert result.row["point_id"] == point.point_id and result.row["status"] == "error"
-    assert result.row["error"].startswith("RuntimeError: Attempted to run task on 3")
+    assert result.row["error"].startswith("KilledWorker: ")
+    missing = ModuleNotFoundError("No module named 'wuerfel_cvx'")  # the cluster's failure
+    with pytest.raises(ModuleNotFoundError):
+        _point_result(_FailedTask(missing), point)  # type: ignore[arg-type]

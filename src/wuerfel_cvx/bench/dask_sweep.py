@@ -14,7 +14,9 @@ travels:
   has arrived here, and the scheduler reruns the dead worker's points elsewhere.  A point
   whose workers die ``distributed.scheduler.allowed-failures`` times (a crash of the point
   itself, not of the machine) becomes an error row naming ``KilledWorker``, as every other
-  failure of a point does.
+  failure of a point does; a reference that does is "not computed" for its points.  Any
+  other failure of a task is the cluster's (say, a worker without this package): it stops
+  the sweep, and the rows written so far stay for the resume.
 
 ``dask[distributed]`` is the ``dask`` extra; without it, asking for a cluster is an
 :class:`~wuerfel_cvx.errors.InputError` naming the extra.
@@ -122,7 +124,10 @@ class DaskExecutor:
                    (key, path) for key, path in needed.items()}
         for future in as_completed(futures):
             key, path = futures.pop(future)
-            reference = future.result() if future.status == "finished" else None
+            if future.status == "finished":
+                reference = future.result()
+            else:
+                reference, _ = None, _killed_worker(future)
             if reference is not None:  # none: the points say "not computed"
                 save_reference(reference, path)
             yield key
@@ -152,10 +157,22 @@ class DaskExecutor:
 
 
 def _point_result(future: Future[PointResult], point: GridPoint) -> PointResult:
-    """The point's result, or its error row when the task itself failed (``KilledWorker``)."""
+    """The point's result, or its error row when its workers kept dying (``KilledWorker``).
+
+    Any other failure of the task (a worker without this package, say) is the cluster's,
+    not the point's: it stops the sweep, which resumes once the cluster is mended.
+    """
     if future.status == "finished":
         return future.result()
+    return PointResult(error_row(point, _killed_worker(future)), None)
+
+
+def _killed_worker(future: Future[Any]) -> BaseException:
+    """The ``KilledWorker`` a failed task ended with; re-raises any other failure."""
+    from distributed import KilledWorker
+
     failure = future.exception() if future.status == "error" else None
-    if failure is None:
-        failure = RuntimeError(f"the point's Dask task ended '{future.status}'")
-    return PointResult(error_row(point, failure), None)
+    if not isinstance(failure, KilledWorker):
+        future.result()  # raises the task's own exception, or a CancelledError
+        raise RuntimeError(f"a Dask task ended '{future.status}'")  # pragma: no cover
+    return failure
