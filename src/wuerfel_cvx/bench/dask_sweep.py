@@ -103,7 +103,7 @@ def dask_executor(cluster: DaskCluster,
 
 def _ready(client: Client, note: Callable[[str], None]) -> DaskExecutor:
     info = client.scheduler_info()
-    note(f"dask: {len(info.get('workers', {}))} workers at {info.get('address', '?')}")
+    note(f"dask: {len(client.nthreads())} workers at {info.get('address', '?')}")
     if "dashboard" in info.get("services", {}):
         note(f"dask dashboard: {client.dashboard_link}")
     return DaskExecutor(client)
@@ -124,11 +124,12 @@ class DaskExecutor:
                    (key, path) for key, path in needed.items()}
         for future in as_completed(futures):
             key, path = futures.pop(future)
+            reference = None  # none: its points say "not computed"
             if future.status == "finished":
                 reference = future.result()
             else:
-                reference, _ = None, _killed_worker(future)
-            if reference is not None:  # none: the points say "not computed"
+                _killed_worker(future)  # raises a failure that is not a KilledWorker
+            if reference is not None:
                 save_reference(reference, path)
             yield key
 
