@@ -1,4 +1,4 @@
-"""Summarise reports/dask/timings.csv (written by measure.sh): speed-up and overhead per point.
+"""Summarise reports/dask's timings (written by measure.sh): speed-up and overhead per point.
 
 Prints markdown tables: the median wall time of each suite and executor over the rounds, the
 speed-up of ``--dask 2`` over ``--jobs 2`` on the standard subset, each round's ratio (the two
@@ -16,7 +16,9 @@ from pathlib import Path
 import pandas as pd
 
 here = Path(sys.argv[1] if len(sys.argv) > 1 else "reports/dask")
-timings = pd.read_csv(here / "timings.csv")
+overhead_file = sys.argv[2] if len(sys.argv) > 2 else "timings-overhead.csv"
+timings = pd.concat([pd.read_csv(here / "timings-standard.csv"),
+                     pd.read_csv(here / overhead_file)])
 medians = timings.groupby(["suite", "executor"])[["points", "wall_s", "load_1min"]].median()
 print("| suite | executor | points | median wall (s) | rounds | median load |")
 print("| --- | --- | ---: | ---: | ---: | ---: |")

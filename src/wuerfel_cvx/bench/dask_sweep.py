@@ -44,6 +44,10 @@ if TYPE_CHECKING:
 EXTRA = "dask"
 """The optional dependency group that installs ``dask[distributed]``."""
 
+PRELOAD = "wuerfel_cvx.bench.runner"
+"""The module a ``LocalCluster``'s workers import as they start, all at once, rather than
+each on its first point (cvxpy and the solvers with it)."""
+
 
 @dataclass(frozen=True)
 class DaskCluster:
@@ -87,7 +91,8 @@ def dask_executor(cluster: DaskCluster,
 
     if cluster.workers is not None:
         with LocalCluster(n_workers=cluster.workers, threads_per_worker=1, processes=True,
-                          dashboard_address=":0", silence_logs=logging.ERROR) as local, \
+                          dashboard_address=":0", silence_logs=logging.ERROR,
+                          preload=[PRELOAD]) as local, \
                 Client(local) as client:
             yield _ready(client, note)
         return
