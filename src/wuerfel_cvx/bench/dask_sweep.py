@@ -12,9 +12,10 @@ travels:
   process saves it under ``<out>/references``).
 - A worker killed mid-sweep loses nothing: a row is written only when its point's result
   has arrived here, and the scheduler reruns the dead worker's points elsewhere.  A point
-  whose workers die ``distributed.scheduler.allowed-failures`` times (a crash of the point
-  itself, not of the machine) becomes an error row naming ``KilledWorker``, as every other
-  failure of a point does; a reference that does is "not computed" for its points.  Any
+  whose workers die more often than ``distributed.scheduler.allowed-failures`` (a crash of
+  the point itself, not of the machine) becomes an error row naming ``KilledWorker``, as
+  every other failure of a point does; a reference that does is "not computed" for its
+  points.  Any
   other failure of a task is the cluster's (say, a worker without this package): it stops
   the sweep, and the rows written so far stay for the resume.
 
