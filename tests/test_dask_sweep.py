@@ -25,14 +25,6 @@ from wuerfel_cvx.errors import InputError
 
 pytestmark = pytest.mark.integration
 
-CLOCK_COLUMNS = frozenset({
-    "finished_at", "wall_time_per_step_median", "wall_time_per_step_p90",
-    "solver_time_per_step_median", "modelling_time_per_step_median",
-    "step_over_solver_median", "wall_time_per_simulated_second", "total_wall_time"})
-"""Columns read off a clock; every other column is physics and must agree to the bit."""
-
-SERIES_CLOCK_COLUMNS = frozenset({"step_time_s", "solver_time_s"})
-
 SUITE_TOML = """name = "{name}"
 [defaults]
 duration = {duration}
@@ -66,9 +58,10 @@ def cells(results: Path) -> pd.DataFrame:
     return frame.set_index("point_id").sort_index()
 
 
-def physics(frame: pd.DataFrame, clock: frozenset[str] = CLOCK_COLUMNS) -> pd.DataFrame:
-    """Every column not read off a clock."""
-    return frame.drop(columns=[column for column in frame.columns if column in clock])
+def physics(frame: pd.DataFrame) -> pd.DataFrame:
+    """Every column not read off a clock: physics, equal to the bit between executors."""
+    return frame.drop(columns=[column for column in frame.columns
+                               if column in schema.CLOCK_COLUMNS])
 
 
 @pytest.fixture(scope="module")
@@ -111,8 +104,8 @@ def test_dask_rows_equal_the_process_pools_to_the_bit(
     assert len(series) == 4  # the error rows have none
     for name in series:
         pd.testing.assert_frame_equal(
-            physics(pd.read_csv(dask / "series" / name, dtype=str), SERIES_CLOCK_COLUMNS),
-            physics(pd.read_csv(pool / "series" / name, dtype=str), SERIES_CLOCK_COLUMNS))
+            physics(pd.read_csv(dask / "series" / name, dtype=str)),
+            physics(pd.read_csv(pool / "series" / name, dtype=str)))
     references = sorted(path.name for path in (pool / "references").iterdir())
     assert references == sorted(path.name for path in (dask / "references").iterdir())
     assert len(references) == 2  # tilted-drop and resting-square, written by the client

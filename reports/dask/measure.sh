@@ -53,14 +53,13 @@ from pathlib import Path
 
 import pandas as pd
 
+from wuerfel_cvx.bench.schema import CLOCK_COLUMNS
+
 here = Path(sys.argv[1])
-clock = {"finished_at", "wall_time_per_step_median", "wall_time_per_step_p90",
-         "solver_time_per_step_median", "modelling_time_per_step_median",
-         "step_over_solver_median", "wall_time_per_simulated_second", "total_wall_time"}
 frames = [pd.read_csv(here / f"results-{name}.csv", dtype=str, keep_default_na=False)
           .set_index("point_id").sort_index() for name in ("jobs2", "dask2")]
 assert list(frames[0].index) == list(frames[1].index), "different point ids"
-physics = [column for column in frames[0].columns if column not in clock]
+physics = [column for column in frames[0].columns if column not in CLOCK_COLUMNS]
 differing = {column: int((frames[0][column] != frames[1][column]).sum()) for column in physics}
 differing = {column: count for column, count in differing.items() if count}
 print(f"{len(frames[0])} points, {len(physics)} physics columns, cells differing: "

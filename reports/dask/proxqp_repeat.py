@@ -19,9 +19,6 @@ from wuerfel_cvx.bench.runner import run_point, run_reference
 from wuerfel_cvx.bench.suite import Suite
 
 HERE = Path(__file__).parent
-CLOCK = {"finished_at", "wall_time_per_step_median", "wall_time_per_step_p90",
-         "solver_time_per_step_median", "modelling_time_per_step_median",
-         "step_over_solver_median", "wall_time_per_simulated_second", "total_wall_time"}
 
 
 def written(row: dict[str, object]) -> pd.Series:
@@ -34,7 +31,7 @@ def main() -> None:
     """Print, per differing point, the differing cells across executors and within one process."""
     frames = [pd.read_csv(HERE / f"results-{name}.csv", dtype=str, keep_default_na=False)
               .set_index("point_id").sort_index() for name in ("jobs2", "dask2")]
-    physics = [column for column in frames[0].columns if column not in CLOCK]
+    physics = [column for column in frames[0].columns if column not in schema.CLOCK_COLUMNS]
     differs = (frames[0][physics] != frames[1][physics]).sum(axis=1)
     points = {p.point_id: p for p in Suite.from_toml(HERE / "standard-dt0.02.toml").points}
     print("| point | cells differing, --jobs 2 vs --dask 2 | cells differing, "
