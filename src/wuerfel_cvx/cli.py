@@ -73,6 +73,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="results directory (default bench-results/<suite>)")
     bench.add_argument("--jobs", type=int, default=1,
                        help="worker processes (default 1; timings are cleanest with 1)")
+    bench.add_argument("--dask", type=int, default=None, metavar="N",
+                       help="run on a dask.distributed LocalCluster of N worker processes "
+                            "(the 'dask' extra)")
+    bench.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="run on the Dask cluster of the scheduler at ADDRESS")
     bench.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                        help="progress bar with ETA (default: on when stderr is a terminal)")
 
@@ -265,9 +270,15 @@ def _bench(args: argparse.Namespace) -> int:
     from .bench.suite import Suite
     from .bench.sweep import run_sweep
 
+    dask = None
+    if args.dask is not None or args.scheduler is not None:
+        from .bench.dask_sweep import DaskCluster, require_distributed
+
+        dask = DaskCluster(workers=args.dask, scheduler=args.scheduler)
+        require_distributed(dask.option)  # before the suite is read
     suite = Suite.named(args.suite)
     out = Path(args.out) if args.out else Path("bench-results") / suite.name
-    summary = run_sweep(suite, out, jobs=args.jobs, progress=args.progress)
+    summary = run_sweep(suite, out, jobs=args.jobs, progress=args.progress, dask=dask)
     print(f"suite {suite.name}: {summary.ran} grid points run, {summary.skipped_done} already "
           f"done, {len(summary.skipped_unavailable)} skipped (not installed), "
           f"{summary.failed} failed or errored")

@@ -70,28 +70,38 @@ def reference_file_name(key: ReferenceKey) -> str:
 
 
 def compute_reference(key: ReferenceKey, path: Path) -> Path:
-    """Run the dt/8 reference for ``key`` and save it to ``path`` (``.npz``).
+    """Run the dt/8 reference for ``key`` and save it to ``path`` (``.npz``)."""
+    return save_reference(run_reference(key), path)
+
+
+def run_reference(key: ReferenceKey, scene: Scene | None = None) -> Reference:
+    """Run the dt/8 reference for ``key``: ``scene`` given as data, or resolved from the key.
 
     The run uses fixed tables, five rods, :data:`REFERENCE_SOLVER` at :data:`REFERENCE_TOL`
-    and the key's friction model.  A failed reference is saved too, marked incomplete, so
-    the points that need it say so.
+    and the key's friction model.  A failed reference is returned too, marked incomplete,
+    so the points that need it say so.
     """
-    scene, formulation, dt, duration, friction_model = key
+    scene_name, formulation, dt, duration, friction_model = key
     fine_dt = dt / REFERENCE_REFINEMENT
     steps = max(1, round(duration / dt)) * REFERENCE_REFINEMENT
     detail = ""
     try:
-        trajectory = simulate(scene, dt=fine_dt, steps=steps, solver=REFERENCE_SOLVER,
-                              formulation=formulation, tol=REFERENCE_TOL,
-                              friction_model=friction_model)
+        trajectory = simulate(scene_name if scene is None else scene, dt=fine_dt, steps=steps,
+                              solver=REFERENCE_SOLVER, formulation=formulation,
+                              tol=REFERENCE_TOL, friction_model=friction_model)
         complete = True
     except StepFailure as failure:
         assert failure.trajectory is not None
         trajectory, complete, detail = failure.trajectory, False, str(failure)
-    sampled = trajectory.points[::REFERENCE_REFINEMENT]
+    return Reference(trajectory.points[::REFERENCE_REFINEMENT], complete, detail)
+
+
+def save_reference(reference: Reference, path: Path) -> Path:
+    """Write ``reference`` to ``path`` (``.npz``), atomically; returns ``path``."""
     path.parent.mkdir(parents=True, exist_ok=True)
     temporary = path.with_name(path.name + ".part.npz")
-    np.savez(temporary, points=sampled, complete=np.array(complete), detail=np.array(detail))
+    np.savez(temporary, points=reference.points, complete=np.array(reference.complete),
+             detail=np.array(reference.detail))
     temporary.replace(path)  # atomic: a killed sweep never leaves half a reference
     return path
 
@@ -111,24 +121,64 @@ def machine() -> dict[str, str]:
             "cvxpy_version": package_version("cvxpy")}
 
 
+@dataclass(frozen=True)
+class PointResult:
+    """What one grid point gives: its results row and its per-step series."""
+
+    row: dict[str, Any]
+    """The results row (see :mod:`wuerfel_cvx.bench.schema`)."""
+    series: pd.DataFrame | None
+    """Per-step metrics in :data:`schema.SERIES_COLUMNS`; ``None`` for an error row."""
+
+
 def run_point(point: GridPoint, reference: Reference | None,
-              series_dir: Path | None = None) -> dict[str, Any]:
-    """Run one grid point and return its results row (never raises for a bad config)."""
+              series_dir: Path | None = None, scene: Scene | None = None) -> dict[str, Any]:
+    """Run one grid point and return its results row (never raises for a bad config).
+
+    The per-step series goes to ``series_dir`` when one is given.
+    """
+    result = measure_point(point, reference, scene)
+    if series_dir is not None:
+        write_series(result, series_dir)
+    return result.row
+
+
+def measure_point(point: GridPoint, reference: Reference | None,
+                  scene: Scene | None = None) -> PointResult:
+    """Run one grid point, writing nothing: its row and series (never raises for a bad config).
+
+    ``scene`` is the point's scene as data; without it, ``point.scene`` is resolved here.
+    """
     base = _configuration(point)
     try:
-        scene = resolve_scene(point.scene)  # loaded once, for the row and the run
+        scene = resolve_scene(point.scene if scene is None else scene)  # loaded once
         base["n_squares"] = scene.n_boxes
         trajectory, failure, disagreement = _simulate(point, scene)
     except Exception as exc:  # any configuration error becomes an error row
-        return schema.new_row(**base, status="error", error=_message(exc), success=False,
-                              verified=False, steps_completed=0)
+        return PointResult(error_row(point, exc, base), None)
     row = {**base, **_outcome(trajectory, failure), **_timing(trajectory, point),
            **_accuracy(trajectory, point, reference),
            **friction_summary(trajectory, peer=point.engine != "wuerfel_cvx"),
            "reference_disagreement": disagreement}
-    if series_dir is not None:
-        _write_series(trajectory, series_dir / schema.series_file_name(point.point_id))
-    return schema.new_row(**row)
+    series = trajectory.metrics.reindex(columns=list(schema.SERIES_COLUMNS))
+    return PointResult(schema.new_row(**row), series)
+
+
+def error_row(point: GridPoint, exc: BaseException,
+              configuration: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The ``status = "error"`` row of a point that could not run, naming ``exc``."""
+    base = _configuration(point) if configuration is None else configuration
+    return schema.new_row(**base, status="error", error=_message(exc), success=False,
+                          verified=False, steps_completed=0)
+
+
+def write_series(result: PointResult, series_dir: Path) -> None:
+    """Write the point's per-step series under ``series_dir`` (nothing for an error row)."""
+    if result.series is None:
+        return
+    path = series_dir / schema.series_file_name(str(result.row["point_id"]))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    result.series.to_csv(path, index=False)
 
 
 def _simulate(point: GridPoint,
@@ -262,11 +312,6 @@ def _initial_energy(trajectory: Trajectory) -> float:
     model = trajectory.model()
     assert model is not None, "every run records its scene"
     return total_energy(model, State(trajectory.points[0], trajectory.velocities[0]))
-
-
-def _write_series(trajectory: Trajectory, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    trajectory.metrics.reindex(columns=list(schema.SERIES_COLUMNS)).to_csv(path, index=False)
 
 
 def _nan_median(values: FloatArray) -> float | None:

@@ -357,6 +357,14 @@ SERIES_COLUMNS: tuple[str, ...] = (
 )
 """Columns of a grid point's per-step series file (units as in the simulation metrics)."""
 
+CLOCK_COLUMNS: frozenset[str] = frozenset({
+    "finished_at", "wall_time_per_step_median", "wall_time_per_step_p90",
+    "solver_time_per_step_median", "modelling_time_per_step_median",
+    "step_over_solver_median", "wall_time_per_simulated_second", "total_wall_time",
+    "step_time_s", "solver_time_s"})
+"""The results and series columns read off a clock.  They differ from run to run; the
+others are physics, the same bits on every run of a deterministic solver."""
+
 
 def series_file_name(point_id: str) -> str:
     """File name of a grid point's per-step series, in ``<results dir>/series/``."""

@@ -4,7 +4,8 @@ The results file is ``<out>/results.csv`` (see :mod:`wuerfel_cvx.bench.schema`).
 that is interrupted, even killed mid-write, resumes: rows already in the file are skipped,
 a partial last line is cut off, references already computed (``<out>/references/``) are
 reused.  Per-step series go to ``<out>/series/``.  With ``jobs > 1`` the work runs in that
-many worker processes; only the main process writes the results file.
+many worker processes, with ``dask`` on a Dask cluster (:mod:`wuerfel_cvx.bench.dask_sweep`);
+either way only the main process writes the results file, and the rows are the same.
 """
 
 from __future__ import annotations
@@ -12,19 +13,31 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from tqdm.auto import tqdm
 
 from ..errors import InputError
 from ..peers import PEER_ENGINES, available_peers
+from ..scene import Scene
 from ..solvers import SOLVERS, available_solvers
 from . import schema
-from .runner import Reference, compute_reference, load_reference, reference_file_name, run_point
+from .runner import (
+    Reference,
+    load_reference,
+    reference_file_name,
+    run_point,
+    run_reference,
+    save_reference,
+)
 from .suite import REFERENCE_REFINEMENT, GridPoint, ReferenceKey, Suite
+
+if TYPE_CHECKING:
+    from .dask_sweep import DaskCluster
 
 RESULTS_FILE = "results.csv"
 
@@ -46,14 +59,20 @@ class SweepSummary:
 
 
 def run_sweep(suite: Suite, out: str | Path, *, jobs: int = 1, progress: bool | None = None,
-              echo: Callable[[str], None] | None = None) -> SweepSummary:
+              echo: Callable[[str], None] | None = None,
+              dask: DaskCluster | None = None) -> SweepSummary:
     """Run every grid point of ``suite`` not yet in ``out/results.csv``.
 
     ``progress=None`` shows a bar only when standard error is a terminal.  ``echo`` gets
-    one-line notes (skipped solvers, resumed rows); default: print to standard error.
+    one-line notes (skipped solvers, resumed rows, the Dask dashboard); default: print to
+    standard error.  ``dask`` runs the points on a Dask cluster instead of ``jobs`` local
+    processes.
     """
     if jobs < 1:
         raise InputError(f"must be at least 1, got {jobs}", field="--jobs")
+    if dask is not None and jobs != 1:
+        raise InputError("give --jobs or a Dask cluster (--dask, --scheduler), not both",
+                         field="--jobs")
     note = echo or (lambda text: print(text, file=sys.stderr))
     out = Path(out)
     try:
@@ -75,16 +94,54 @@ def run_sweep(suite: Suite, out: str | Path, *, jobs: int = 1, progress: bool | 
     show = sys.stderr.isatty() if progress is None else progress
     work = sum(key_steps(key) for key in references) + sum(p.steps for p in todo)
     failed = 0
-    with tqdm(total=work, unit="step", disable=not show, desc=suite.name,
-              dynamic_ncols=True) as bar:
-        for key, _ in _run_all(_reference_tasks(references), jobs):
+    with _executor(jobs, dask if todo else None, note) as executor, \
+            tqdm(total=work, unit="step", disable=not show, desc=suite.name,
+                 dynamic_ncols=True) as bar:
+        for key in executor.references(references):
             bar.update(key_steps(key))
-        for point, row in _run_all(_point_tasks(todo, out), jobs):
+        for point, row in executor.points(todo, out):
             schema.append_row(results, row)
             failed += row["status"] != "ok"
             bar.update(point.steps)
     return SweepSummary(results, len(todo), len(runnable) - len(todo), tuple(unavailable),
                         failed)
+
+
+class Executor(Protocol):
+    """Where a sweep's references and grid points run; :func:`run_sweep` writes the rows."""
+
+    def references(self, needed: dict[ReferenceKey, Path]) -> Iterator[ReferenceKey]:
+        """Compute each reference and save it to its path; yield its key once saved."""
+
+    def points(self, todo: list[GridPoint],
+               out: Path) -> Iterator[tuple[GridPoint, dict[str, Any]]]:
+        """Run each point, its series written under ``out/series``; yield its row."""
+
+
+@dataclass(frozen=True)
+class ProcessPool:
+    """The sweep in this process (``jobs == 1``) or in ``jobs`` local worker processes."""
+
+    jobs: int
+
+    def references(self, needed: dict[ReferenceKey, Path]) -> Iterator[ReferenceKey]:
+        """Compute each reference in a worker, which saves it; yield its key."""
+        for key, _ in _run_all(_reference_tasks(needed), self.jobs):
+            yield key
+
+    def points(self, todo: list[GridPoint],
+               out: Path) -> Iterator[tuple[GridPoint, dict[str, Any]]]:
+        """Run each point in a worker, which writes its series; yield its row."""
+        yield from _run_all(_point_tasks(todo, out), self.jobs)
+
+
+def _executor(jobs: int, dask: DaskCluster | None,
+              note: Callable[[str], None]) -> AbstractContextManager[Executor]:
+    if dask is None:
+        return nullcontext(ProcessPool(jobs))
+    from .dask_sweep import dask_executor
+
+    return dask_executor(dask, note)
 
 
 def key_steps(key: ReferenceKey) -> int:
@@ -138,25 +195,45 @@ def _reference_tasks(references: dict[ReferenceKey, Path]) -> list[Task]:
 
 
 def _point_tasks(points: list[GridPoint], out: Path) -> list[Task]:
-    longest_first = sorted(points, key=lambda point: point.steps, reverse=True)
-    return [(point, _point_job, (point, out)) for point in longest_first]
+    return [(point, _point_job, (point, out)) for point in longest_first(points)]
+
+
+def longest_first(points: Iterable[GridPoint]) -> list[GridPoint]:
+    """The points in the order they are started: most steps first, for a short tail."""
+    return sorted(points, key=lambda point: point.steps, reverse=True)
+
+
+def try_reference(key: ReferenceKey, scene: Scene | None = None) -> Reference | None:
+    """:func:`run_reference`, or ``None`` if it raises (e.g. an unknown scene).
+
+    Its grid points then report the error themselves.
+    """
+    try:
+        return run_reference(key, scene)
+    except Exception:
+        return None
+
+
+def point_reference(point: GridPoint, out: Path) -> Reference | None:
+    """The point's reference as saved under ``out/references``; ``None`` if it needs none."""
+    key = point.reference_key
+    if key is None:
+        return None
+    path = out / "references" / reference_file_name(key)
+    if path.exists():
+        return load_reference(path)
+    return Reference(np.zeros((0, 0, 2)), complete=False, detail="not computed")
 
 
 def _reference_job(key: ReferenceKey, path: Path) -> Path:
-    try:
-        return compute_reference(key, path)
-    except Exception:  # e.g. an unknown scene: its grid points report the error
-        return path
+    reference = try_reference(key)
+    if reference is not None:
+        save_reference(reference, path)
+    return path
 
 
 def _point_job(point: GridPoint, out: Path) -> dict[str, Any]:
-    reference = None
-    key = point.reference_key
-    if key is not None:
-        path = out / "references" / reference_file_name(key)
-        reference = (load_reference(path) if path.exists() else
-                     Reference(np.zeros((0, 0, 2)), complete=False, detail="not computed"))
-    return run_point(point, reference, out / "series")
+    return run_point(point, point_reference(point, out), out / "series")
 
 
 def _run_all(tasks: list[Task], jobs: int) -> Iterator[tuple[Any, Any]]:
