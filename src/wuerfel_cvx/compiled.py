@@ -40,6 +40,7 @@ import scipy.sparse as sp
 from .backends import DirectSolver, build_direct
 from .formulations.qp import PARAMETER_SLOTS, DeclaredQP, StepQP
 from .solvers import SOLVERS
+from .warm_start import WarmStarts
 
 StructureKey = tuple[object, ...]
 
@@ -124,6 +125,8 @@ class CompiledQPCache:
     """Structures compiled so far."""
     reused: int = 0
     """Steps that re-solved an already compiled structure."""
+    warm_starts: WarmStarts | None = None
+    """Each solver's last solution, to warm-start the next QP (``None``: cold starts)."""
     _problems: OrderedDict[StructureKey, CompiledQP] = field(default_factory=OrderedDict,
                                                              repr=False)
     _sightings: dict[StructureKey, int] = field(default_factory=dict, repr=False)

@@ -55,6 +55,7 @@ from .solve import (
 )
 from .solvers import SOLVERS, get_solver, tolerance_value
 from .trajectory import Trajectory
+from .warm_start import WarmStarts
 
 DT_RANGE = (1e-6, 100.0)
 """Accepted time steps (s).  Baumgarte's ``beta / dt`` turns round-off in rod lengths
@@ -126,6 +127,11 @@ class Simulation:
         optimal, non-finite or unusable data, an exception).  The step's metrics row then
         names the solver that succeeded in ``solver`` and keeps the failed status in
         ``primary_status``.  Only when every solver fails does the run stop.
+    warm_start:
+        With ``compiled``, start each QP's solver from the last step's solution, mapped
+        onto this step's rows by contact (:mod:`wuerfel_cvx.warm_start`), in the solvers
+        that take a start (OSQP, PROXQP, DAQP); ``False``: every solve starts cold.  Same
+        answers to solver tolerance.
 
     Raises
     ------
@@ -139,7 +145,7 @@ class Simulation:
                  *, table_mass: float | None = None, extra_rod: bool = False,
                  compiled: bool = True, sleep: SleepSettings | None = None,
                  islands: bool = False, fallback: Sequence[str] = (),
-                 friction_model: str | None = None):
+                 friction_model: str | None = None, warm_start: bool = True):
         self.dt = checked_dt(dt)
         self.solvers = [get_solver(name).name for name in (solver, *fallback)]
         tolerance_value(tol)
@@ -147,7 +153,8 @@ class Simulation:
         self.model = Model.from_scene(scene, table_mass=table_mass, extra_rod=extra_rod)
         self.formulation = with_friction_model(get_formulation(formulation), friction_model,
                                                bool(np.any(self.model.friction > 0.0)))
-        self.cache = CompiledQPCache() if compiled else None
+        self.cache = (CompiledQPCache(warm_starts=WarmStarts() if warm_start else None)
+                      if compiled else None)
         self._friction_cache = FrictionCache() if compiled else None
         self._coulomb = (getattr(self.formulation, "friction_model", None) == "coulomb"
                          and bool(np.any(self.model.friction > 0.0)))

@@ -34,6 +34,7 @@ from .formulations.qp import DeclaredQP, StepQP
 from .geometry import FloatArray
 from .scaling import scaled_qp, unknowns_scale
 from .solvers import SolverSpec, get_solver, tolerance_value
+from .warm_start import WarmStart
 
 #: A solution is verified when its relative residuals are below this multiple of ``eps``.
 #: Solvers measure their own stopping criteria in scaled or differently normed units, so
@@ -145,10 +146,13 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     if bad_data:  # no solver is handed NaN or inf (some would panic or return garbage)
         raise StepFailure(step, spec.name, INVALID_DATA, f"non-finite {bad_data}")
     scale = unknowns_scale(qp)  # 1 (qp as it is) unless its data are large
+    warm_starts = None if cache is None else cache.warm_starts
     started = time.perf_counter()
     try:
         # inside the try: applying a compiled structure's parameters can raise too
-        answer = _solve(scaled_qp(qp, scale), spec, options, cache)
+        seen = scaled_qp(qp, scale)
+        warm = None if warm_starts is None else warm_starts.guess(spec.name, seen, scale)
+        answer = _solve(seen, spec, options, cache, warm)
     except cp.error.SolverError as exc:
         raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
     except Exception as exc:  # a solver library raising anything is a failed step
@@ -167,6 +171,8 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     if status == cp.OPTIMAL_INACCURATE and not verified:
         raise StepFailure(step, spec.name, status,
                           f"residuals {residuals.worst():.2e} above {VERIFY_FACTOR * eps:.1e}")
+    if warm_starts is not None and verified:
+        warm_starts.remember(spec.name, seen, answer.x, answer.eq_dual, answer.ineq_dual, scale)
     return StepSolution(x=x, solver=spec.name, status=status, residuals=residuals,
                         verified=verified, solve_wall_time=wall,
                         solver_time=spec.timing.solver_time(answer.reported_time,
@@ -177,14 +183,16 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
 
 
 def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
-           cache: CompiledQPCache | None) -> _Answer:
+           cache: CompiledQPCache | None, warm: WarmStart | None = None) -> _Answer:
     """Solve on the direct path if the cache has one for ``qp``, else through cvxpy.
 
     A solver with a native backend (:attr:`~wuerfel_cvx.solvers.SolverSpec.native`) is
-    always called on it, with or without a cache.
+    always called on it, with or without a cache.  ``warm`` (:mod:`wuerfel_cvx.warm_start`)
+    goes to the native and direct backends that take one; with a cache that keeps no warm
+    starts, the direct path starts cold too.
     """
     if spec.native is not None:
-        raw = native_backend(spec.native).solve(qp, options)
+        raw = native_backend(spec.native).solve(qp, options, warm)
         return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
                        raw.iterations, DIRECT, raw.native_time)
     if cache is None:
@@ -192,8 +200,9 @@ def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
     else:
         key = structure_key(qp)  # once per solve: both look-ups below take it
         direct = cache.direct_solver(qp, spec.name, options, key)
-        if direct is not None:  # OSQP warm-starts from the structure's last solution
-            raw = direct.solve(qp, options)
+        if direct is not None:
+            cold = cache.warm_starts is None
+            raw = direct.solve(qp, {**options, "warm_start": False} if cold else options, warm)
             return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
                            raw.iterations, DIRECT, raw.native_time)
         declared, path = cache.prepare(qp, key)
