@@ -46,6 +46,7 @@ from .model import Model, State
 from .recorder import TrajectoryRecorder, physical_metrics, run_info
 from .scene import Scene
 from .sleep import IslandPlanner, SleepSettings, merge, restrict
+from .slots import SlotLayout
 from .solve import (
     Residuals,
     StepSolution,
@@ -155,6 +156,11 @@ class Simulation:
                                                bool(np.any(self.model.friction > 0.0)))
         self.cache = (CompiledQPCache(warm_starts=WarmStarts() if warm_start else None)
                       if compiled else None)
+        columns = getattr(self.formulation, "slot_columns", None)
+        if (self.cache is not None and columns is not None and table_mass is None
+                and sleep is None and not islands):  # slots number every body of the model
+            self.cache.slots = SlotLayout(columns)
+            self.cache.compile_after = 1  # a slot structure repeats: compile it at once
         self._friction_cache = FrictionCache() if compiled else None
         self._coulomb = (getattr(self.formulation, "friction_model", None) == "coulomb"
                          and bool(np.any(self.model.friction > 0.0)))
@@ -177,6 +183,9 @@ class Simulation:
         """
         step = self.step_index + 1
         started = time.perf_counter()
+        if self.cache is not None and self.cache.slots is not None:
+            self.cache.slots.track(self.model, self.state.points, self.state.velocities,
+                                   self.dt)
         plan = self.planner.plan(self.contacts)
         if plan.all_asleep:
             return self._sleep(step, started)
@@ -223,6 +232,9 @@ class Simulation:
         if self.cache is not None:
             info["compiled_structures"] = self.cache.compiled
             info["steps_reusing_a_compiled_structure"] = self.cache.reused
+            info["canonicalised_qps"] = self.cache.canonicalised
+            if self.cache.slots is not None:
+                info["slot_layout_changes"] = self.cache.slots.changes
         return self.recorder.trajectory()
 
     # ------------------------------------------------------------------ parts of a step

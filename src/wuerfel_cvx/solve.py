@@ -17,6 +17,7 @@ when all three are below ``VERIFY_FACTOR * eps``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -33,6 +34,7 @@ from .errors import StepFailure
 from .formulations.qp import DeclaredQP, StepQP
 from .geometry import FloatArray
 from .scaling import scaled_qp, unknowns_scale
+from .slots import padded_warm_start
 from .solvers import SolverSpec, get_solver, tolerance_value
 from .warm_start import WarmStart
 
@@ -152,7 +154,7 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
         # inside the try: applying a compiled structure's parameters can raise too
         seen = scaled_qp(qp, scale)
         warm = None if warm_starts is None else warm_starts.guess(spec.name, seen, scale)
-        answer = _solve(seen, spec, options, cache, warm)
+        answer = _solve_in_slots(seen, spec, options, cache, warm)
     except cp.error.SolverError as exc:
         raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
     except Exception as exc:  # a solver library raising anything is a failed step
@@ -208,6 +210,21 @@ def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
         declared, path = cache.prepare(qp, key)
     return _solve_with_cvxpy(qp, declared, spec.cvxpy_name, {"warm_start": False, **options},
                              path)
+
+
+def _solve_in_slots(qp: StepQP, spec: SolverSpec, options: dict[str, object],
+                    cache: CompiledQPCache | None, warm: WarmStart | None) -> _Answer:
+    """:func:`_solve` ``qp`` in the cache's slot structure if it has one that applies.
+
+    The answer's multipliers are the exact rows' (read at their slots).
+    """
+    padded = None if cache is None or cache.slots is None else cache.slots.pad(qp)
+    if padded is None:
+        return _solve(qp, spec, options, cache, warm)
+    slotted, rows = padded
+    answer = _solve(slotted, spec, options, cache,
+                    padded_warm_start(warm, rows, slotted.n_inequalities))
+    return dataclasses.replace(answer, ineq_dual=np.asarray(answer.ineq_dual)[rows])
 
 
 @dataclass(frozen=True)
