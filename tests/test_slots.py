@@ -90,20 +90,21 @@ def test_new_contacts_of_the_same_pairs_keep_the_structure() -> None:
 def test_a_resting_pile_compiles_one_slot_structure(scene: str) -> None:
     """One structure for a pile at rest (reports/step-path).
 
-    Measured: pyramid-10 canonicalises 12 exact structures in 200 steps (PIQP, rigid).
+    It is declared once, compiled when it repeats, then solved on the direct path.
+    Measured: pyramid-10 canonicalises 12 times with exact rows in 200 steps (PIQP, rigid).
     """
     sim = Simulation(Scene.named(scene), dt=0.01, solver="PIQP", formulation="rigid-slots")
     for _ in range(200):
         sim.step()
     assert sim.cache is not None and sim.cache.slots is not None
-    assert sim.cache.canonicalised == 1 and sim.cache.slots.changes == 1
+    assert sim.cache.canonicalised == 2 and sim.cache.slots.changes == 1
 
 
 def test_rain_recompiles_no_more_often_than_reported() -> None:
     """Rain-50 recompiles at most as often as reports/step-path says.
 
-    Measured over 100 steps, PIQP, rigid: 54 canonicalisations with exact rows, 23 with
-    slots (each layout compiled once).
+    Measured over 100 steps, PIQP, rigid: 54 canonicalisations with exact rows, 37 with
+    slots (22 layouts after the first; each declared once, 14 compiled when they repeated).
     """
     counts: dict[str, int] = {}
     for formulation in ("rigid", "rigid-slots"):
@@ -113,7 +114,7 @@ def test_rain_recompiles_no_more_often_than_reported() -> None:
             sim.step()
         assert sim.cache is not None
         counts[formulation] = sim.cache.canonicalised
-    assert counts["rigid-slots"] <= 23 < counts["rigid"]
+    assert counts["rigid-slots"] <= 37 < counts["rigid"]
 
 
 @pytest.mark.parametrize("solver", ["CLARABEL", "OSQP", "PIQP"])
@@ -122,5 +123,5 @@ def test_a_slot_run_follows_the_exact_run_to_solver_tolerance(solver: str) -> No
     runs = [simulate("pyramid-3", dt=0.01, steps=steps, solver=solver, formulation=name,
                      tol="high") for name in ("rigid", "rigid-slots")]
     assert all(run.metrics["verified"].all() for run in runs)
-    assert set(runs[1].metrics["path"]) <= {"compiled", "direct"}  # never declared afresh
+    assert runs[1].metrics["path"].iloc[1:].eq("direct").all()  # one structure throughout
     assert float(np.max(np.abs(runs[1].points - runs[0].points))) <= steps * 0.01 * AGREEMENT

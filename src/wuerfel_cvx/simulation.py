@@ -160,7 +160,6 @@ class Simulation:
         if (self.cache is not None and columns is not None and table_mass is None
                 and sleep is None and not islands):  # slots number every body of the model
             self.cache.slots = SlotLayout(columns)
-            self.cache.compile_after = 1  # a slot structure repeats: compile it at once
         self._friction_cache = FrictionCache() if compiled else None
         self._coulomb = (getattr(self.formulation, "friction_model", None) == "coulomb"
                          and bool(np.any(self.model.friction > 0.0)))

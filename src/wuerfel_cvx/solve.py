@@ -202,12 +202,15 @@ def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
     else:
         key = structure_key(qp)  # once per solve: both look-ups below take it
         direct = cache.direct_solver(qp, spec.name, options, key)
+        if direct is None:
+            declared, path = cache.prepare(qp, key)
+            if path == COMPILED and cache.slots is not None:  # a slot structure repeats:
+                direct = cache.direct_solver(qp, spec.name, options, key)  # set up at once
         if direct is not None:
             cold = cache.warm_starts is None
             raw = direct.solve(qp, {**options, "warm_start": False} if cold else options, warm)
             return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
                            raw.iterations, DIRECT, raw.native_time)
-        declared, path = cache.prepare(qp, key)
     return _solve_with_cvxpy(qp, declared, spec.cvxpy_name, {"warm_start": False, **options},
                              path)
 
