@@ -103,8 +103,8 @@ def test_a_resting_pile_compiles_one_slot_structure(scene: str) -> None:
 def test_rain_recompiles_no_more_often_than_reported() -> None:
     """Rain-50 recompiles at most as often as reports/step-path says.
 
-    Measured over 100 steps, PIQP, rigid: 54 canonicalisations with exact rows, 37 with
-    slots (22 layouts after the first; each declared once, 14 compiled when they repeated).
+    Measured over 100 steps, PIQP, rigid: 54 canonicalisations with exact rows, 43 with
+    slots (34 layouts, each declared once; 13 compiled when they repeated).
     """
     counts: dict[str, int] = {}
     for formulation in ("rigid", "rigid-slots"):
@@ -114,7 +114,7 @@ def test_rain_recompiles_no_more_often_than_reported() -> None:
             sim.step()
         assert sim.cache is not None
         counts[formulation] = sim.cache.canonicalised
-    assert counts["rigid-slots"] <= 37 < counts["rigid"]
+    assert counts["rigid-slots"] <= 43 < counts["rigid"]
 
 
 @pytest.mark.parametrize("solver", ["CLARABEL", "OSQP", "PIQP"])

@@ -43,9 +43,10 @@ from .warm_start import WarmStart
 FAT_MARGIN = 0.1
 """Margin (m) by which a body's bounding box is enlarged, Box2D's ``B2_AABB_MARGIN``."""
 
-FIRST_SLOTS = 4
-"""Row slots per pair and block at first: a face resting on a face has four rows (two
-corners each way); a pair that needs more grows by this many."""
+FIRST_SLOTS = 2
+"""Row slots per pair and block at first, and the step by which a pair that needs more
+grows (a face resting on a face has four rows: two corners each way).  Every slot is a row
+for the solver, so a pair starts with few."""
 
 LOOKAHEAD = 4.0
 """Steps of motion by which a new fat box reaches ahead (Box2D 2.4's ``b2_aabbMultiplier``)."""
@@ -84,7 +85,8 @@ class SlotLayout:
     fat_margin: float = FAT_MARGIN
     first_slots: int = FIRST_SLOTS
     changes: int = 0
-    """Times the set of pairs or a pair's slots changed (each is a new structure)."""
+    """Slot layouts laid out for a QP (the first, and one per change of the pairs or of a
+    pair's slots between two QPs): each is a new structure."""
     padded: int = 0
     """QPs solved in a slot structure."""
     _fat: FloatArray | None = field(default=None, repr=False)
@@ -189,7 +191,6 @@ class SlotLayout:
                 changed = True
         if changed:
             self._layout = None
-            self.changes += 1
 
     def _set_pairs(self, pairs: set[Pair]) -> None:
         """Take ``pairs`` as the broad phase's, keeping the slots of pairs that stay."""
@@ -197,7 +198,6 @@ class SlotLayout:
             return
         self._pairs = {pair: self._pairs.get(pair, self.first_slots) for pair in sorted(pairs)}
         self._layout = None
-        self.changes += 1
 
     def _overlapping(self, model: Model, extra: float) -> set[Pair]:
         """Pairs of bodies (box-box, box-table) whose fat boxes, grown by ``extra`` (m), overlap."""
@@ -241,6 +241,7 @@ class SlotLayout:
         indices = (np.concatenate(columns) if columns else np.zeros(0)).astype(np.int32)
         self._layout = _Layout(keys=keys, starts=starts, low=low, high=high, indptr=indptr,
                                indices=indices, slots=int(counts.sum()), blocks=blocks)
+        self.changes += 1
         return self._layout
 
 
