@@ -84,6 +84,6 @@ def solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) ->
         x=np.array(x, dtype=np.float64), eq_dual=multipliers[:n_eq],
         ineq_dual=-multipliers[n_eq:n_eq + qp.n_inequalities],
         status=status_name("DAQP", int(exitflag)),
-        reported_time=float(info["solve_time"]),
+        reported_time=float(info["solve_time"]) + float(info["setup_time"]),
         native_time=native_time,
         iterations=int(info["iterations"]))
