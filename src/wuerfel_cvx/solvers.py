@@ -131,7 +131,7 @@ SOLVERS: dict[str, SolverSpec] = {
         # Hessian: through cvxpy it sees auxiliary variables without cost and regularises.
         SolverSpec("DAQP", "DAQP", lambda eps: {"primal_tol": eps, "iter_limit": 10_000},
                    "dual active-set (dense)", "daqp", ("#8c564b", "P"), native="daqp",
-                   timing=Timing(note="its setup_time plus solve_time (the dense form is built before)")),
+                   timing=Timing(note="its setup_time plus solve_time (dense form built before)")),
         # HiGHS drops matrix entries below small_matrix_value (default 1e-9) from the
         # model; 1e-12 is the floor of that option's range, so only round-off is dropped.
         SolverSpec("HIGHS", "HIGHS", lambda eps: {
