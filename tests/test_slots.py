@@ -12,6 +12,7 @@ from wuerfel_cvx.formulations import StepQP, get_formulation, step_qp
 from wuerfel_cvx.model import Model, State
 from wuerfel_cvx.slots import UNUSED_SLACK, SlotLayout
 from wuerfel_cvx.solve import solve_step_qp
+from wuerfel_cvx.solvers import available_solvers
 
 pytestmark = pytest.mark.integration
 
@@ -125,3 +126,13 @@ def test_a_slot_run_follows_the_exact_run_to_solver_tolerance(solver: str) -> No
     assert all(run.metrics["verified"].all() for run in runs)
     assert runs[1].metrics["path"].iloc[1:].eq("direct").all()  # one structure throughout
     assert float(np.max(np.abs(runs[1].points - runs[0].points))) <= steps * 0.01 * AGREEMENT
+
+
+@pytest.mark.parametrize("solver", [s for s in ("PROXQP", "DAQP") if s in available_solvers()])
+def test_a_native_backend_solves_the_exact_rows(solver: str) -> None:
+    """Slots only spare cvxpy's canonicalisation; a native backend compiles nothing."""
+    sim = Simulation(Scene.named("stack-3"), dt=0.01, solver=solver, formulation="rigid-slots")
+    for _ in range(3):
+        sim.step()
+    assert sim.cache is not None and sim.cache.slots is not None
+    assert sim.cache.slots.padded == 0

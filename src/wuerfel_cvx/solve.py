@@ -219,9 +219,11 @@ def _solve_in_slots(qp: StepQP, spec: SolverSpec, options: dict[str, object],
                     cache: CompiledQPCache | None, warm: WarmStart | None) -> _Answer:
     """:func:`_solve` ``qp`` in the cache's slot structure if it has one that applies.
 
-    The answer's multipliers are the exact rows' (read at their slots).
+    The answer's multipliers are the exact rows' (read at their slots).  A native backend
+    compiles nothing, so it takes the exact rows.
     """
-    padded = None if cache is None or cache.slots is None else cache.slots.pad(qp)
+    slots = None if cache is None or spec.native is not None else cache.slots
+    padded = None if slots is None else slots.pad(qp)
     if padded is None:
         return _solve(qp, spec, options, cache, warm)
     slotted, rows = padded
