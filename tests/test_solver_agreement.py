@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from qp_bank import AGREEMENT, BANK_CASES, qp_bank
+from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.solve import solve_step_qp
 from wuerfel_cvx.solvers import available_solvers
 
@@ -20,7 +21,22 @@ def test_bank_covers_contacts_of_both_formulations() -> None:
     assert {entry.formulation for entry in with_contacts} == {"velocity", "seed"}
 
 
-@pytest.mark.parametrize("solver", available_solvers())
+#: Solvers whose claims of optimality on the bank are known to fail the KKT check, and why.
+FAILS_THE_CHECK = {
+    "HIGHS": "HiGHS 1.16's QP duals miss stationarity (relative dual residual 3e-8 to 4e-6 "
+             "on the bank, above 100 eps at 'high'), and on rain-8 its QP solver claims an "
+             "optimum with a primal infeasibility of 1.6e-5 (HiGHS's own 'Solve error')",
+}
+
+
+def _checked(solver: str) -> object:
+    reason = FAILS_THE_CHECK.get(solver)
+    if reason is None:
+        return solver
+    return pytest.param(solver, marks=pytest.mark.xfail(strict=True, reason=reason))
+
+
+@pytest.mark.parametrize("solver", [_checked(solver) for solver in available_solvers()])
 def test_solver_agrees_with_clarabel_on_new_velocities(solver: str) -> None:
     for entry in qp_bank():
         reference = solve_step_qp(entry.build(), "CLARABEL", "high")
@@ -33,3 +49,23 @@ def test_solver_agrees_with_clarabel_on_new_velocities(solver: str) -> None:
 
 def test_the_core_solvers_are_installed() -> None:
     assert {"CLARABEL", "OSQP", "PIQP"} <= set(available_solvers())
+
+
+@pytest.mark.parametrize("solver", sorted(set(FAILS_THE_CHECK) & set(available_solvers())))
+def test_a_solver_failing_the_check_is_caught_and_its_primal_still_agrees(solver: str) -> None:
+    """The KKT check, not the solver's word, decides; where the check passes, x agrees."""
+    caught = 0
+    for entry in qp_bank():
+        reference = solve_step_qp(entry.build(), "CLARABEL", "high")
+        try:
+            candidate = solve_step_qp(entry.build(), solver, "high")
+        except StepFailure as failure:
+            assert failure.status != "optimal", entry.label
+            caught += 1
+            continue
+        if not candidate.verified:  # AGREEMENT follows from the residuals: none here
+            caught += 1
+            continue
+        disagreement = float(np.max(np.abs(candidate.x - reference.x)))
+        assert disagreement <= AGREEMENT, (entry.label, disagreement)
+    assert caught > 0  # the reason recorded in FAILS_THE_CHECK still holds

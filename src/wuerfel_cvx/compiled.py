@@ -39,7 +39,9 @@ import scipy.sparse as sp
 
 from .backends import DirectSolver, build_direct
 from .formulations.qp import PARAMETER_SLOTS, DeclaredQP, StepQP
+from .slots import SlotLayout
 from .solvers import SOLVERS
+from .warm_start import WarmStarts
 
 StructureKey = tuple[object, ...]
 
@@ -124,6 +126,12 @@ class CompiledQPCache:
     """Structures compiled so far."""
     reused: int = 0
     """Steps that re-solved an already compiled structure."""
+    warm_starts: WarmStarts | None = None
+    """Each solver's last solution, to warm-start the next QP (``None``: cold starts)."""
+    slots: SlotLayout | None = None
+    """Solve each QP in its slot structure (:mod:`wuerfel_cvx.slots`; ``None``: exact rows)."""
+    canonicalised: int = 0
+    """QPs that went through cvxpy's canonicalisation (declared afresh, or compiled)."""
     _problems: OrderedDict[StructureKey, CompiledQP] = field(default_factory=OrderedDict,
                                                              repr=False)
     _sightings: dict[StructureKey, int] = field(default_factory=dict, repr=False)
@@ -149,6 +157,7 @@ class CompiledQPCache:
             self._sightings[key] = seen
             if len(self._sightings) > 16 * self.capacity:  # forget old one-off structures
                 self._sightings.clear()
+            self.canonicalised += 1
             return qp.declared(), DECLARED
         self._sightings.pop(key, None)
         compiled = CompiledQP.of(qp)
@@ -156,6 +165,7 @@ class CompiledQPCache:
         if len(self._problems) > self.capacity:
             self._problems.popitem(last=False)
         self.compiled += 1
+        self.canonicalised += 1
         return compiled.load(qp), COMPILED
 
     def direct_solver(self, qp: StepQP, solver: str, options: dict[str, Any],

@@ -85,6 +85,7 @@ def run_info(scene: Scene, *, formulation: str, solver: str, tol: str, dt: float
         "versions": {key: package_version(package) for key, package in
                      {"wuerfel_cvx": "wuerfel_cvx", **(packages or {})}.items()},
         "compiled_structures": None, "steps_reusing_a_compiled_structure": None,
+        "canonicalised_qps": None, "slot_layout_changes": None,
     }
 
 

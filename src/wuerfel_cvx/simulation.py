@@ -47,6 +47,7 @@ from .model import IntArray, Model, State
 from .recorder import TrajectoryRecorder, physical_metrics, run_info
 from .scene import Scene
 from .sleep import IslandPlanner, SleepSettings, merge, restrict
+from .slots import SlotLayout
 from .solve import (
     Residuals,
     StepSolution,
@@ -56,6 +57,7 @@ from .solve import (
 )
 from .solvers import SOLVERS, get_solver, tolerance_value
 from .trajectory import Trajectory
+from .warm_start import WarmStarts
 
 DT_RANGE = (1e-6, 100.0)
 """Accepted time steps (s).  Baumgarte's ``beta / dt`` turns round-off in rod lengths
@@ -127,6 +129,11 @@ class Simulation:
         optimal, non-finite or unusable data, an exception).  The step's metrics row then
         names the solver that succeeded in ``solver`` and keeps the failed status in
         ``primary_status``.  Only when every solver fails does the run stop.
+    warm_start:
+        With ``compiled``, start each QP's solver from the last step's solution, mapped
+        onto this step's rows by contact (:mod:`wuerfel_cvx.warm_start`), in the solvers
+        that take a start (OSQP, PROXQP, DAQP); ``False``: every solve starts cold.  Same
+        answers to solver tolerance.
 
     Raises
     ------
@@ -140,7 +147,7 @@ class Simulation:
                  *, table_mass: float | None = None, extra_rod: bool = False,
                  compiled: bool = True, sleep: SleepSettings | None = None,
                  islands: bool = False, fallback: Sequence[str] = (),
-                 friction_model: str | None = None):
+                 friction_model: str | None = None, warm_start: bool = True):
         self.dt = checked_dt(dt)
         self.solvers = [get_solver(name).name for name in (solver, *fallback)]
         tolerance_value(tol)
@@ -148,7 +155,12 @@ class Simulation:
         self.model = Model.from_scene(scene, table_mass=table_mass, extra_rod=extra_rod)
         self.formulation = with_friction_model(get_formulation(formulation), friction_model,
                                                bool(np.any(self.model.friction > 0.0)))
-        self.cache = CompiledQPCache() if compiled else None
+        self.cache = (CompiledQPCache(warm_starts=WarmStarts() if warm_start else None)
+                      if compiled else None)
+        columns = getattr(self.formulation, "slot_columns", None)
+        if (self.cache is not None and columns is not None and table_mass is None
+                and sleep is None and not islands):  # slots number every body of the model
+            self.cache.slots = SlotLayout(columns)
         self._friction_cache = FrictionCache() if compiled else None
         self._coulomb = (getattr(self.formulation, "friction_model", None) == "coulomb"
                          and bool(np.any(self.model.friction > 0.0)))
@@ -172,6 +184,9 @@ class Simulation:
         """
         step = self.step_index + 1
         started = time.perf_counter()
+        if self.cache is not None and self.cache.slots is not None:
+            self.cache.slots.track(self.model, self.state.points, self.state.velocities,
+                                   self.dt)
         plan = self.planner.plan(self.contacts)
         if plan.all_asleep:
             return self._sleep(step, started)
@@ -225,6 +240,9 @@ class Simulation:
         if self.cache is not None:
             info["compiled_structures"] = self.cache.compiled
             info["steps_reusing_a_compiled_structure"] = self.cache.reused
+            info["canonicalised_qps"] = self.cache.canonicalised
+            if self.cache.slots is not None:
+                info["slot_layout_changes"] = self.cache.slots.changes
         return self.recorder.trajectory()
 
     # ------------------------------------------------------------------ parts of a step

@@ -17,6 +17,7 @@ when all three are below ``VERIFY_FACTOR * eps``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -34,7 +35,9 @@ from .errors import StepFailure
 from .formulations.qp import DeclaredQP, StepQP
 from .geometry import FloatArray
 from .scaling import scaled_qp, unknowns_scale, weights_scale
+from .slots import padded_warm_start
 from .solvers import SolverSpec, get_solver, tolerance_value
+from .warm_start import WarmStart
 
 #: A solution is verified when its relative residuals are below this multiple of ``eps``.
 #: Solvers measure their own stopping criteria in scaled or differently normed units, so
@@ -157,10 +160,13 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
         raise StepFailure(step, spec.name, INVALID_DATA, f"non-finite {bad_data}")
     scale = unknowns_scale(qp)  # 1 (qp as it is) unless its data are large
     weight_scale = weights_scale(qp)  # 1 unless its bodies are light
+    warm_starts = None if cache is None else cache.warm_starts
     started = time.perf_counter()
     try:
         # inside the try: applying a compiled structure's parameters can raise too
-        answer = _solve(scaled_qp(qp, scale, weight_scale), spec, options, cache)
+        seen = scaled_qp(qp, scale, weight_scale)
+        warm = None if warm_starts is None else warm_starts.guess(spec.name, seen, scale)
+        answer = _solve_in_slots(seen, spec, options, cache, warm)
     except cp.error.SolverError as exc:
         raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
     except Exception as exc:  # a solver library raising anything is a failed step
@@ -180,6 +186,8 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     if status == cp.OPTIMAL_INACCURATE and not verified:
         raise StepFailure(step, spec.name, status,
                           f"residuals {residuals.worst():.2e} above {VERIFY_FACTOR * eps:.1e}")
+    if warm_starts is not None and verified:
+        warm_starts.remember(spec.name, seen, answer.x, answer.eq_dual, answer.ineq_dual, scale)
     return StepSolution(x=x, solver=spec.name, status=status, residuals=residuals,
                         verified=verified, solve_wall_time=wall,
                         solver_time=spec.timing.solver_time(answer.reported_time,
@@ -190,14 +198,16 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
 
 
 def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
-           cache: CompiledQPCache | None) -> _Answer:
+           cache: CompiledQPCache | None, warm: WarmStart | None = None) -> _Answer:
     """Solve on the direct path if the cache has one for ``qp``, else through cvxpy.
 
     A solver with a native backend (:attr:`~wuerfel_cvx.solvers.SolverSpec.native`) is
-    always called on it, with or without a cache.
+    always called on it, with or without a cache.  ``warm`` (:mod:`wuerfel_cvx.warm_start`)
+    goes to the native and direct backends that take one; with a cache that keeps no warm
+    starts, the direct path starts cold too.
     """
     if spec.native is not None:
-        raw = native_backend(spec.native).solve(qp, options)
+        raw = native_backend(spec.native).solve(qp, options, warm)
         return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
                        raw.iterations, DIRECT, raw.native_time)
     if cache is None:
@@ -205,13 +215,34 @@ def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
     else:
         key = structure_key(qp)  # once per solve: both look-ups below take it
         direct = cache.direct_solver(qp, spec.name, options, key)
-        if direct is not None:  # OSQP warm-starts from the structure's last solution
-            raw = direct.solve(qp, options)
+        if direct is None:
+            declared, path = cache.prepare(qp, key)
+            if path == COMPILED and cache.slots is not None:  # a slot structure repeats:
+                direct = cache.direct_solver(qp, spec.name, options, key)  # set up at once
+        if direct is not None:
+            cold = cache.warm_starts is None
+            raw = direct.solve(qp, {**options, "warm_start": False} if cold else options, warm)
             return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
                            raw.iterations, DIRECT, raw.native_time)
-        declared, path = cache.prepare(qp, key)
     return _solve_with_cvxpy(qp, declared, spec.cvxpy_name, {"warm_start": False, **options},
                              path)
+
+
+def _solve_in_slots(qp: StepQP, spec: SolverSpec, options: dict[str, object],
+                    cache: CompiledQPCache | None, warm: WarmStart | None) -> _Answer:
+    """:func:`_solve` ``qp`` in the cache's slot structure if it has one that applies.
+
+    The answer's multipliers are the exact rows' (read at their slots).  A native backend
+    compiles nothing, so it takes the exact rows.
+    """
+    slots = None if cache is None or spec.native is not None else cache.slots
+    padded = None if slots is None else slots.pad(qp)
+    if padded is None:
+        return _solve(qp, spec, options, cache, warm)
+    slotted, rows = padded
+    answer = _solve(slotted, spec, options, cache,
+                    padded_warm_start(warm, rows, slotted.n_inequalities))
+    return dataclasses.replace(answer, ineq_dual=np.asarray(answer.ineq_dual)[rows])
 
 
 @dataclass(frozen=True)

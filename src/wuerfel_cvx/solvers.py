@@ -127,6 +127,17 @@ SOLVERS: dict[str, SolverSpec] = {
         SolverSpec("SCS", "SCS", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, "max_iters": 200_000}, "ADMM (conic)", "scs",
             ("#9467bd", "v")),
+        # Called natively (backends/daqp.py), on the step QP's own positive-definite
+        # Hessian: through cvxpy it sees auxiliary variables without cost and regularises.
+        SolverSpec("DAQP", "DAQP", lambda eps: {"primal_tol": eps, "iter_limit": 10_000},
+                   "dual active-set (dense)", "daqp", ("#8c564b", "P"), native="daqp",
+                   timing=Timing(note="its setup_time plus solve_time (dense form built before)")),
+        # HiGHS drops matrix entries below small_matrix_value (default 1e-9) from the
+        # model; 1e-12 is the floor of that option's range, so only round-off is dropped.
+        SolverSpec("HIGHS", "HIGHS", lambda eps: {
+            "primal_feasibility_tolerance": eps, "dual_feasibility_tolerance": eps,
+            "small_matrix_value": 1e-12, "output_flag": False}, "active-set (QP)",
+            "highspy", ("#e377c2", "X")),
     )
 }
 """Every solver the package knows; :func:`available_solvers` lists those installed."""

@@ -18,8 +18,9 @@ The duals of our rows are read from the solver's by the row and coefficient each
 right-hand side takes in the conic data, so every step is checked by the same independent
 KKT residuals as any other solve.
 
-PROXQP's backend (:mod:`.proxqp`) is of another kind: *native*, it takes the step QP's own
-numbers rather than cvxpy's map, and serves every path (:func:`native_backend`).
+PROXQP's and DAQP's backends (:mod:`.proxqp`, :mod:`.daqp`) are of another kind:
+*native*, they take the step QP's own numbers rather than cvxpy's map, and serve every
+path (:func:`native_backend`).
 
 One module per solver (:mod:`.osqp`, :mod:`.piqp`, :mod:`.clarabel`), named by the
 solver's :attr:`~wuerfel_cvx.solvers.SolverSpec.backend`; every use of cvxpy internals is
@@ -35,6 +36,7 @@ from typing import Any, Protocol
 import cvxpy as cp
 
 from ..formulations.qp import StepQP
+from ..warm_start import WarmStart
 from ._cvxpy import INTERNALS_CHANGED, DirectPathWarning, Unavailable, warn_unavailable
 from ._map import DirectResult
 
@@ -48,16 +50,22 @@ class DirectSolver(Protocol):
     solver: Any
     """The persistent native solver."""
 
-    def solve(self, qp: StepQP, settings: dict[str, Any]) -> DirectResult:
-        """Solve ``qp`` (of this structure) with the solver's ``settings``."""
+    def solve(self, qp: StepQP, settings: dict[str, Any],
+              warm: WarmStart | None = None) -> DirectResult:
+        """Solve ``qp`` (of this structure) with the solver's ``settings``.
+
+        ``warm``: a guess from the last step (:mod:`wuerfel_cvx.warm_start`), used by a
+        solver that takes one and ignored by the others.
+        """
         ...
 
 
 class NativeBackend(Protocol):
     """A module that solves a step QP from its own numbers (:mod:`.proxqp`)."""
 
-    def solve(self, qp: StepQP, options: dict[str, Any]) -> DirectResult:
-        """Solve ``qp`` with the solver's ``options``."""
+    def solve(self, qp: StepQP, options: dict[str, Any],
+              warm: WarmStart | None = None) -> DirectResult:
+        """Solve ``qp`` with the solver's ``options``, from ``warm`` if it takes one."""
         ...
 
 

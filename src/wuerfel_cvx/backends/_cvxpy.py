@@ -42,6 +42,7 @@ _STATUS_MAPS = {
     "PIQP": ("cvxpy.reductions.solvers.qp_solvers.piqp_qpif", "PIQP"),
     "CLARABEL": ("cvxpy.reductions.solvers.conic_solvers.clarabel_conif", "CLARABEL"),
     "PROXQP": ("cvxpy.reductions.solvers.qp_solvers.proxqp_qpif", "PROXQP"),
+    "DAQP": ("cvxpy.reductions.solvers.qp_solvers.daqp_qpif", "DAQP"),
 }
 
 

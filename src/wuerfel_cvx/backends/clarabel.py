@@ -15,6 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..formulations.qp import StepQP
+from ..warm_start import WarmStart
 from ._cvxpy import Unavailable, clarabel_settings, compile_conic, status_name
 from ._map import DirectResult, ParameterMap
 
@@ -27,7 +28,8 @@ class DirectClarabel:
     b_rows: np.ndarray
     solver: Any
 
-    def solve(self, qp: StepQP, settings: dict[str, Any]) -> DirectResult:
+    def solve(self, qp: StepQP, settings: dict[str, Any],
+              warm: WarmStart | None = None) -> DirectResult:
         """Solve ``qp`` (this structure); ``settings`` were fixed when it was set up."""
         m = self.mapping
         values, q = m.values(qp)

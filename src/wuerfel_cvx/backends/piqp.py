@@ -15,6 +15,7 @@ import cvxpy as cp
 import numpy as np
 
 from ..formulations.qp import StepQP
+from ..warm_start import WarmStart
 from ._cvxpy import Unavailable, compile_qp, status_name
 from ._map import DirectResult, QPForm
 
@@ -29,7 +30,8 @@ class DirectPIQP:
     solver: Any
     settings: dict[str, Any]
 
-    def solve(self, qp: StepQP, settings: dict[str, Any]) -> DirectResult:
+    def solve(self, qp: StepQP, settings: dict[str, Any],
+              warm: WarmStart | None = None) -> DirectResult:
         """Solve ``qp`` (this structure) with PIQP ``settings``."""
         form = self.form
         values, q = form.mapping.values(qp)

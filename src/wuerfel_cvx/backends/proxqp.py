@@ -28,7 +28,8 @@ times slower and did not return on another.  The dense AVX-512 build's round-off
 its arrays lie in memory, so its answers can differ in the last bits between processes and
 between calls (``docs/false-infeasible.md``); that is proxsuite's, and aligning the inputs
 does not remove it (the solver's own buffers count too).  A fresh solver is set up for
-every QP.
+every QP; a warm start from the last step (:mod:`wuerfel_cvx.warm_start`) is handed
+to it as its initial guess.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ import scipy.sparse as sp
 
 from ..formulations.qp import StepQP
 from ..geometry import FloatArray
+from ..warm_start import WarmStart
 from ._cvxpy import status_name
 from ._map import DirectResult
 
@@ -75,11 +77,12 @@ def proxsuite_form(qp: StepQP) -> tuple[dict[str, Any], FloatArray]:
     return form, sign
 
 
-def solve(qp: StepQP, options: dict[str, Any]) -> DirectResult:
+def solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) -> DirectResult:
     """Solve ``qp`` with proxsuite's dense backend and ``options`` (proxsuite settings).
 
     Every option is one of proxsuite's settings, set by name; an unknown name raises
-    ``AttributeError`` (a failed step), so that no setting is dropped silently.
+    ``AttributeError`` (a failed step), so that no setting is dropped silently.  With
+    ``warm``, proxsuite starts from its primal and multipliers (``WARM_START``).
     """
     import proxsuite  # type: ignore[import-untyped]  # an optional solver, no stubs
 
@@ -92,7 +95,11 @@ def solve(qp: StepQP, options: dict[str, Any]) -> DirectResult:
     form, sign = proxsuite_form(qp)
     started = time.perf_counter()
     solver.init(**form)
-    solver.solve()
+    if warm is None:
+        solver.solve()
+    else:
+        settings.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START
+        solver.solve(warm.x, warm.eq_dual, sign * warm.ineq_dual)
     native_time = time.perf_counter() - started
     results = solver.results
     info = results.info

@@ -14,6 +14,7 @@ from .motion import rigid_step
 from .qp import StepQP, declare_qp
 from .rigid import RigidFormulation
 from .seed import SeedFormulation
+from .slotted import RigidSlotsFormulation, VelocitySlotsFormulation
 from .velocity import VelocityFormulation
 
 SEED_BAUMGARTE_RATE = 20.0
@@ -28,6 +29,8 @@ FORMULATIONS: dict[str, Callable[[], Formulation]] = {
     "rigid": RigidFormulation,
     "seed-baumgarte": partial(SeedFormulation, name="seed-baumgarte",
                               baumgarte_rate=SEED_BAUMGARTE_RATE),
+    "rigid-slots": RigidSlotsFormulation,
+    "velocity-slots": VelocitySlotsFormulation,
 }
 """Registry of formulation names (the first is the default) and their factories."""
 

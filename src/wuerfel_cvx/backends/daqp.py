@@ -1,0 +1,89 @@
+"""DAQP's native backend: the dual active-set solver called on the step QP's own numbers.
+
+DAQP solves ``min x' H x / 2 + f' x`` subject to ``blower <= A x <= bupper`` with a
+positive-definite ``H``, by a dual active-set method on dense data.  cvxpy's DAQP interface
+(1.9) hands it cvxpy's QP form, whose auxiliary variables carry no cost; ``H`` is then
+singular and cvxpy switches on DAQP's proximal regularisation, whose answers failed the
+KKT check on step QPs of the solver bank.  The step QP's own Hessian is positive definite::
+
+    H = 2 W + 2 F' F,   f = -H t,   A = [E; G],
+
+with the equalities marked as such (``sense`` 5) and ``h <= G x <= u`` as two-sided rows
+(``u = +inf`` where there is none), so this backend takes it as it is, on every path
+(:attr:`~wuerfel_cvx.solvers.SolverSpec.native`).  DAQP's multipliers ``lam`` enter its
+Lagrangian as ``H x + f + A' lam = 0``, so the package's ``y`` is ``lam`` on the equalities
+and its ``z = z_lower - z_upper`` is ``-lam`` on the inequalities.
+
+A warm start (:class:`~wuerfel_cvx.warm_start.WarmStart`) is handed over as DAQP's
+``dual_start``: its multipliers' signs give the initial working set, so a resting scene,
+whose active set repeats, starts at its optimum.
+"""
+
+from __future__ import annotations
+
+import time
+from ctypes import c_int
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..formulations.qp import StepQP
+from ..geometry import FloatArray
+from ..warm_start import WarmStart
+from ._cvxpy import status_name
+from ._map import DirectResult
+
+EQUALITY = 5
+"""DAQP's ``sense`` of an equality row (active and immutable)."""
+
+INFINITE_BOUND = 1e30
+"""DAQP's infinite bound (its default ``fval_bound``'s magnitude; ``inf`` is not taken)."""
+
+
+def daqp_form(qp: StepQP) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
+                                   np.ndarray]:
+    """``qp`` as DAQP's dense ``H, f, A, bupper, blower, sense``."""
+    hessian = sp.diags_array(2.0 * qp.weights, format="csr")
+    if qp.cost_factor is not None and qp.n_cost_rows:
+        factor = sp.csr_array(qp.cost_factor)
+        hessian = sp.csr_array(hessian + 2.0 * (factor.T @ factor))
+    upper = np.full(qp.n_inequalities, INFINITE_BOUND)
+    if qp.upper_rows.size:
+        assert qp.ineq_upper is not None
+        upper[qp.upper_rows] = qp.ineq_upper[qp.upper_rows]
+    rows = sp.vstack([qp.eq_matrix, qp.ineq_matrix], format="csr")
+    dense_hessian = hessian.toarray()
+    sense = np.concatenate([np.full(qp.n_equalities, EQUALITY),
+                            np.zeros(qp.n_inequalities)]).astype(c_int)
+    return (dense_hessian, -(dense_hessian @ qp.target), rows.toarray(),
+            np.concatenate([qp.eq_rhs, upper]), np.concatenate([qp.eq_rhs, qp.ineq_rhs]),
+            sense)
+
+
+def solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) -> DirectResult:
+    """Solve ``qp`` with DAQP and ``options`` (DAQP settings), from ``warm`` if given."""
+    import daqp  # type: ignore[import-not-found]  # an optional solver, no stubs
+
+    hessian, linear, rows, upper, lower, sense = daqp_form(qp)
+    extra: dict[str, Any] = {}
+    if warm is not None:
+        extra["dual_start"] = np.concatenate([warm.eq_dual, -warm.ineq_dual])
+    if rows.shape[0] == 0:  # DAQP needs a row: one that always holds
+        rows = np.zeros((1, qp.n_variables))
+        upper, lower = np.array([INFINITE_BOUND]), np.array([-INFINITE_BOUND])
+        sense = np.zeros(1, dtype=c_int)
+        extra.pop("dual_start", None)
+    started = time.perf_counter()
+    x, _, exitflag, info = daqp.solve(hessian, linear, rows, upper, lower, sense,
+                                      **options, **extra)
+    native_time = time.perf_counter() - started
+    multipliers = np.array(info["lam"], dtype=np.float64)
+    n_eq = qp.n_equalities
+    return DirectResult(
+        x=np.array(x, dtype=np.float64), eq_dual=multipliers[:n_eq],
+        ineq_dual=-multipliers[n_eq:n_eq + qp.n_inequalities],
+        status=status_name("DAQP", int(exitflag)),
+        reported_time=float(info["solve_time"]) + float(info["setup_time"]),
+        native_time=native_time,
+        iterations=int(info["iterations"]))
