@@ -18,11 +18,12 @@ pytestmark = pytest.mark.unit
 
 def test_perf_times_the_small_scenes_in_every_formulation_and_solver() -> None:
     points = Suite.named("perf").points
+    formulations = {"velocity", "velocity-baumgarte", "rigid", "rigid-slots", "velocity-slots"}
+    solvers = {"CLARABEL", "OSQP", "PIQP", "PROXQP", "DAQP", "HIGHS"}
     for scene in ("tilted-drop", "stack-10"):
         configurations = {(p.formulation, p.solver) for p in points if p.scene == scene}
         assert configurations == {(formulation, solver)
-                                  for formulation in ("velocity", "velocity-baumgarte", "rigid")
-                                  for solver in ("CLARABEL", "OSQP", "PIQP")}
+                                  for formulation in formulations for solver in solvers}
 
 
 def test_scaling_fits_a_settled_pile_up_to_the_large_pyramid() -> None:
