@@ -123,6 +123,29 @@ class Contacts:
                         distance=self.distance[keep])
 
 
+    def keys(self, boxes: IntArray | None = None, n_boxes: int = 0) -> list[ContactKey]:
+        """Each contact's :data:`ContactKey`, in the whole model's numbering.
+
+        For contacts :meth:`restricted` to ``boxes`` of a model with ``n_boxes`` boxes, the
+        numbering is mapped back (its inverse); ``None``: they are numbered so already.
+        """
+        def whole(points: IntArray) -> list[int]:
+            if boxes is None:
+                return points.tolist()  # type: ignore[no-any-return]
+            body = points // 4
+            kept = body < boxes.size
+            old = np.where(kept, boxes[np.minimum(body, boxes.size - 1)],
+                           n_boxes + body - boxes.size)
+            return (4 * old + points % 4).tolist()  # type: ignore[no-any-return]
+
+        return list(zip(whole(self.point), whole(self.edge_i), whole(self.edge_j),
+                        strict=True))
+
+
+ContactKey = tuple[int, int, int]
+"""A contact across steps: its point and its edge's two points (all-points indices)."""
+
+
 def _lengths(vectors: FloatArray) -> FloatArray:
     """Euclidean lengths (m) over the last axis (size 2), as ``np.linalg.norm`` computes them.
 

@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .contacts import Contacts
+from .contacts import ContactKey, Contacts
 from .errors import InputError
 from .formulations import Formulation, StepQP
 from .friction import ContactForces
@@ -198,57 +198,39 @@ def _carried(values: FloatArray, old: Contacts, new: Contacts) -> FloatArray:
     """``values`` per contact of ``old`` moved to the same contacts of ``new`` (0 elsewhere)."""
     if old is new:
         return values
-    key = {(int(p), int(i), int(j)): k
-           for k, (p, i, j) in enumerate(zip(old.point, old.edge_i, old.edge_j, strict=True))}
-    carried = np.zeros(len(new))
-    for k, (p, i, j) in enumerate(zip(new.point, new.edge_i, new.edge_j, strict=True)):
-        at = key.get((int(p), int(i), int(j)))
-        if at is not None and at < len(values):
-            carried[k] = values[at]
-    return carried
+    at = {key: k for k, key in enumerate(old.keys()) if k < len(values)}
+    return np.array([values[at[key]] if key in at else 0.0 for key in new.keys()])
 
 
 def _inf(values: FloatArray) -> float:
     return float(np.max(np.abs(values))) if np.size(values) else 0.0
 
 
-ContactKey = tuple[int, int, int]
-"""A contact across steps: its point and its edge's two points, in the whole model's numbering."""
-
-
 @dataclass
 class FrictionMemory:
-    """The friction impulses (N s) of the last step's contacts, by :data:`ContactKey`.
+    """The friction impulses (N s) of the last step's contacts, by contact key.
 
     What ``coulomb_warm_start`` starts the next step's fixed point from.  An island QP
     numbers its bodies on its own (:meth:`~wuerfel_cvx.contacts.Contacts.restricted`);
-    ``bodies`` maps them back, the whole model's body of each of its bodies, tables
-    included (``None``: the QP is over every body).
+    ``boxes`` (the island's boxes, ``None``: every box) maps them back
+    (:meth:`~wuerfel_cvx.contacts.Contacts.keys`).
     """
 
+    n_boxes: int
+    """Boxes of the whole model."""
     impulses: dict[ContactKey, float] = dataclasses.field(default_factory=dict)
 
-    def initial(self, contacts: Contacts, bodies: IntArray | None) -> FloatArray:
+    def initial(self, contacts: Contacts, boxes: IntArray | None) -> FloatArray:
         """The remembered impulse of each of ``contacts`` (0 for a new contact)."""
-        return np.array([self.impulses.get(key, 0.0) for key in _keys(contacts, bodies)])
+        return np.array([self.impulses.get(key, 0.0)
+                         for key in contacts.keys(boxes, self.n_boxes)])
 
     def remember(self, steps: Sequence[tuple[CoulombStep, IntArray | None]]) -> None:
         """Keep the impulses the fixed points of one step ended with, forget the rest."""
         self.impulses = {}
-        for outcome, bodies in steps:
-            self.impulses.update(zip(_keys(outcome.qp.contacts, bodies),
+        for outcome, boxes in steps:
+            self.impulses.update(zip(outcome.qp.contacts.keys(boxes, self.n_boxes),
                                      map(float, outcome.forces.friction), strict=True))
-
-
-def _keys(contacts: Contacts, bodies: IntArray | None) -> list[ContactKey]:
-    """The :data:`ContactKey` of each contact, numbered by ``bodies`` (see FrictionMemory)."""
-    def whole(points: IntArray) -> IntArray:
-        if bodies is None:
-            return points
-        return np.asarray(4 * bodies[points // 4] + points % 4, dtype=np.int64)
-
-    return list(zip(whole(contacts.point).tolist(), whole(contacts.edge_i).tolist(),
-                    whole(contacts.edge_j).tolist(), strict=True))
 
 
 class CoulombNotConverged(RuntimeWarning):

@@ -165,7 +165,7 @@ class Simulation:
         self._coulomb = (getattr(self.formulation, "friction_model", None) == "coulomb"
                          and bool(np.any(self.model.friction > 0.0)))
         self._coulomb_warned = False  # a run warns of its first unconverged step only
-        self._friction_memory = FrictionMemory()
+        self._friction_memory = FrictionMemory(self.model.n_boxes)
         self.planner = IslandPlanner(self.model.n_boxes, sleep, islands)
         self.state = State.initial(scene)
         self.step_index = 0
@@ -199,14 +199,12 @@ class Simulation:
             model, state, contacts = restrict(self.model, self.state, self.contacts, boxes)
             qp = self.formulation.build(model, state, contacts, self.dt)
             build_time += time.perf_counter() - mark
-            bodies = None if boxes is None else np.concatenate(
-                [boxes, self.model.n_boxes + np.arange(self.model.n_tables)])
             qp, solution, primary, passes, coulomb = self._solve_passes(step, model, state, qp,
-                                                                        bodies)
+                                                                        boxes)
             most_passes = max(most_passes, passes)
             coulombs.append(coulomb)
             if coulomb is not None:
-                remembered.append((coulomb, bodies))
+                remembered.append((coulomb, boxes))
             moved = self.formulation.advance(model, state, solution.x, self.dt)
             parts.append((boxes, moved))
             forces = ccp_forces(qp, solution) if coulomb is None else coulomb.forces
@@ -247,7 +245,7 @@ class Simulation:
 
     # ------------------------------------------------------------------ parts of a step
     def _solve_passes(self, step: int, model: Model, state: State, qp: StepQP,
-                      bodies: IntArray | None,
+                      boxes: IntArray | None,
                       ) -> tuple[StepQP, StepSolution, str, int, CoulombStep | None]:
         """Solve ``qp`` and the formulation's further passes.
 
@@ -257,8 +255,8 @@ class Simulation:
         status of the run's own solver over the passes, and the number of passes.  With
         ``friction_model="coulomb"`` and contacts with friction, the passes are those of the
         Coulomb fixed point (:mod:`wuerfel_cvx.coulomb`), returned last (else ``None``),
-        started from the last step's impulses (``bodies``: the island's bodies in the whole
-        model's numbering, :class:`~wuerfel_cvx.coulomb.FrictionMemory`); its
+        started from the last step's impulses (``boxes``: the island's boxes, ``None`` for
+        all; :class:`~wuerfel_cvx.coulomb.FrictionMemory`); its
         friction problems' times and iterations are in the sums, and a friction problem that
         fails its own check makes the step unverified.
         """
@@ -272,7 +270,7 @@ class Simulation:
                 lambda problem: solve_friction_with_fallback(problem, self.solvers, self.tol,
                                                              step, self._friction_cache),
                 coulomb_settings(self.formulation),
-                self._friction_memory.initial(qp.contacts, bodies)
+                self._friction_memory.initial(qp.contacts, boxes)
                 if getattr(self.formulation, "coulomb_warm_start", False) else None)
             qp, solved = coulomb.qp, coulomb.solved
         else:
