@@ -117,8 +117,9 @@ def _incident_face(corners: FloatArray, w: int, q: int, reference_face: int) -> 
 
 @compiled
 def _narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
-                  reach: FloatArray) -> tuple[IntArray, IntArray, IntArray, FloatArray]:
-    """Held (pair, corner, edge, distance) of the ordered pairs, pair-major."""
+                  reach: FloatArray
+                  ) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
+    """Held (pair, corner, edge, distance, clearance) of the ordered pairs, pair-major."""
     n_pairs = edge_body.shape[0]
     half = n_pairs // 2
     distances = np.empty((n_pairs, 4, 4))  # [pair, corner, edge]
@@ -130,6 +131,7 @@ def _narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray
     corner_out = np.empty(4 * n_pairs, dtype=np.int64)
     edge_out = np.empty(4 * n_pairs, dtype=np.int64)
     distance_out = np.empty(4 * n_pairs)
+    clearance_out = np.empty(4 * n_pairs)
     count = 0
     for p in range(n_pairs):
         w, q = edge_body[p], point_body[p]
@@ -154,8 +156,13 @@ def _narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray
             if (beyond <= TIE_TOLERANCE or near_end) and distance <= margin:
                 pair_out[count], corner_out[count] = p, k
                 edge_out[count], distance_out[count] = face, distance
+                clearance_out[count] = 0.0
+                if beyond > TIE_TOLERANCE:  # as contacts.clearances computes it
+                    clearance_out[count] = math.sqrt(beyond * beyond
+                                                     + distance * distance) - distance
                 count += 1
-    return pair_out[:count], corner_out[:count], edge_out[:count], distance_out[:count]
+    return (pair_out[:count], corner_out[:count], edge_out[:count], distance_out[:count],
+            clearance_out[:count])
 
 
 @compiled
@@ -229,8 +236,9 @@ def pairs_within(centers: FloatArray, bound: FloatArray, candidates: IntArray,
 
 
 def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
-                 reach: FloatArray) -> tuple[IntArray, IntArray, IntArray, FloatArray]:
-    """Held contacts of the ordered pairs: pair index, corner, edge index, distance (m).
+                 reach: FloatArray
+                 ) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
+    """Held contacts of the ordered pairs: pair index, corner, edge, distance, clearance (m).
 
     ``corners`` ``(n_bodies, 4, 2)`` (m, counter-clockwise), ``edge_body`` and
     ``point_body`` ``(P,)`` the ordered pairs of :func:`~wuerfel_cvx.contacts.body_pairs`

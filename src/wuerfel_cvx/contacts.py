@@ -26,7 +26,11 @@ Manifold rule (one contact normal per body pair, as Box2D's polygon manifolds)
     from the face (the segment) is within the search margin: it may reach the face
     within the step, as when two corners approach each other.  (Farther out the line no
     longer stands for the face: its rotation would move the corner more than twice as
-    much as the face.)  All rows of a pair then push the two bodies apart
+    much as the face.)  Such a corner's row may close its *gap*, the corner's distance from
+    the face (the segment, reached at the face's end), not its smaller distance from the
+    line: the row holds the corner off the face, not off the line extended past the face's
+    end, where nothing is (:attr:`Contacts.clearance`).  All rows of a pair then push the
+    two bodies apart
     within 45 degrees of the reference normal (the incident face of a rectangle is at
     most that far off it): no two rows of a pair hold the same relative sliding in
     opposite senses.  Each row is still a point against an edge's line, so the
@@ -80,6 +84,10 @@ class Contacts:
     edge_body: IntArray
     distance: FloatArray
     """Signed distance (m) of the point from the edge line, positive outside."""
+    clearance: FloatArray | None = None
+    """How much farther (m) the point is from its face (the segment) than from the face's
+    line: ``sqrt(beyond^2 + distance^2) - distance`` for a point whose projection lies
+    ``beyond`` past the face's nearer end, 0 for a point on the face; ``None``: 0 for all."""
 
     def __len__(self) -> int:
         return int(self.point.shape[0])
@@ -88,7 +96,17 @@ class Contacts:
     def empty(cls) -> Contacts:
         """No contacts."""
         none = np.zeros(0, dtype=np.int64)
-        return cls(none, none, none, none, none, np.zeros(0))
+        return cls(none, none, none, none, none, np.zeros(0), np.zeros(0))
+
+    @property
+    def gap(self) -> FloatArray:
+        """Each point's distance (m) from its face: ``distance``, plus any ``clearance``.
+
+        What the point must travel to reach the face: a row's gap.
+        """
+        if self.clearance is None:
+            return self.distance
+        return np.where(self.clearance > 0.0, self.distance + self.clearance, self.distance)
 
     def deepest_penetration(self) -> float:
         """Depth (m) of the deepest held point behind its edge's line; 0 if none is.
@@ -120,7 +138,8 @@ class Contacts:
                         edge_j=renumbered(self.edge_j[keep]),
                         point_body=new_body[self.point_body[keep]],
                         edge_body=new_body[self.edge_body[keep]],
-                        distance=self.distance[keep])
+                        distance=self.distance[keep],
+                        clearance=None if self.clearance is None else self.clearance[keep])
 
 
     def keys(self, boxes: IntArray | None = None, n_boxes: int = 0) -> list[ContactKey]:
@@ -304,9 +323,29 @@ def find_contacts(
     return _search(model, points, reach)
 
 
+def clearances(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
+               corner: IntArray, edge: IntArray, distance: FloatArray) -> FloatArray:
+    """:attr:`Contacts.clearance` (m) of held rows, all ``(m,)``.
+
+    Row ``r`` is ``corner[r]`` of ``point_body[r]`` against face ``edge[r]`` of
+    ``edge_body[r]``, at signed line distance ``distance[r]`` (m).  0 for a corner whose
+    projection is within :data:`TIE_TOLERANCE` of the face, else
+    ``sqrt(beyond^2 + distance^2) - distance`` with ``beyond`` (m) past the nearer end.
+    """
+    start = corners[edge_body, edge]
+    along = corners[edge_body, (edge + 1) % 4] - start
+    length = _lengths(along)
+    offset = corners[point_body, corner] - start
+    place = (offset[:, 0] * along[:, 0] + offset[:, 1] * along[:, 1]) / length
+    beyond = np.maximum(-place, place - length)
+    return np.where(beyond > TIE_TOLERANCE,
+                    np.sqrt(beyond * beyond + distance * distance) - distance, 0.0)
+
+
 def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
-                 reach: FloatArray) -> tuple[IntArray, IntArray, IntArray, FloatArray]:
-    """Held contacts of the ordered pairs: pair index, corner, edge index, distance (m).
+                 reach: FloatArray
+                 ) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
+    """Held contacts of the ordered pairs: pair index, corner, edge, distance, clearance (m).
 
     ``corners`` ``(n_bodies, 4, 2)`` (m), ``edge_body`` and ``point_body`` ``(P,)`` as
     from :func:`body_pairs`, ``reach`` ``(n_bodies,)`` (m).  The manifold rule of the
@@ -318,7 +357,9 @@ def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
     edge, keep = choose_edges(corners, edge_body, point_body, distances, pair_margin)
     chosen = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]  # (4 corners, P)
     pair_index, corner = np.nonzero(keep.T)  # pair-major order
-    return pair_index, corner, edge[corner, pair_index], chosen[corner, pair_index]
+    face, distance = edge[corner, pair_index], chosen[corner, pair_index]
+    return pair_index, corner, face, distance, clearances(
+        corners, edge_body[pair_index], point_body[pair_index], corner, face, distance)
 
 
 def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
@@ -330,7 +371,8 @@ def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
     corners = all_points.reshape(-1, 4, 2)
     # the compiled narrow phase where numba is installed; the same contacts, bit for bit
     narrow = contact_kernel.narrow_phase if _numba.enabled else narrow_phase
-    pair_index, corner, edge_index, distance = narrow(corners, edge_body, point_body, reach)
+    pair_index, corner, edge_index, distance, clearance = narrow(corners, edge_body,
+                                                                 point_body, reach)
     w = edge_body[pair_index]
     return Contacts(
         point=4 * point_body[pair_index] + corner,
@@ -339,4 +381,5 @@ def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
         point_body=point_body[pair_index],
         edge_body=w,
         distance=distance,
+        clearance=clearance,
     )

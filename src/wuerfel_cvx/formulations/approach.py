@@ -106,6 +106,20 @@ def gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArr
     return np.asarray(cross(edge, p_k - p_i) / np.hypot(edge[..., 0], edge[..., 1]))
 
 
+def face_gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArray:
+    """The rows' gaps (m) at times ``tau``: :func:`gaps_at` plus each contact's clearance.
+
+    A point beyond its face's end is held off the face, not off the line past the end: its
+    gap is its line distance plus its start's :attr:`~wuerfel_cvx.contacts.Contacts.clearance`
+    (held constant over the step, so the row's rate is the line's).
+    """
+    gaps = gaps_at(motion, contacts, tau)
+    if contacts.clearance is None:
+        return gaps
+    clearance = np.reshape(contacts.clearance, (-1,) + (1,) * (np.ndim(tau) - 1))
+    return np.asarray(np.where(clearance > 0.0, gaps + clearance, gaps))
+
+
 def ramp_end(start_gap: FloatArray, dt: float, push_speed: float) -> FloatArray:
     """The ramp's end ``c = min(0, phi_0 + dt u)`` (m) for start gaps ``phi_0`` (m)."""
     return np.minimum(0.0, start_gap + dt * push_speed)
@@ -166,7 +180,7 @@ def _closest_approach(motion: BodyMotion, contacts: Contacts, dt: float,
     """
     m = len(contacts)
     grid = np.linspace(0.0, dt, SAMPLES + 1)
-    gaps = gaps_at(motion, contacts, np.broadcast_to(grid, (m, SAMPLES + 1)))
+    gaps = face_gaps_at(motion, contacts, np.broadcast_to(grid, (m, SAMPLES + 1)))
     start = gaps[:, 0]
     ramp_rate = (ramp_end(start, dt, push_speed) - start) / dt
     margin = gaps - start[:, None] - ramp_rate[:, None] * grid
@@ -181,7 +195,7 @@ def _closest_approach(motion: BodyMotion, contacts: Contacts, dt: float,
     shift = np.where(curvature > 0.0, 0.5 * (left - right) / np.where(curvature > 0.0,
                                                                       curvature, 1.0), 0.0)
     refined = np.clip((inner + np.clip(shift, -1.0, 1.0)) * dt / SAMPLES, dt / SAMPLES, dt)
-    refined_margin = gaps_at(motion, contacts, refined) - start - ramp_rate * refined
+    refined_margin = face_gaps_at(motion, contacts, refined) - start - ramp_rate * refined
     sampled_tau, sampled_margin = grid[best], margin[rows, best]
     take = refined_margin / refined < mean_rate[rows, best]
     violation = float(max(0.0, -np.min(margin), -np.min(refined_margin)))

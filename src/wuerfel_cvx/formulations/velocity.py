@@ -196,12 +196,13 @@ class VelocityFormulation(FrictionSettings):
                      dt: float) -> tuple[sp.csr_array, FloatArray]:
         """``G`` and ``h`` of ``G v+ >= h`` in the corner velocities (one row per contact).
 
-        Speculative for a point outside (``rate = 1/dt``), Baumgarte for one inside.
+        Speculative for a point outside (``rate = 1/dt``; it may close its gap, its
+        distance from the face, :attr:`Contacts.gap`), Baumgarte for one inside.
         """
         matrix = point_rows(len(contacts), n_unknown_points(model),
                             side_blocks(all_points, contacts, model))
         rate = np.where(contacts.distance > 0.0, 1.0 / dt, self.beta / dt)
-        return matrix, -rate * contacts.distance
+        return matrix, -rate * contacts.gap
 
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
         """The QP's new corner velocities ``(4 n, 2)`` (m/s)."""
