@@ -75,8 +75,11 @@ def test_results_row_has_the_overlap_depth() -> None:
     row = run_point(point, None)
     assert row["status"] == "ok" and row["steps_completed"] == 3
     # a corner inside a body is at least its depth from every exit, so it takes at least
-    # that translation to separate the two: the overlap bounds the penetration
-    assert row["max_overlap_depth"] >= row["max_penetration"] > 0.0
+    # that translation to separate the two: the overlap bounds the penetration.  Here the
+    # deepest corner is measured against the same face by both, so the two are equal up
+    # to the round-off of their different arithmetic (a few ulps)
+    assert row["max_overlap_depth"] >= row["max_penetration"] * (1.0 - 1e-14)
+    assert row["max_penetration"] > 0.0
     assert row["max_overlap_depth"] > 1e-4
 
 

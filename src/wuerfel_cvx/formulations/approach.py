@@ -88,11 +88,9 @@ class _ContactCorners:
             self.edge_body, self.point_body, self.corner_i, self.corner_j, self.corner_k)))
 
 
-def gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArray:
-    """Signed distances (m) of the contacts' points from their edge lines at times ``tau``.
-
-    ``tau`` (s) is ``(m,)`` or ``(m, K)`` for ``m`` contacts; the result has its shape.
-    """
+def _corners_at(motion: BodyMotion, contacts: Contacts,
+                tau: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Each contact's edge ends ``p_i``, ``p_j`` and point ``p_k`` (m) at times ``tau``."""
     c = _ContactCorners.of(contacts)
     shape = np.shape(tau)
     a, b = (np.reshape(body, (-1,) + (1,) * (len(shape) - 1)) for body in (c.edge_body,
@@ -101,23 +99,40 @@ def gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArr
     def at(body: IntArray, corner: IntArray) -> FloatArray:
         return motion.positions(body, np.reshape(corner, a.shape), tau)
 
-    p_i, p_j, p_k = at(a, c.corner_i), at(a, c.corner_j), at(b, c.corner_k)
+    return at(a, c.corner_i), at(a, c.corner_j), at(b, c.corner_k)
+
+
+def gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArray:
+    """Signed distances (m) of the contacts' points from their edge lines at times ``tau``.
+
+    ``tau`` (s) is ``(m,)`` or ``(m, K)`` for ``m`` contacts; the result has its shape.
+    """
+    p_i, p_j, p_k = _corners_at(motion, contacts, tau)
     edge = p_j - p_i
     return np.asarray(cross(edge, p_k - p_i) / np.hypot(edge[..., 0], edge[..., 1]))
 
 
 def face_gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArray:
-    """The rows' gaps (m) at times ``tau``: :func:`gaps_at` plus each contact's clearance.
+    """The rows' gaps (m) at times ``tau``: the points' distances from their faces.
 
-    A point beyond its face's end is held off the face, not off the line past the end: its
-    gap is its line distance plus its start's :attr:`~wuerfel_cvx.contacts.Contacts.clearance`
-    (held constant over the step, so the row's rate is the line's).
+    :func:`gaps_at` for a contact whose point starts on its face.  A point that starts past
+    its face's end (:attr:`~wuerfel_cvx.contacts.Contacts.clearance` above 0) is held off
+    the face, not off the line past the end: while it is past the end its gap is its
+    distance from the face (the segment), ``hypot(beyond, line distance)``, and once it
+    has moved over the face, its line distance.
     """
     gaps = gaps_at(motion, contacts, tau)
-    if contacts.clearance is None:
+    if contacts.clearance is None or not np.any(contacts.clearance > 0.0):
         return gaps
-    clearance = np.reshape(contacts.clearance, (-1,) + (1,) * (np.ndim(tau) - 1))
-    return np.asarray(np.where(clearance > 0.0, gaps + clearance, gaps))
+    p_i, p_j, p_k = _corners_at(motion, contacts, tau)
+    edge = p_j - p_i
+    length = np.hypot(edge[..., 0], edge[..., 1])
+    offset = p_k - p_i
+    place = (offset[..., 0] * edge[..., 0] + offset[..., 1] * edge[..., 1]) / length
+    beyond = np.maximum(-place, place - length)
+    past = np.reshape(contacts.clearance > 0.0, (-1,) + (1,) * (np.ndim(tau) - 1)) & (
+        beyond > 0.0)
+    return np.asarray(np.where(past, np.hypot(beyond, gaps), gaps))
 
 
 def ramp_end(start_gap: FloatArray, dt: float, push_speed: float) -> FloatArray:
