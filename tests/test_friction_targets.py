@@ -43,3 +43,16 @@ def test_ramp_fit_of_a_box_sliding_down_a_slope_is_g_sin_minus_mu_cos() -> None:
                                  "coulomb_steps": np.nan, "coulomb_converged": np.nan,
                                  **row}]))
     assert "| ccp | CLARABEL | 0 |" in text and "met" in text
+
+
+def test_measure_runs_only_the_scenes_asked_for(monkeypatch: pytest.MonkeyPatch) -> None:
+    from wuerfel_cvx.bench import friction_targets
+
+    ran: list[str] = []
+    monkeypatch.setattr(friction_targets, "_run",
+                        lambda scene, *args: (ran.append(scene), (None, "not run"))[1])
+    monkeypatch.setattr(friction_targets, "available_peers", lambda: [])
+    rows = list(friction_targets.measure(quick=True, scenes=["card-house"]))
+    assert set(ran) == {"card-house"} and {row["scene"] for row in rows} == {"card-house"}
+    assert len(rows) == len(friction_targets.MODELS) * len(friction_targets.SOLVERS)
+    assert list(friction_targets.measure(quick=True, scenes=["no-such-scene"])) == []
