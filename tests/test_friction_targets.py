@@ -56,3 +56,12 @@ def test_measure_runs_only_the_scenes_asked_for(monkeypatch: pytest.MonkeyPatch)
     assert set(ran) == {"card-house"} and {row["scene"] for row in rows} == {"card-house"}
     assert len(rows) == len(friction_targets.MODELS) * len(friction_targets.SOLVERS)
     assert list(friction_targets.measure(quick=True, scenes=["no-such-scene"])) == []
+
+
+def test_a_run_that_stopped_is_reported_failed_not_standing() -> None:
+    from wuerfel_cvx.bench.friction_targets import _verdict
+
+    record = {"outcome": "step 4: solver OSQP failed with status 'user_limit'", "moved": 0.0}
+    assert _verdict(record) == "failed"
+    assert _verdict({"outcome": "ok", "moved": 0.0}) == "stands"
+    assert _verdict({"outcome": "ok", "moved": 2e-4}) == "moves"

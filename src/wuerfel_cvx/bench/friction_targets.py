@@ -22,7 +22,7 @@ import argparse
 import math
 import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -281,12 +281,18 @@ def _standing_table(standing: pd.DataFrame) -> str:
              record["model"] if isinstance(record["model"], str) else "-", record["solver"],
              format_number(record["duration_s"]),
              format_number(record["moved"]), format_number(record["penetration"]),
-             "stands" if float(record["moved"]) <= STANDING else "moves",
-             format_number(record["wall_s"]), record["outcome"]]
+             _verdict(record), format_number(record["wall_s"]), record["outcome"]]
             for record in standing.to_dict("records")]
     return markdown_table(["scene", "engine", "model", "solver", "run (s)",
                            "moved after settling (m)", "deepest penetration (m)", "<= 0.1 mm",
                            "wall (s)", "outcome"], rows, "llllrrrlrl")
+
+
+def _verdict(record: Mapping[Any, Any]) -> str:
+    """``stands`` or ``moves``; ``failed`` for a run that stopped (its motion is not judged)."""
+    if record["outcome"] != "ok":
+        return "failed"
+    return "stands" if float(record["moved"]) <= STANDING else "moves"
 
 
 def _convergence_text(frame: pd.DataFrame) -> str:
