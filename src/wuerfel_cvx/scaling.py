@@ -66,7 +66,8 @@ def data_magnitude(qp: StepQP) -> float:
     arrays: list[FloatArray] = [qp.target, qp.eq_rhs, qp.ineq_rhs]
     if qp.ineq_upper is not None:
         arrays.append(qp.ineq_upper[qp.upper_rows])
-    return max((float(np.max(np.abs(values))) for values in arrays if np.size(values)),
+    # the arrays' own methods: NumPy's module-level wrappers cost more than the work here
+    return max((float(np.abs(values).max()) for values in arrays if values.size),
                default=0.0)
 
 
@@ -90,7 +91,7 @@ def weights_scale(qp: StepQP) -> float:
     1 when the largest weight is at least :data:`WEIGHT_FLOOR` (or not positive and
     finite); else the smallest power of four with ``max(w) c >= WEIGHT_FLOOR``.
     """
-    largest = float(np.max(qp.weights)) if qp.weights.size else 0.0
+    largest = float(qp.weights.max()) if qp.weights.size else 0.0
     if not 0.0 < largest < WEIGHT_FLOOR:
         return 1.0
     mantissa, exponent = math.frexp(WEIGHT_FLOOR / largest)  # ratio = mantissa 2^exponent

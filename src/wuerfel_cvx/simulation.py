@@ -132,8 +132,8 @@ class Simulation:
     warm_start:
         With ``compiled``, start each QP's solver from the last step's solution, mapped
         onto this step's rows by contact (:mod:`wuerfel_cvx.warm_start`), in the solvers
-        that take a start (OSQP, PROXQP, DAQP); ``False``: every solve starts cold.  Same
-        answers to solver tolerance.
+        that take such a start (PROXQP, DAQP); OSQP starts from its structure's own last
+        solution.  ``False``: every solve starts cold.  Same answers to solver tolerance.
 
     Raises
     ------

@@ -160,7 +160,7 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
         raise StepFailure(step, spec.name, INVALID_DATA, f"non-finite {bad_data}")
     scale = unknowns_scale(qp)  # 1 (qp as it is) unless its data are large
     weight_scale = weights_scale(qp)  # 1 unless its bodies are light
-    warm_starts = None if cache is None else cache.warm_starts
+    warm_starts = None if cache is None or not spec.takes_warm_start else cache.warm_starts
     started = time.perf_counter()
     try:
         # inside the try: applying a compiled structure's parameters can raise too
@@ -176,7 +176,7 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     if status not in SOLVED or answer.x is None:
         raise StepFailure(step, spec.name, status)
     x = scale * np.asarray(answer.x, dtype=np.float64)  # exact: scale is a power of two
-    if not np.all(np.isfinite(x)):
+    if not np.isfinite(x).all():
         raise StepFailure(step, spec.name, status, "solution has non-finite entries")
     dual_scale = scale / weight_scale  # exact: a ratio of powers of two
     ineq_dual = dual_scale * np.asarray(answer.ineq_dual, dtype=np.float64)
@@ -312,10 +312,10 @@ def _non_finite_data(qp: StepQP) -> str:
               "eq_rhs": qp.eq_rhs, "ineq_matrix": qp.ineq_matrix.data, "ineq_rhs": qp.ineq_rhs}
     if qp.cost_factor is not None:
         arrays["cost_factor"] = qp.cost_factor.data
-    # a NaN or an infinity makes its array's sum non-finite, so finite sums clear them all
-    # at one reduction each; a non-finite sum (possibly an overflow) is looked at closely
-    if qp.ineq_upper is None and all(math.isfinite(np.add.reduce(values))
-                                     for values in arrays.values()):
+    # a NaN or an infinity makes the arrays' sum non-finite, so a finite sum clears them
+    # all at one reduction; a non-finite sum (possibly an overflow) is looked at closely
+    if qp.ineq_upper is None and math.isfinite(np.add.reduce(np.concatenate(
+            list(arrays.values())))):
         return ""
     bad = [name for name, values in arrays.items() if not np.all(np.isfinite(values))]
     if qp.ineq_upper is not None and not np.all(np.isfinite(qp.ineq_upper)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -72,7 +73,15 @@ class ParameterMap:
         vector[-1] = 1.0  # the constant column
         for start, size, name in self.slots:
             vector[start:start + size] = PARAMETER_SLOTS[name].values(qp)
-        return self.reduced_map @ vector, np.asarray(self.q_map @ vector).ravel()[:-1]
+        both = self._both_maps @ vector
+        count = self.reduced_map.shape[0]
+        return both[:count], both[count:-1]
+
+    @cached_property
+    def _both_maps(self) -> sp.csr_array:
+        """``reduced_map`` over ``q_map``: one product gives both (each row's sum as alone)."""
+        return sp.csr_array(sp.vstack([self.reduced_map, sp.csr_array(self.q_map)],
+                                      format="csr"))
 
     @property
     def n_matrix_entries(self) -> int:

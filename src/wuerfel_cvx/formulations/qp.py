@@ -38,6 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .. import _numba, row_kernel
+from .._sparse import canonical_csr
 from ..contacts import Contacts
 from ..geometry import FloatArray
 
@@ -302,9 +303,7 @@ def point_rows(
         data, indices, indptr, canonical = row_kernel.point_rows(
             index.astype(np.int64, copy=False), grad.astype(np.float64, copy=False))
         if canonical:
-            compiled = sp.csr_array((data, indices, indptr), shape=shape)
-            compiled.has_canonical_format = True
-            return compiled
+            return canonical_csr(data, indices, indptr, shape)
     moving = index >= 0
     keep = np.repeat(moving.ravel(), 2)  # entries in (row, block, axis) order
     cols = (2 * index[:, :, None] + np.arange(2)).reshape(-1)[keep]

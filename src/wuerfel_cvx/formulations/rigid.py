@@ -25,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .. import _numba, row_kernel
+from .._sparse import canonical_csr, empty_rows
 from ..contacts import Contacts
 from ..errors import InputError
 from ..geometry import FloatArray, corner_mean, cross, rot90
@@ -76,8 +77,7 @@ class RigidFormulation(SinglePass, FrictionSettings):
         centre_velocity, spin = body_velocities(points, state.velocities, masses)
         weights = np.column_stack([masses.sum(axis=1), masses.sum(axis=1), inertia]).ravel()
         target = np.column_stack([centre_velocity + dt * model.gravity, spin]).ravel()
-        no_rows = sp.csr_array((0, weights.shape[0]))
-        return declare_qp(weights, target, no_rows, np.zeros(0),
+        return declare_qp(weights, target, empty_rows(weights.shape[0]), np.zeros(0),
                           body_rows(corner_rows, points), rhs, contacts, cones=cones)
 
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
@@ -111,11 +111,9 @@ def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
     turned = rot90(_offsets(points)).reshape(-1)  # per corner coordinate (4 n * 2,)
     n_cols = 3 * (corner_rows.shape[1] // 8)
     if _numba.enabled:  # the same arrays, written by a compiled loop
-        matrix = sp.csr_array(row_kernel.body_rows(corner_rows.data, corner_rows.indices,
+        return canonical_csr(*row_kernel.body_rows(corner_rows.data, corner_rows.indices,
                                                    corner_rows.indptr, turned),
-                              shape=(n_rows, n_cols))
-        matrix.has_canonical_format = True
-        return matrix
+                             shape=(n_rows, n_cols))
     row = np.repeat(np.arange(n_rows, dtype=np.int64), np.diff(corner_rows.indptr))
     col = corner_rows.indices.astype(np.int64)
     value = corner_rows.data
