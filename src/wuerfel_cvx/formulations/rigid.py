@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sp
 
-from .. import _numba, row_kernel
+from .. import _numba, motion_kernel, row_kernel
 from .._sparse import canonical_csr, empty_rows
 from ..contacts import Contacts
 from ..errors import InputError
@@ -83,6 +83,8 @@ class RigidFormulation(SinglePass, FrictionSettings):
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
         """The corner velocities ``(4 n, 2)`` (m/s) of the new body velocities."""
         body = solution.reshape(-1, 3)
+        if _numba.enabled:  # the same numbers, by a compiled loop
+            return motion_kernel.corner_velocities(state.points, body)
         turned = rot90(_offsets(state.points))  # (n, 4, 2)
         # u + omega rot90(r), summed as the sparse corner map (8 n x 3 n) times solution would be
         corners = (0.0 + body[:, None, :2]) + turned * body[:, None, 2:]

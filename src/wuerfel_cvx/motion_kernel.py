@@ -1,0 +1,150 @@
+"""The rigid update's arithmetic as compiled loops (numba), when numba is installed.
+
+:func:`wuerfel_cvx.formulations.motion.rigid_step` fits each box's corners and moves it
+rigidly in some forty NumPy operations on arrays of a few boxes, whose per-call overhead
+outweighs their arithmetic on a small scene.  The kernels here do everything but the
+trigonometry: the angle's ``arctan2`` and the rotations' ``cos`` and ``sin`` stay NumPy
+calls between them (:func:`fit_sums`, then :func:`fit_motion`, then :func:`moved`), since
+NumPy's vector versions of those functions need not round as the C library does.
+
+Each sum is taken in the order NumPy takes it, from 0.0: a mean over a body's four corners
+and a sum over its four corners one after the other (NumPy's reduction over a short axis),
+a sum over its eight coordinates pairwise (:func:`_pairwise8`, NumPy's unrolled pairwise
+sum of eight contiguous numbers).  So they return the NumPy path's numbers bit for bit
+(``tests/test_motion_kernel.py``), which stays the reference and runs without numba.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._numba import AVAILABLE, compiled
+from .geometry import FloatArray
+
+__all__ = ["AVAILABLE", "corner_velocities", "fit_motion", "fit_sums", "moved"]
+
+
+@compiled
+def _pairwise8(values: FloatArray) -> float:
+    """The sum of eight numbers as NumPy's pairwise sum adds eight contiguous ones."""
+    total: float = 0.0 + (((values[0] + values[1]) + (values[2] + values[3]))
+                          + ((values[4] + values[5]) + (values[6] + values[7])))
+    return total
+
+
+@compiled
+def _centre(points: FloatArray, body: int, axis: int) -> float:
+    """Mean of body ``body``'s four corners (rows ``4 body`` on of ``points``) on ``axis``."""
+    total = 0.0
+    for k in range(4):
+        total += points[4 * body + k, axis]
+    return total / 4.0
+
+
+@compiled
+def fit_sums(reference: FloatArray, points: FloatArray,
+             ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Each box's centroid ``(n, 2)`` and the two sums whose ``arctan2`` is its angle.
+
+    ``sum r x q`` and ``sum r . q`` over its corners, ``r`` the reference corners
+    ``(n, 4, 2)`` and ``q`` the corners ``points`` ``(4 n, 2)`` about their centroid.
+    """
+    n = reference.shape[0]
+    center = np.empty((n, 2))
+    cross_sum = np.empty(n)
+    dot_sum = np.empty(n)
+    offsets = np.empty((4, 2))
+    products = np.empty(8)
+    for b in range(n):
+        for d in range(2):
+            center[b, d] = _centre(points, b, d)
+        for k in range(4):
+            for d in range(2):
+                offsets[k, d] = points[4 * b + k, d] - center[b, d]
+        total = 0.0
+        for k in range(4):
+            total += reference[b, k, 0] * offsets[k, 1] - reference[b, k, 1] * offsets[k, 0]
+        cross_sum[b] = total
+        for k in range(4):
+            for d in range(2):
+                products[2 * k + d] = reference[b, k, d] * offsets[k, d]
+        dot_sum[b] = _pairwise8(products)
+    return center, cross_sum, dot_sum
+
+
+@compiled
+def fit_motion(reference: FloatArray, cos: FloatArray, sin: FloatArray,
+               velocities: FloatArray, angle: FloatArray, dt: float,
+               ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Each box's centre velocity ``(n, 2)``, spin ``(n,)`` and angle after ``dt``.
+
+    ``cos`` and ``sin`` of the fitted ``angle`` ``(n,)``; ``velocities`` ``(4 n, 2)``.
+    """
+    n = reference.shape[0]
+    center_velocity = np.empty((n, 2))
+    spin = np.empty(n)
+    fitted = np.empty((4, 2))
+    squares = np.empty(8)
+    for b in range(n):
+        for k in range(4):
+            x, y = reference[b, k, 0], reference[b, k, 1]
+            fitted[k, 0] = cos[b] * x - sin[b] * y
+            fitted[k, 1] = sin[b] * x + cos[b] * y
+        for d in range(2):
+            center_velocity[b, d] = _centre(velocities, b, d)
+        total = 0.0
+        for k in range(4):
+            relative_x = velocities[4 * b + k, 0] - center_velocity[b, 0]
+            relative_y = velocities[4 * b + k, 1] - center_velocity[b, 1]
+            total += fitted[k, 0] * relative_y - fitted[k, 1] * relative_x
+        for k in range(4):
+            for d in range(2):
+                squares[2 * k + d] = fitted[k, d] * fitted[k, d]
+        spin[b] = total / _pairwise8(squares)
+    return center_velocity, spin, angle + spin * dt
+
+
+@compiled
+def moved(reference: FloatArray, cos: FloatArray, sin: FloatArray, center: FloatArray,
+          center_velocity: FloatArray, spin: FloatArray, dt: float,
+          ) -> tuple[FloatArray, FloatArray]:
+    """Corners and their velocities ``(4 n, 2)`` after ``dt``, at the turned angle.
+
+    ``cos`` and ``sin`` of the new angle ``(n,)``; ``center`` and ``center_velocity``
+    ``(n, 2)`` and ``spin`` ``(n,)`` of the fitted motion.
+    """
+    n = reference.shape[0]
+    points = np.empty((4 * n, 2))
+    velocities = np.empty((4 * n, 2))
+    for b in range(n):
+        new_x = center[b, 0] + dt * center_velocity[b, 0]
+        new_y = center[b, 1] + dt * center_velocity[b, 1]
+        for k in range(4):
+            x, y = reference[b, k, 0], reference[b, k, 1]
+            offset_x = cos[b] * x - sin[b] * y
+            offset_y = sin[b] * x + cos[b] * y
+            points[4 * b + k, 0] = new_x + offset_x
+            points[4 * b + k, 1] = new_y + offset_y
+            velocities[4 * b + k, 0] = center_velocity[b, 0] + spin[b] * -offset_y
+            velocities[4 * b + k, 1] = center_velocity[b, 1] + spin[b] * offset_x
+    return points, velocities
+
+
+@compiled
+def corner_velocities(points: FloatArray, body_velocities: FloatArray) -> FloatArray:
+    """Corner velocities ``(4 n, 2)`` of body velocities ``(u_x, u_y, omega)`` ``(n, 3)``.
+
+    ``u + omega rot90(r)``, ``r`` a corner's offset from its box's centroid in ``points``
+    ``(4 n, 2)``, as :meth:`wuerfel_cvx.formulations.rigid.RigidFormulation.new_velocities`.
+    """
+    n = body_velocities.shape[0]
+    velocities = np.empty((4 * n, 2))
+    for b in range(n):
+        center_x, center_y = _centre(points, b, 0), _centre(points, b, 1)
+        u_x, u_y, omega = body_velocities[b, 0], body_velocities[b, 1], body_velocities[b, 2]
+        for k in range(4):
+            offset_x = points[4 * b + k, 0] - center_x
+            offset_y = points[4 * b + k, 1] - center_y
+            velocities[4 * b + k, 0] = (0.0 + u_x) + -offset_y * omega
+            velocities[4 * b + k, 1] = (0.0 + u_y) + offset_x * omega
+    return velocities
