@@ -27,13 +27,16 @@ class DirectClarabel:
     mapping: ParameterMap
     b_rows: np.ndarray
     solver: Any
+    a: sp.csc_matrix
+    """``A`` in the structure's pattern; each solve writes its nonzeros in place."""
 
     def solve(self, qp: StepQP, settings: dict[str, Any],
               warm: WarmStart | None = None) -> DirectResult:
         """Solve ``qp`` (this structure); ``settings`` were fixed when it was set up."""
         m = self.mapping
         values, q = m.values(qp)
-        a = _matrix(m, values)
+        a = self.a
+        np.negative(values[:m.n_matrix_entries], out=a.data)
         b = np.zeros(m.shape[0])
         b[self.b_rows] = values[m.n_matrix_entries:]
         started = time.perf_counter()
@@ -76,4 +79,4 @@ def build(problem: Any, names: dict[int, str], qp: StepQP,
         raise Unavailable("Clarabel does not allow data updates with these settings")
     return DirectClarabel(mapping=mapping,
                           b_rows=np.asarray(mapping.indices[mapping.n_matrix_entries:]),
-                          solver=solver)
+                          solver=solver, a=_matrix(mapping, mapping.values(qp)[0]))
