@@ -2,7 +2,8 @@
 
 :func:`wuerfel_cvx.formulations.motion.rigid_step` and the rigid formulation's corner
 velocities run their NumPy paths with ``_numba.enabled`` false (the reference) and the
-kernels of :mod:`wuerfel_cvx.motion_kernel` with it true; both must give the same bits, on
+kernels of :mod:`wuerfel_cvx.motion_kernel` with it true (and so the rigid formulation's
+objective); both must give the same bits, on
 library states (resting stacks: zero and negative-zero velocities), on random boxes of
 every size and angle, and on a rigid run's whole trajectory.
 """
@@ -15,9 +16,9 @@ import pytest
 from test_contacts_fast import LIBRARY, library_states
 from wuerfel_cvx import _numba, motion_kernel, simulate
 from wuerfel_cvx.formulations.motion import rigid_step
-from wuerfel_cvx.formulations.rigid import RigidFormulation
+from wuerfel_cvx.formulations.rigid import RigidFormulation, rigid_objective
 from wuerfel_cvx.geometry import FloatArray, rectangle_corners
-from wuerfel_cvx.model import State
+from wuerfel_cvx.model import Model, State
 from wuerfel_cvx.robustness.determinism import exact_digest
 
 pytestmark = [pytest.mark.integration,
@@ -52,11 +53,22 @@ def assert_same_update(monkeypatch: pytest.MonkeyPatch, reference: FloatArray,
     assert_same_bits(corners[1], corners[0])
 
 
+def assert_same_objective(monkeypatch: pytest.MonkeyPatch, model: Model,
+                          state: State) -> None:
+    """The rigid formulation's weights and target."""
+    objectives = both(monkeypatch, lambda: rigid_objective(model, state, DT))
+    for compiled, reference in zip(objectives[1], objectives[0], strict=True):
+        assert_same_bits(compiled, reference)
+
+
 @pytest.mark.parametrize("name", sorted(LIBRARY))
 def test_library_states_move_alike(monkeypatch: pytest.MonkeyPatch, name: str) -> None:
     model, states = library_states(name)
     rng = np.random.default_rng(11)
     for state in states:
+        assert_same_objective(monkeypatch, model, state)
+        assert_same_objective(monkeypatch, model, State(
+            state.points, rng.normal(scale=5.0, size=state.velocities.shape)))
         solution = rng.normal(size=3 * model.n_boxes)
         assert_same_update(monkeypatch, model.reference_corners, state, solution)
         resting = State(state.points, -np.zeros_like(state.velocities))  # negative zeros

@@ -31,6 +31,7 @@ from wuerfel_cvx.formulations.rows import (
     rod_blocks,
     seed_side_blocks,
     side_blocks,
+    side_rows,
 )
 from wuerfel_cvx.formulations.velocity import VelocityFormulation
 from wuerfel_cvx.model import Model, State
@@ -62,6 +63,8 @@ def assert_same_rows(monkeypatch: pytest.MonkeyPatch, model: Model, state: State
         reference, compiled = both(monkeypatch, lambda b=blocks, r=rows: point_rows(
             r, n_unknown, b))
         assert_same_matrix(compiled, reference)
+    reference, compiled = both(monkeypatch, lambda: side_rows(all_points, contacts, model))
+    assert_same_matrix(compiled, reference)
     if model.table_mass is None:
         corner_rows = point_rows(len(contacts), n_unknown, block_sets[0])
         reference, compiled = both(monkeypatch, lambda: body_rows(corner_rows, state.points))

@@ -1,4 +1,4 @@
-"""The rigid update's arithmetic as compiled loops (numba), when numba is installed.
+"""The rigid motion's arithmetic as compiled loops (numba), when numba is installed.
 
 :func:`wuerfel_cvx.formulations.motion.rigid_step` fits each box's corners and moves it
 rigidly in some forty NumPy operations on arrays of a few boxes, whose per-call overhead
@@ -10,8 +10,10 @@ NumPy's vector versions of those functions need not round as the C library does.
 Each sum is taken in the order NumPy takes it, from 0.0: a mean over a body's four corners
 and a sum over its four corners one after the other (NumPy's reduction over a short axis),
 a sum over its eight coordinates pairwise (:func:`_pairwise8`, NumPy's unrolled pairwise
-sum of eight contiguous numbers).  So they return the NumPy path's numbers bit for bit
-(``tests/test_motion_kernel.py``), which stays the reference and runs without numba.
+sum of eight contiguous numbers).  The rigid formulation's objective (:func:`rigid_objective`)
+and the offsets its rows turn (:func:`turned_offsets`) are computed likewise.  So they return
+the NumPy path's numbers bit for bit (``tests/test_motion_kernel.py``), which stays the
+reference and runs without numba.
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ import numpy as np
 from ._numba import AVAILABLE, compiled
 from .geometry import FloatArray
 
-__all__ = ["AVAILABLE", "corner_velocities", "fit_motion", "fit_sums", "moved"]
+__all__ = ["AVAILABLE", "corner_velocities", "fit_motion", "fit_sums", "moved",
+           "rigid_objective", "turned_offsets"]
 
 
 @compiled
@@ -148,3 +151,67 @@ def corner_velocities(points: FloatArray, body_velocities: FloatArray) -> FloatA
             velocities[4 * b + k, 0] = (0.0 + u_x) + -offset_y * omega
             velocities[4 * b + k, 1] = (0.0 + u_y) + offset_x * omega
     return velocities
+
+
+@compiled
+def turned_offsets(points: FloatArray) -> FloatArray:
+    """``rot90`` of each corner's offset from its box's centroid, flat ``(8 n,)``."""
+    n = points.shape[0] // 4
+    turned = np.empty(8 * n)
+    for b in range(n):
+        center_x, center_y = _centre(points, b, 0), _centre(points, b, 1)
+        for k in range(4):
+            turned[8 * b + 2 * k] = -(points[4 * b + k, 1] - center_y)
+            turned[8 * b + 2 * k + 1] = points[4 * b + k, 0] - center_x
+    return turned
+
+
+@compiled
+def rigid_objective(points: FloatArray, velocities: FloatArray, masses: FloatArray,
+                    reference: FloatArray, gravity_step: FloatArray,
+                    ) -> tuple[FloatArray, FloatArray]:
+    """The rigid formulation's weights and target, ``(3 n,)`` each.
+
+    Per box ``(M, M, I)`` and ``(u0 + dt g, omega0)``: ``M`` the summed corner
+    ``masses`` ``(n, 4)``, ``I`` the moment of inertia of the ``reference`` corners, ``u0``
+    and ``omega0`` the body velocities of the corners' ``velocities`` about ``points``
+    (:func:`wuerfel_cvx.formulations.rigid.body_velocities`), ``gravity_step`` ``dt g``.
+    """
+    n = masses.shape[0]
+    weights = np.empty(3 * n)
+    target = np.empty(3 * n)
+    for b in range(n):
+        total = 0.0
+        inertia = 0.0
+        for k in range(4):
+            total += masses[b, k]
+            radius = 0.0
+            radius += reference[b, k, 0] * reference[b, k, 0]
+            radius += reference[b, k, 1] * reference[b, k, 1]
+            inertia += masses[b, k] * radius
+        weights[3 * b] = total
+        weights[3 * b + 1] = total
+        weights[3 * b + 2] = inertia
+        center = np.empty(2)
+        for d in range(2):
+            momentum = 0.0
+            for k in range(4):
+                momentum += masses[b, k] * velocities[4 * b + k, d]
+            center[d] = momentum / total
+        center_x, center_y = _centre(points, b, 0), _centre(points, b, 1)
+        moment = 0.0
+        spread = 0.0
+        for k in range(4):
+            offset_x = points[4 * b + k, 0] - center_x
+            offset_y = points[4 * b + k, 1] - center_y
+            relative_x = velocities[4 * b + k, 0] - center[0]
+            relative_y = velocities[4 * b + k, 1] - center[1]
+            moment += masses[b, k] * (offset_x * relative_y - offset_y * relative_x)
+            squares = 0.0
+            squares += offset_x * offset_x
+            squares += offset_y * offset_y
+            spread += masses[b, k] * squares
+        target[3 * b] = center[0] + gravity_step[0]
+        target[3 * b + 1] = center[1] + gravity_step[1]
+        target[3 * b + 2] = moment / spread
+    return weights, target

@@ -299,6 +299,13 @@ def point_rows(
         return sp.csr_array(shape)
     index = np.stack([np.asarray(point) for point, _ in blocks], axis=1)  # (R, B)
     grad = np.stack([gradient for _, gradient in blocks], axis=1)  # (R, B, 2)
+    return stacked_point_rows(index, grad, n_points)
+
+
+def stacked_point_rows(index: np.ndarray, grad: FloatArray, n_points: int) -> sp.csr_array:
+    """:func:`point_rows` of the blocks stacked: ``index`` ``(R, B)``, ``grad`` ``(R, B, 2)``."""
+    n_rows = index.shape[0]
+    shape = (n_rows, 2 * n_points)
     if _numba.enabled:  # the same arrays, written by a compiled loop
         data, indices, indptr, canonical = row_kernel.point_rows(
             index.astype(np.int64, copy=False), grad.astype(np.float64, copy=False))

@@ -70,13 +70,7 @@ class RigidFormulation(SinglePass, FrictionSettings):
                                                 edges=self.friction_model == "ccp")
         if cones is not None:
             cones = replace(cones, slip=body_rows(cones.slip, points))
-        masses = model.point_masses.reshape(-1, 4)
-        # from the exact squares, not the current corners: constant weights keep the
-        # compiled-problem cache's key constant
-        inertia = np.sum(masses * np.sum(model.reference_corners**2, axis=2), axis=1)
-        centre_velocity, spin = body_velocities(points, state.velocities, masses)
-        weights = np.column_stack([masses.sum(axis=1), masses.sum(axis=1), inertia]).ravel()
-        target = np.column_stack([centre_velocity + dt * model.gravity, spin]).ravel()
+        weights, target = rigid_objective(model, state, dt)
         return declare_qp(weights, target, empty_rows(weights.shape[0]), np.zeros(0),
                           body_rows(corner_rows, points), rhs, contacts, cones=cones)
 
@@ -96,6 +90,24 @@ class RigidFormulation(SinglePass, FrictionSettings):
                           self.new_velocities(state, solution, dt), dt)
 
 
+def rigid_objective(model: Model, state: State, dt: float) -> tuple[FloatArray, FloatArray]:
+    """Weights ``(M, M, I)`` and target ``(u0 + dt g, omega0)`` per box, flat ``(3 n,)``.
+
+    ``I`` from the exact squares, not the current corners: constant weights keep the
+    compiled-problem cache's key constant.  With numba, a compiled loop
+    (:func:`wuerfel_cvx.motion_kernel.rigid_objective`) gives the same numbers bit for bit.
+    """
+    masses = model.point_masses.reshape(-1, 4)
+    if _numba.enabled:
+        return motion_kernel.rigid_objective(state.points, state.velocities, masses,
+                                             model.reference_corners, dt * model.gravity)
+    inertia = np.sum(masses * np.sum(model.reference_corners**2, axis=2), axis=1)
+    centre_velocity, spin = body_velocities(state.points, state.velocities, masses)
+    weights = np.column_stack([masses.sum(axis=1), masses.sum(axis=1), inertia]).ravel()
+    target = np.column_stack([centre_velocity + dt * model.gravity, spin]).ravel()
+    return weights, target
+
+
 def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
     """``corner_rows`` times the corner map ``v_i = u + omega rot90(r_i)``, written directly.
 
@@ -110,12 +122,13 @@ def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
     key, stays the same from step to step.
     """
     n_rows = corner_rows.shape[0]
-    turned = rot90(_offsets(points)).reshape(-1)  # per corner coordinate (4 n * 2,)
     n_cols = 3 * (corner_rows.shape[1] // 8)
-    if _numba.enabled:  # the same arrays, written by a compiled loop
+    if _numba.enabled:  # the same arrays, written by compiled loops
         return canonical_csr(*row_kernel.body_rows(corner_rows.data, corner_rows.indices,
-                                                   corner_rows.indptr, turned),
+                                                   corner_rows.indptr,
+                                                   motion_kernel.turned_offsets(points)),
                              shape=(n_rows, n_cols))
+    turned = rot90(_offsets(points)).reshape(-1)  # per corner coordinate (4 n * 2,)
     row = np.repeat(np.arange(n_rows, dtype=np.int64), np.diff(corner_rows.indptr))
     col = corner_rows.indices.astype(np.int64)
     value = corner_rows.data

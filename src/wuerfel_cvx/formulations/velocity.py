@@ -60,7 +60,7 @@ from .rows import (
     held_table_blocks,
     n_unknown_points,
     rod_blocks,
-    side_blocks,
+    side_rows,
     unknown_masses,
 )
 
@@ -198,8 +198,7 @@ class VelocityFormulation(FrictionSettings):
 
         Speculative for a point outside (``rate = 1/dt``), Baumgarte for one inside.
         """
-        matrix = point_rows(len(contacts), n_unknown_points(model),
-                            side_blocks(all_points, contacts, model))
+        matrix = side_rows(all_points, contacts, model)
         rate = np.where(contacts.distance > 0.0, 1.0 / dt, self.beta / dt)
         return matrix, -rate * contacts.distance
 
