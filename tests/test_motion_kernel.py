@@ -3,7 +3,7 @@
 :func:`wuerfel_cvx.formulations.motion.rigid_step` and the rigid formulation's corner
 velocities run their NumPy paths with ``_numba.enabled`` false (the reference) and the
 kernels of :mod:`wuerfel_cvx.motion_kernel` with it true (and so the rigid formulation's
-objective); both must give the same bits, on
+objective and the contact reach); both must give the same bits, on
 library states (resting stacks: zero and negative-zero velocities), on random boxes of
 every size and angle, and on a rigid run's whole trajectory.
 """
@@ -17,6 +17,7 @@ from test_contacts_fast import LIBRARY, library_states
 from wuerfel_cvx import _numba, motion_kernel, simulate
 from wuerfel_cvx.formulations.motion import rigid_step
 from wuerfel_cvx.formulations.rigid import RigidFormulation, rigid_objective
+from wuerfel_cvx.formulations.velocity import VelocityFormulation
 from wuerfel_cvx.geometry import FloatArray, rectangle_corners
 from wuerfel_cvx.model import Model, State
 from wuerfel_cvx.robustness.determinism import exact_digest
@@ -55,10 +56,12 @@ def assert_same_update(monkeypatch: pytest.MonkeyPatch, reference: FloatArray,
 
 def assert_same_objective(monkeypatch: pytest.MonkeyPatch, model: Model,
                           state: State) -> None:
-    """The rigid formulation's weights and target."""
+    """The rigid formulation's weights and target, and the contact reach."""
     objectives = both(monkeypatch, lambda: rigid_objective(model, state, DT))
     for compiled, reference in zip(objectives[1], objectives[0], strict=True):
         assert_same_bits(compiled, reference)
+    reaches = both(monkeypatch, lambda: VelocityFormulation().body_reach(model, state, DT))
+    assert_same_bits(reaches[1], reaches[0])
 
 
 @pytest.mark.parametrize("name", sorted(LIBRARY))

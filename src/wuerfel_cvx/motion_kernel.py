@@ -11,7 +11,8 @@ Each sum is taken in the order NumPy takes it, from 0.0: a mean over a body's fo
 and a sum over its four corners one after the other (NumPy's reduction over a short axis),
 a sum over its eight coordinates pairwise (:func:`_pairwise8`, NumPy's unrolled pairwise
 sum of eight contiguous numbers).  The rigid formulation's objective (:func:`rigid_objective`)
-and the offsets its rows turn (:func:`turned_offsets`) are computed likewise.  So they return
+and the offsets its rows turn (:func:`turned_offsets`), and the contact reach of the
+corners' speeds (:func:`body_reach`), are computed likewise.  So they return
 the NumPy path's numbers bit for bit (``tests/test_motion_kernel.py``), which stays the
 reference and runs without numba.
 """
@@ -23,7 +24,7 @@ import numpy as np
 from ._numba import AVAILABLE, compiled
 from .geometry import FloatArray
 
-__all__ = ["AVAILABLE", "corner_velocities", "fit_motion", "fit_sums", "moved",
+__all__ = ["AVAILABLE", "body_reach", "corner_velocities", "fit_motion", "fit_sums", "moved",
            "rigid_objective", "turned_offsets"]
 
 
@@ -215,3 +216,35 @@ def rigid_objective(points: FloatArray, velocities: FloatArray, masses: FloatArr
         target[3 * b + 1] = center[1] + gravity_step[1]
         target[3 * b + 2] = moment / spread
     return weights, target
+
+
+@compiled
+def _speed(velocities: FloatArray, row: int) -> float:
+    """``|velocities[row]|`` as ``np.linalg.norm`` computes it (squares summed from 0.0)."""
+    squares = 0.0
+    squares += velocities[row, 0] * velocities[row, 0]
+    squares += velocities[row, 1] * velocities[row, 1]
+    speed: float = np.sqrt(squares)
+    return speed
+
+
+@compiled
+def body_reach(velocities: FloatArray, n_tables: int, half_margin: float, dt: float,
+               fall: float) -> FloatArray:
+    """``half_margin + dt (s + fall)`` per box, ``s`` its fastest corner's speed; tables last.
+
+    Speeds as ``np.linalg.norm(velocities, axis=1)`` computes them and the fastest as
+    ``max(axis=1)`` picks it (NaN if any is NaN); each table's reach is ``half_margin``.
+    """
+    n = velocities.shape[0] // 4
+    reach = np.empty(n + n_tables)
+    for b in range(n):
+        fastest = _speed(velocities, 4 * b)
+        for k in range(1, 4):
+            speed = _speed(velocities, 4 * b + k)
+            if fastest == fastest and (speed > fastest or speed != speed):
+                fastest = speed
+        reach[b] = half_margin + dt * (fastest + fall)
+    for t in range(n_tables):
+        reach[n + t] = half_margin
+    return reach

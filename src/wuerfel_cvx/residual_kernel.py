@@ -20,7 +20,7 @@ import numpy as np
 from ._numba import AVAILABLE, compiled
 from .geometry import FloatArray
 
-__all__ = ["AVAILABLE", "residuals"]
+__all__ = ["AVAILABLE", "csr_product", "residuals"]
 
 
 @compiled
@@ -55,9 +55,9 @@ def _first_max(a: float, b: float) -> float:
 
 
 @compiled
-def _product(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+def csr_product(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
              x: FloatArray) -> FloatArray:
-    """``A x`` for CSR ``A``, each row summed from 0.0 in entry order."""
+    """``A x`` for CSR ``A``, each row summed from 0.0 in entry order (as scipy's product)."""
     out = np.zeros(indptr.shape[0] - 1)
     for r in range(indptr.shape[0] - 1):
         total = 0.0
@@ -102,8 +102,8 @@ def residuals(weights: FloatArray, target: FloatArray, x: FloatArray,
                                   _largest(ineq_term))
     dual = _first_max(_largest(stationarity), _largest_negative(ineq_dual)) / dual_scale
 
-    eq_lhs = _product(eq_data, eq_indices, eq_indptr, x)
-    ineq_lhs = _product(ineq_data, ineq_indices, ineq_indptr, x)
+    eq_lhs = csr_product(eq_data, eq_indices, eq_indptr, x)
+    ineq_lhs = csr_product(ineq_data, ineq_indices, ineq_indptr, x)
     eq_violation = eq_lhs - eq_rhs
     slack = ineq_lhs - ineq_rhs
     primal_scale = 1.0 + _first_max(_first_max(_first_max(_largest(eq_rhs), _largest(ineq_rhs)),

@@ -162,6 +162,8 @@ def available_solvers() -> list[str]:
 def get_solver(name: str) -> SolverSpec:
     """A solver by name, case-insensitive; :class:`InputError` lists the available ones."""
     key = name.strip().upper()
+    if key in SOLVERS and SOLVERS[key].cvxpy_name in _installed_in_cvxpy():
+        return SOLVERS[key]
     available = available_solvers()
     if key not in SOLVERS or key not in available:
         why = "not installed" if key in SOLVERS else "unknown solver"

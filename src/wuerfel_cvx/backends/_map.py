@@ -16,6 +16,7 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
+from .. import _numba, residual_kernel
 from ..formulations.qp import PARAMETER_SLOTS, StepQP
 from ..geometry import FloatArray
 
@@ -73,7 +74,12 @@ class ParameterMap:
         vector[-1] = 1.0  # the constant column
         for start, size, name in self.slots:
             vector[start:start + size] = PARAMETER_SLOTS[name].values(qp)
-        both = self._both_maps @ vector
+        both_maps = self._both_maps
+        if _numba.enabled:  # the same sums, without scipy's dispatch
+            both = residual_kernel.csr_product(both_maps.data, both_maps.indices,
+                                               both_maps.indptr, vector)
+        else:
+            both = both_maps @ vector
         count = self.reduced_map.shape[0]
         return both[:count], both[count:-1]
 
