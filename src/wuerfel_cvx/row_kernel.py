@@ -2,7 +2,7 @@
 
 :func:`wuerfel_cvx.formulations.qp.point_rows` (gradient blocks to a canonical CSR matrix),
 :func:`wuerfel_cvx.formulations.rigid.body_rows` (corner rows times the rigid corner map)
-and the side rows' gradient blocks (:func:`wuerfel_cvx.formulations.rows.side_rows`) are
+and the rod and side rows' gradient blocks (:mod:`wuerfel_cvx.formulations.rows`) are
 batches of NumPy operations (stack, repeat, a stable argsort, cumulative sums) whose
 per-call overhead outweighs their arithmetic on the rows of a small scene.  The kernels here
 write the same arrays row by row: entries sorted by column with a stable insertion sort (a
@@ -19,7 +19,7 @@ from ._numba import AVAILABLE, compiled
 from .geometry import FloatArray
 from .model import IntArray
 
-__all__ = ["AVAILABLE", "body_rows", "point_rows", "side_blocks"]
+__all__ = ["AVAILABLE", "body_rows", "point_rows", "rod_blocks", "side_blocks"]
 
 
 @compiled
@@ -140,3 +140,30 @@ def side_blocks(all_points: FloatArray, point: IntArray, edge_i: IntArray, edge_
             for axis in range(2):
                 gradient[r, b, axis] = gradient[r, b, axis] * scale
     return index, gradient
+
+
+@compiled
+def rod_blocks(points: FloatArray, rods: IntArray, lengths: FloatArray,
+               ) -> tuple[IntArray, FloatArray, FloatArray]:
+    """The blocks of :func:`wuerfel_cvx.formulations.rows.rod_blocks`, stacked, and ``C/l``.
+
+    ``index`` ``(R, 2)`` (the rod's two points), ``gradient`` ``(R, 2, 2)`` (``d/l`` and
+    ``-d/l``, ``d = p_i - p_j``) and the rods' errors ``(|d|^2 - l^2) / (2 l)``, in the
+    NumPy path's operations (``|d|^2`` summed from 0.0).
+    """
+    count = rods.shape[0]
+    index = np.empty((count, 2), dtype=np.int64)
+    gradient = np.empty((count, 2, 2))
+    error = np.empty(count)
+    for r in range(count):
+        i, j = rods[r, 0], rods[r, 1]
+        index[r, 0], index[r, 1] = i, j
+        length = lengths[r]
+        squares = 0.0
+        for axis in range(2):
+            d = points[i, axis] - points[j, axis]
+            squares += d * d
+            gradient[r, 0, axis] = d / length
+            gradient[r, 1, axis] = -d / length
+        error[r] = 0.5 * (squares - length * length) / length
+    return index, gradient, error

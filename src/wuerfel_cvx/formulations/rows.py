@@ -52,6 +52,20 @@ def rod_blocks(model: Model, points: FloatArray) -> tuple[list[tuple[IntArray, F
     return [(i, d / length), (j, -d / length)], error
 
 
+def rod_rows(model: Model, points: FloatArray) -> tuple[sp.csr_array, FloatArray]:
+    """The rows of :func:`rod_blocks` (one per rod) in the unknown points' columns, and ``C/l``.
+
+    With numba the blocks are computed by a compiled loop
+    (:func:`wuerfel_cvx.row_kernel.rod_blocks`), with the same numbers bit for bit.
+    """
+    n_unknown = n_unknown_points(model)
+    if not _numba.enabled:
+        blocks, error = rod_blocks(model, points)
+        return point_rows(len(error), n_unknown, blocks), error
+    index, gradient, error = row_kernel.rod_blocks(points, model.rods, model.rod_lengths)
+    return stacked_point_rows(index, gradient, n_unknown), error
+
+
 def side_blocks(all_points: FloatArray, contacts: Contacts,
                 model: Model) -> list[tuple[IntArray, FloatArray]]:
     """Exact gradient of ``A / |p_j - p_i|`` blocks for each contact (edge length fixed).

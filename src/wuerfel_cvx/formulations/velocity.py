@@ -60,7 +60,7 @@ from .qp import StepQP, declare_qp, point_rows
 from .rows import (
     held_table_blocks,
     n_unknown_points,
-    rod_blocks,
+    rod_rows,
     side_rows,
     unknown_masses,
 )
@@ -112,8 +112,7 @@ class VelocityFormulation(FrictionSettings):
         target[: model.n_points] = velocities + dt * model.gravity
         target[model.n_points:] = dt * model.gravity  # heavy table: held by equalities
 
-        blocks, rod_error = rod_blocks(model, points)
-        rod_matrix = point_rows(len(rod_error), n_unknown, blocks)
+        rod_matrix, rod_error = rod_rows(model, points)
         held = held_table_blocks(model)
         held_matrix = point_rows(len(held[0][0]), n_unknown, held) if held else None
         eq_matrix = (rod_matrix if held_matrix is None else
