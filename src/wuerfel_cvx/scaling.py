@@ -80,7 +80,11 @@ def unknowns_scale(qp: StepQP) -> float:
     Else the smallest power of two with ``data_magnitude(qp) / s <= SCALE_LIMIT``.
     Non-finite data give 1 (they are rejected before any solver runs).
     """
-    magnitude = data_magnitude(qp)
+    return scale_of_magnitude(data_magnitude(qp))
+
+
+def scale_of_magnitude(magnitude: float) -> float:
+    """:func:`unknowns_scale` of a QP whose :func:`data_magnitude` is ``magnitude``."""
     if not magnitude > SCALE_LIMIT or not math.isfinite(magnitude):
         return 1.0
     mantissa, exponent = math.frexp(magnitude / SCALE_LIMIT)  # ratio = mantissa 2^exponent
@@ -94,7 +98,11 @@ def weights_scale(qp: StepQP) -> float:
     1 when the largest weight is at least :data:`WEIGHT_FLOOR` (or not positive and
     finite); else the smallest power of four with ``max(w) c >= WEIGHT_FLOOR``.
     """
-    largest = float(qp.weights.max()) if qp.weights.size else 0.0
+    return scale_of_weight(float(qp.weights.max()) if qp.weights.size else 0.0)
+
+
+def scale_of_weight(largest: float) -> float:
+    """:func:`weights_scale` of a QP whose largest weight is ``largest`` (kg, or kg m^2)."""
     if not 0.0 < largest < WEIGHT_FLOOR:
         return 1.0
     mantissa, exponent = math.frexp(WEIGHT_FLOOR / largest)  # ratio = mantissa 2^exponent
