@@ -20,6 +20,7 @@ lengths hold to round-off.  Fixed tables only.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -47,11 +48,15 @@ class RigidFormulation(SinglePass, FrictionSettings):
     """Distance (m) within which a point-edge pair is always constrained."""
     name: str = "rigid"
 
+    @cached_property
+    def _velocity(self) -> VelocityFormulation:
+        """The velocity formulation whose reach and contact rows this one takes."""
+        return VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin,
+                                   linearisation="start")
+
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
         """Contact reach (m) per body, as in the velocity formulation."""
-        velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin,
-                                       linearisation="start")
-        return velocity.body_reach(model, state, dt)
+        return self._velocity.body_reach(model, state, dt)
 
     def build(self, model: Model, state: State, contacts: Contacts, dt: float) -> StepQP:
         """The step QP in the boxes' new centre and angular velocities.
@@ -60,14 +65,14 @@ class RigidFormulation(SinglePass, FrictionSettings):
         """
         if model.table_mass is not None:
             raise InputError("the rigid formulation has fixed tables only", field="table_mass")
-        velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin,
-                                       linearisation="start")
         points = state.points
         all_points = model.all_points(points)
-        corner_rows, rhs = velocity.contact_rows(model, all_points, contacts, dt)
-        corner_rows, rhs, cones = contact_cones(model, all_points, contacts, corner_rows, rhs,
-                                                np.arange(len(contacts)),
-                                                edges=self.friction_model == "ccp")
+        corner_rows, rhs = self._velocity.contact_rows(model, all_points, contacts, dt)
+        cones = None
+        if np.any(model.friction > 0.0):  # else no contact has friction: no cones
+            corner_rows, rhs, cones = contact_cones(model, all_points, contacts, corner_rows,
+                                                    rhs, np.arange(len(contacts)),
+                                                    edges=self.friction_model == "ccp")
         if cones is not None:
             cones = replace(cones, slip=body_rows(cones.slip, points))
         weights, target = rigid_objective(model, state, dt)
