@@ -20,7 +20,7 @@ from ..formulations.qp import StepQP
 from ..geometry import FloatArray
 from ..warm_start import WarmStart
 from ._cvxpy import Unavailable, clarabel_settings, compile_conic, status_name
-from ._map import DirectResult, ParameterMap
+from ._map import DirectResult, ParameterMap, scaled
 
 
 @dataclass
@@ -46,8 +46,8 @@ class DirectClarabel:
         result = self.solver.solve()
         native_time = time.perf_counter() - started
         z = np.asarray(result.z, dtype=np.float64)
-        eq_dual, ineq_dual = m.duals(qp, lambda block: block[1] * z[block[0]],
-                                     lambda block: -block[1] * z[block[0]])
+        eq_dual, ineq_dual = m.duals(qp, lambda block: scaled(z, block, 0, 1.0),
+                                     lambda block: scaled(z, block, 0, -1.0))
         return DirectResult(
             x=m.primal(result.x, qp), eq_dual=eq_dual, ineq_dual=ineq_dual,
             status=status_name("CLARABEL", str(result.status)),
