@@ -118,13 +118,13 @@ def test_the_installed_cvxpy_is_one_the_adapter_was_checked_against() -> None:
 @pytest.mark.parametrize("solver", list(DIRECT_SOLVERS))
 def test_internals_not_as_expected_fall_back_with_a_warning(
         solver: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    qp = qp_bank()[0].build()  # first: building the bank runs simulations, which would warn
     monkeypatch.setattr(_cvxpy, "_warned", set())
 
     def changed(*args: Any, **kwargs: Any) -> Any:
         raise AttributeError("'Problem' object has no attribute '_cache'")
 
     monkeypatch.setattr(_cvxpy, "_parameter_map", changed)
-    qp = qp_bank()[0].build()
     with pytest.warns(DirectPathWarning, match="AttributeError"):
         assert direct_for(solver, qp, SOLVERS[solver].options(HIGH)) is None
 

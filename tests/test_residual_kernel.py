@@ -5,16 +5,21 @@
 step QPs of short runs (every formulation without a coupling cost or upper bounds), at the
 solvers' answers, at perturbed points and multipliers, with NaN multipliers (as a solver
 that returns no duals leaves them) and on QPs without equalities or without inequalities.
+The compiled data check before a solve gives the NumPy path's scales and failures.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pytest
 
 from wuerfel_cvx import _numba, residual_kernel, simulate
+from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations.qp import StepQP
-from wuerfel_cvx.solve import Residuals, StepSolution, kkt_residuals
+from wuerfel_cvx.scaling import data_magnitude
+from wuerfel_cvx.solve import Residuals, StepSolution, _checked_scales, kkt_residuals
 
 pytestmark = [pytest.mark.integration,
               pytest.mark.skipif(not residual_kernel.AVAILABLE, reason="numba is not installed")]
@@ -70,3 +75,32 @@ def test_a_qp_without_rows_gives_the_same_residuals(monkeypatch: pytest.MonkeyPa
     qp, solution = step_qps("spinning-flight", "rigid", 1)[0]
     assert qp.n_equalities == qp.n_inequalities == 0
     assert_same(*both(monkeypatch, qp, solution.x, np.zeros(0), np.zeros(0)))
+
+
+def _scales(monkeypatch: pytest.MonkeyPatch, qp: StepQP, enabled: bool) -> tuple[float, float]:
+    monkeypatch.setattr(_numba, "enabled", enabled)
+    return _checked_scales(qp, 0, "OSQP")
+
+
+@pytest.mark.parametrize(("scene", "formulation"), [("stack-5", "rigid"),
+                                                    ("rain-10", "velocity-baumgarte")])
+def test_the_data_check_gives_the_numpy_scales(monkeypatch: pytest.MonkeyPatch, scene: str,
+                                               formulation: str) -> None:
+    rng = np.random.default_rng(8)
+    for qp, _ in step_qps(scene, formulation, 20):
+        for target, weights in ((qp.target, qp.weights), (qp.target * 3e4, qp.weights * 1e-3)):
+            varied = dataclasses.replace(qp, target=target, weights=weights)
+            assert _scales(monkeypatch, varied, True) == _scales(monkeypatch, varied, False)
+        finite, magnitude, largest = residual_kernel.data_summary(
+            qp.weights, qp.target, qp.eq_matrix.data, qp.eq_rhs, qp.ineq_matrix.data,
+            qp.ineq_rhs)
+        assert finite and magnitude == data_magnitude(qp) and largest == qp.weights.max()
+        field = str(rng.choice(["weights", "target", "eq_rhs", "ineq_rhs"]))
+        values = np.array(getattr(qp, field), dtype=np.float64)
+        if values.size:
+            values[rng.integers(values.size)] = rng.choice([np.nan, np.inf, -np.inf])
+            broken = dataclasses.replace(qp, **{field: values})
+            for enabled in (True, False):
+                monkeypatch.setattr(_numba, "enabled", enabled)
+                with pytest.raises(StepFailure, match=f"non-finite {field}"):
+                    _checked_scales(broken, 0, "OSQP")

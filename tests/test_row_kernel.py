@@ -29,8 +29,10 @@ from wuerfel_cvx.formulations.rows import (
     held_table_blocks,
     n_unknown_points,
     rod_blocks,
+    rod_rows,
     seed_side_blocks,
     side_blocks,
+    side_rows,
 )
 from wuerfel_cvx.formulations.velocity import VelocityFormulation
 from wuerfel_cvx.model import Model, State
@@ -62,6 +64,11 @@ def assert_same_rows(monkeypatch: pytest.MonkeyPatch, model: Model, state: State
         reference, compiled = both(monkeypatch, lambda b=blocks, r=rows: point_rows(
             r, n_unknown, b))
         assert_same_matrix(compiled, reference)
+    reference, compiled = both(monkeypatch, lambda: side_rows(all_points, contacts, model))
+    assert_same_matrix(compiled, reference)
+    reference, compiled = both(monkeypatch, lambda: rod_rows(model, state.points))
+    assert_same_matrix(compiled[0], reference[0])
+    assert compiled[1].tobytes() == reference[1].tobytes()
     if model.table_mass is None:
         corner_rows = point_rows(len(contacts), n_unknown, block_sets[0])
         reference, compiled = both(monkeypatch, lambda: body_rows(corner_rows, state.points))

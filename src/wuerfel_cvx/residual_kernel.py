@@ -9,6 +9,8 @@ gradient ``(2 w) (x - t)``, the transposed products summed from 0.0 in entry ord
 product), the largest magnitudes propagating NaN (as ``np.max``) and combined as Python's
 ``max`` combines them.  So it returns the NumPy path's numbers bit for bit
 (``tests/test_residual_kernel.py``); other QPs, and runs without numba, take the NumPy path.
+:func:`data_summary` checks the same QPs' numbers before the solve (finite, and the
+magnitudes their scaling is chosen by) in one pass.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ import numpy as np
 from ._numba import AVAILABLE, compiled
 from .geometry import FloatArray
 
-__all__ = ["AVAILABLE", "residuals"]
+__all__ = ["AVAILABLE", "csr_product", "data_summary", "residuals"]
 
 
 @compiled
@@ -55,9 +57,9 @@ def _first_max(a: float, b: float) -> float:
 
 
 @compiled
-def _product(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+def csr_product(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
              x: FloatArray) -> FloatArray:
-    """``A x`` for CSR ``A``, each row summed from 0.0 in entry order."""
+    """``A x`` for CSR ``A``, each row summed from 0.0 in entry order (as scipy's product)."""
     out = np.zeros(indptr.shape[0] - 1)
     for r in range(indptr.shape[0] - 1):
         total = 0.0
@@ -102,8 +104,8 @@ def residuals(weights: FloatArray, target: FloatArray, x: FloatArray,
                                   _largest(ineq_term))
     dual = _first_max(_largest(stationarity), _largest_negative(ineq_dual)) / dual_scale
 
-    eq_lhs = _product(eq_data, eq_indices, eq_indptr, x)
-    ineq_lhs = _product(ineq_data, ineq_indices, ineq_indptr, x)
+    eq_lhs = csr_product(eq_data, eq_indices, eq_indptr, x)
+    ineq_lhs = csr_product(ineq_data, ineq_indices, ineq_indptr, x)
     eq_violation = eq_lhs - eq_rhs
     slack = ineq_lhs - ineq_rhs
     primal_scale = 1.0 + _first_max(_first_max(_first_max(_largest(eq_rhs), _largest(ineq_rhs)),
@@ -114,3 +116,37 @@ def residuals(weights: FloatArray, target: FloatArray, x: FloatArray,
         complementarity = (_largest(ineq_dual * slack)
                            / (1.0 + _largest(ineq_dual) * primal_scale))
     return primal, dual, complementarity
+
+
+@compiled
+def _fold(values: FloatArray, finite: bool, largest: float) -> tuple[bool, float]:
+    """``finite`` and ``largest`` updated with ``values``: all finite, the largest ``|v|``."""
+    for k in range(values.shape[0]):
+        value = values[k]
+        if not math.isfinite(value):
+            finite = False
+        elif abs(value) > largest:
+            largest = abs(value)
+    return finite, largest
+
+
+@compiled
+def data_summary(weights: FloatArray, target: FloatArray, eq_data: FloatArray,
+                 eq_rhs: FloatArray, ineq_data: FloatArray, ineq_rhs: FloatArray,
+                 ) -> tuple[bool, float, float]:
+    """Whether a QP's numbers are all finite, its data's magnitude and its largest weight.
+
+    The magnitude is the largest ``|t|``, ``|e|``, ``|h|`` (0.0 if none) and the largest
+    weight ``max(w)`` (0.0 if none): for finite data the numbers
+    :func:`wuerfel_cvx.scaling.data_magnitude` and ``weights.max()`` give.
+    """
+    finite, _ = _fold(weights, True, 0.0)
+    finite, _ = _fold(eq_data, finite, 0.0)
+    finite, _ = _fold(ineq_data, finite, 0.0)
+    finite, magnitude = _fold(target, finite, 0.0)
+    finite, magnitude = _fold(eq_rhs, finite, magnitude)
+    finite, magnitude = _fold(ineq_rhs, finite, magnitude)
+    largest = weights[0] if weights.shape[0] else 0.0
+    for k in range(1, weights.shape[0]):
+        largest = max(largest, weights[k])
+    return finite, magnitude, largest

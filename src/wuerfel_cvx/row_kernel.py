@@ -1,13 +1,14 @@
 """Row assembly as compiled loops (numba), when numba is installed.
 
-:func:`wuerfel_cvx.formulations.qp.point_rows` (gradient blocks to a canonical CSR matrix)
-and :func:`wuerfel_cvx.formulations.rigid.body_rows` (corner rows times the rigid corner
-map) are batches of NumPy operations (stack, repeat, a stable argsort, cumulative sums)
-whose per-call overhead outweighs their arithmetic on the rows of a small scene.  The
-kernels here write the same CSR arrays row by row: entries sorted by column with a stable
-insertion sort (a row has a handful of entries), a cell's entries summed from 0.0 in the
-order the NumPy path sums them.  So they return the very arrays of the NumPy paths, bit for
-bit (``tests/test_row_kernel.py``), which stay the reference and the fallback without numba.
+:func:`wuerfel_cvx.formulations.qp.point_rows` (gradient blocks to a canonical CSR matrix),
+:func:`wuerfel_cvx.formulations.rigid.body_rows` (corner rows times the rigid corner map)
+and the rod and side rows' gradient blocks (:mod:`wuerfel_cvx.formulations.rows`) are
+batches of NumPy operations (stack, repeat, a stable argsort, cumulative sums) whose
+per-call overhead outweighs their arithmetic on the rows of a small scene.  The kernels here
+write the same arrays row by row: entries sorted by column with a stable insertion sort (a
+row has a handful of entries), a cell's entries summed from 0.0 in the order the NumPy path
+sums them.  So they return the very arrays of the NumPy paths, bit for bit
+(``tests/test_row_kernel.py``), which stay the reference and the fallback without numba.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from ._numba import AVAILABLE, compiled
 from .geometry import FloatArray
 from .model import IntArray
 
-__all__ = ["AVAILABLE", "body_rows", "point_rows"]
+__all__ = ["AVAILABLE", "body_rows", "point_rows", "rod_blocks", "side_blocks"]
 
 
 @compiled
@@ -104,3 +105,65 @@ def body_rows(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, turned:
             count += 1
         out_indptr[r + 1] = count
     return out_data[:count], out_indices[:count], out_indptr
+
+
+@compiled
+def side_blocks(all_points: FloatArray, point: IntArray, edge_i: IntArray, edge_j: IntArray,
+                n_moving: int) -> tuple[IntArray, FloatArray]:
+    """The blocks of :func:`wuerfel_cvx.formulations.rows.side_blocks`, stacked.
+
+    ``index`` ``(R, 3)`` (edge start, edge end, point; ``-1`` for a point at or beyond
+    ``n_moving``, a fixed table corner, when ``n_moving >= 0``) and ``gradient``
+    ``(R, 3, 2)``: the side's gradients divided by the edge length, as the NumPy path
+    computes them (its ``rot90`` differences, the norm's squares summed from 0.0).
+    """
+    rows = point.shape[0]
+    index = np.empty((rows, 3), dtype=np.int64)
+    gradient = np.empty((rows, 3, 2))
+    for r in range(rows):
+        i, j, k = edge_i[r], edge_j[r], point[r]
+        index[r, 0] = -1 if 0 <= n_moving <= i else i
+        index[r, 1] = -1 if 0 <= n_moving <= j else j
+        index[r, 2] = -1 if 0 <= n_moving <= k else k
+        # rot90(p_k - p_j), rot90(p_i - p_k), rot90(p_j - p_i)
+        gradient[r, 0, 0] = -(all_points[k, 1] - all_points[j, 1])
+        gradient[r, 0, 1] = all_points[k, 0] - all_points[j, 0]
+        gradient[r, 1, 0] = -(all_points[i, 1] - all_points[k, 1])
+        gradient[r, 1, 1] = all_points[i, 0] - all_points[k, 0]
+        gradient[r, 2, 0] = -(all_points[j, 1] - all_points[i, 1])
+        gradient[r, 2, 1] = all_points[j, 0] - all_points[i, 0]
+        squares = 0.0
+        squares += gradient[r, 2, 0] * gradient[r, 2, 0]
+        squares += gradient[r, 2, 1] * gradient[r, 2, 1]
+        scale = 1.0 / np.sqrt(squares)
+        for b in range(3):
+            for axis in range(2):
+                gradient[r, b, axis] = gradient[r, b, axis] * scale
+    return index, gradient
+
+
+@compiled
+def rod_blocks(points: FloatArray, rods: IntArray, lengths: FloatArray,
+               ) -> tuple[IntArray, FloatArray, FloatArray]:
+    """The blocks of :func:`wuerfel_cvx.formulations.rows.rod_blocks`, stacked, and ``C/l``.
+
+    ``index`` ``(R, 2)`` (the rod's two points), ``gradient`` ``(R, 2, 2)`` (``d/l`` and
+    ``-d/l``, ``d = p_i - p_j``) and the rods' errors ``(|d|^2 - l^2) / (2 l)``, in the
+    NumPy path's operations (``|d|^2`` summed from 0.0).
+    """
+    count = rods.shape[0]
+    index = np.empty((count, 2), dtype=np.int64)
+    gradient = np.empty((count, 2, 2))
+    error = np.empty(count)
+    for r in range(count):
+        i, j = rods[r, 0], rods[r, 1]
+        index[r, 0], index[r, 1] = i, j
+        length = lengths[r]
+        squares = 0.0
+        for axis in range(2):
+            d = points[i, axis] - points[j, axis]
+            squares += d * d
+            gradient[r, 0, axis] = d / length
+            gradient[r, 1, axis] = -d / length
+        error[r] = 0.5 * (squares - length * length) / length
+    return index, gradient, error

@@ -132,8 +132,8 @@ class Simulation:
     warm_start:
         With ``compiled``, start each QP's solver from the last step's solution, mapped
         onto this step's rows by contact (:mod:`wuerfel_cvx.warm_start`), in the solvers
-        that take a start (OSQP, PROXQP, DAQP); ``False``: every solve starts cold.  Same
-        answers to solver tolerance.
+        that take such a start (PROXQP, DAQP); OSQP starts from its structure's own last
+        solution.  ``False``: every solve starts cold.  Same answers to solver tolerance.
 
     Raises
     ------
@@ -214,7 +214,7 @@ class Simulation:
             primary_statuses.append(primary)
             mark = time.perf_counter()
         state = merge(self.state, parts)
-        if not (np.all(np.isfinite(state.points)) and np.all(np.isfinite(state.velocities))):
+        if not (np.isfinite(state.points).all() and np.isfinite(state.velocities).all()):
             raise StepFailure(step, self.solvers[0], solutions[-1].status, "non-finite state")
         self.planner.record(state.velocities, self.dt)
         self._friction_memory.remember(remembered)
@@ -283,6 +283,8 @@ class Simulation:
         last = solutions[-1]
         answers = coulomb.answers if coulomb is not None else []
         primary = first_failed_status(solutions, [status for _, status in solved], last)
+        if len(solved) == 1 and coulomb is None:  # one pass: its solution is the summary
+            return qp, last, primary, 1, None
         return qp, dataclasses.replace(
             last, solver="+".join(dict.fromkeys(s.solver for s in solutions)),
             path="+".join(dict.fromkeys(s.path for s in solutions)),

@@ -34,7 +34,13 @@ from .compiled import COMPILED, DECLARED, DIRECT, CompiledQPCache, structure_key
 from .errors import StepFailure
 from .formulations.qp import DeclaredQP, StepQP
 from .geometry import FloatArray
-from .scaling import scaled_qp, unknowns_scale, weights_scale
+from .scaling import (
+    scale_of_magnitude,
+    scale_of_weight,
+    scaled_qp,
+    unknowns_scale,
+    weights_scale,
+)
 from .slots import padded_warm_start
 from .solvers import SolverSpec, get_solver, tolerance_value
 from .warm_start import WarmStart
@@ -155,12 +161,8 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     spec = get_solver(solver)
     eps = tolerance_value(tol)
     options = spec.options(eps)
-    bad_data = _non_finite_data(qp)
-    if bad_data:  # no solver is handed NaN or inf (some would panic or return garbage)
-        raise StepFailure(step, spec.name, INVALID_DATA, f"non-finite {bad_data}")
-    scale = unknowns_scale(qp)  # 1 (qp as it is) unless its data are large
-    weight_scale = weights_scale(qp)  # 1 unless its bodies are light
-    warm_starts = None if cache is None else cache.warm_starts
+    scale, weight_scale = _checked_scales(qp, step, spec.name)
+    warm_starts = None if cache is None or not spec.takes_warm_start else cache.warm_starts
     started = time.perf_counter()
     try:
         # inside the try: applying a compiled structure's parameters can raise too
@@ -176,7 +178,7 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     if status not in SOLVED or answer.x is None:
         raise StepFailure(step, spec.name, status)
     x = scale * np.asarray(answer.x, dtype=np.float64)  # exact: scale is a power of two
-    if not np.all(np.isfinite(x)):
+    if not np.isfinite(x).all():
         raise StepFailure(step, spec.name, status, "solution has non-finite entries")
     dual_scale = scale / weight_scale  # exact: a ratio of powers of two
     ineq_dual = dual_scale * np.asarray(answer.ineq_dual, dtype=np.float64)
@@ -306,16 +308,36 @@ def _transposed_product(matrix: sp.csr_array, vector: FloatArray) -> FloatArray:
                       dtype=np.float64)
 
 
+def _checked_scales(qp: StepQP, step: int, solver: str) -> tuple[float, float]:
+    """``qp``'s unknowns and weights scales (:mod:`wuerfel_cvx.scaling`): 1 for ordinary data.
+
+    Raises :class:`StepFailure` (status ``invalid_data``) if its data are not all finite: no
+    solver is handed NaN or inf (some would panic or return garbage).  With numba, a QP
+    without upper bounds or coupling cost is checked in one compiled pass
+    (:func:`wuerfel_cvx.residual_kernel.data_summary`), to the same scales.
+    """
+    if _numba.enabled and qp.ineq_upper is None and qp.cost_factor is None:
+        finite, magnitude, largest = residual_kernel.data_summary(
+            qp.weights, qp.target, qp.eq_matrix.data, qp.eq_rhs, qp.ineq_matrix.data,
+            qp.ineq_rhs)
+        if finite:
+            return scale_of_magnitude(magnitude), scale_of_weight(largest)
+    bad_data = _non_finite_data(qp)
+    if bad_data:
+        raise StepFailure(step, solver, INVALID_DATA, f"non-finite {bad_data}")
+    return unknowns_scale(qp), weights_scale(qp)  # 1 unless data are large, bodies light
+
+
 def _non_finite_data(qp: StepQP) -> str:
     """Names of the QP's arrays holding NaN or inf ('' if all are finite)."""
     arrays = {"weights": qp.weights, "target": qp.target, "eq_matrix": qp.eq_matrix.data,
               "eq_rhs": qp.eq_rhs, "ineq_matrix": qp.ineq_matrix.data, "ineq_rhs": qp.ineq_rhs}
     if qp.cost_factor is not None:
         arrays["cost_factor"] = qp.cost_factor.data
-    # a NaN or an infinity makes its array's sum non-finite, so finite sums clear them all
-    # at one reduction each; a non-finite sum (possibly an overflow) is looked at closely
-    if qp.ineq_upper is None and all(math.isfinite(np.add.reduce(values))
-                                     for values in arrays.values()):
+    # a NaN or an infinity makes the arrays' sum non-finite, so a finite sum clears them
+    # all at one reduction; a non-finite sum (possibly an overflow) is looked at closely
+    if qp.ineq_upper is None and math.isfinite(np.add.reduce(np.concatenate(
+            list(arrays.values())))):
         return ""
     bad = [name for name, values in arrays.items() if not np.all(np.isfinite(values))]
     if qp.ineq_upper is not None and not np.all(np.isfinite(qp.ineq_upper)

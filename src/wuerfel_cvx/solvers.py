@@ -95,6 +95,9 @@ class SolverSpec:
     native: str | None = None
     """Module of :mod:`wuerfel_cvx.backends` whose ``solve(qp, options)`` solves every step
     QP from its own numbers, on every path, without cvxpy (``None``: through cvxpy)."""
+    takes_warm_start: bool = False
+    """Whether its backend starts from a guess of the last step's solution
+    (:mod:`wuerfel_cvx.warm_start`); for the others none is mapped or kept."""
 
     def version(self) -> str:
         """Installed version of :attr:`package` (``"not installed"``, ``"unknown"``)."""
@@ -122,7 +125,7 @@ SOLVERS: dict[str, SolverSpec] = {
             "eps_abs": eps, "eps_rel": 0.0, "max_iter": 10_000,
             "eps_primal_inf": CERTIFICATE_TOLERANCE, "eps_dual_inf": CERTIFICATE_TOLERANCE},
             "proximal augmented Lagrangian (dense backend)", "proxsuite", ("#d62728", "D"),
-            native="proxqp",
+            native="proxqp", takes_warm_start=True,
             timing=Timing(note="its run_time includes its setup (a fresh solver per QP)")),
         SolverSpec("SCS", "SCS", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, "max_iters": 200_000}, "ADMM (conic)", "scs",
@@ -131,6 +134,7 @@ SOLVERS: dict[str, SolverSpec] = {
         # Hessian: through cvxpy it sees auxiliary variables without cost and regularises.
         SolverSpec("DAQP", "DAQP", lambda eps: {"primal_tol": eps, "iter_limit": 10_000},
                    "dual active-set (dense)", "daqp", ("#8c564b", "P"), native="daqp",
+                   takes_warm_start=True,
                    timing=Timing(note="its setup_time plus solve_time (dense form built before)")),
         # HiGHS drops matrix entries below small_matrix_value (default 1e-9) from the
         # model; 1e-12 is the floor of that option's range, so only round-off is dropped.
@@ -158,6 +162,8 @@ def available_solvers() -> list[str]:
 def get_solver(name: str) -> SolverSpec:
     """A solver by name, case-insensitive; :class:`InputError` lists the available ones."""
     key = name.strip().upper()
+    if key in SOLVERS and SOLVERS[key].cvxpy_name in _installed_in_cvxpy():
+        return SOLVERS[key]
     available = available_solvers()
     if key not in SOLVERS or key not in available:
         why = "not installed" if key in SOLVERS else "unknown solver"

@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib
 import warnings
 from dataclasses import dataclass
+from functools import cache
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
@@ -83,10 +84,17 @@ def check_version() -> None:
                           f"{oldest[0]}.{oldest[1]} to {newest[0]}.{newest[1]}")
 
 
-def status_name(solver: str, native_status: object) -> str:
-    """The status name cvxpy gives a native ``solver`` status (``solver_error`` if unknown)."""
+@cache
+def _status_map(solver: str) -> dict[object, str]:
+    """The map cvxpy has from ``solver``'s native statuses to its status names."""
     module, name = _STATUS_MAPS[solver]
     table: dict[object, str] = getattr(importlib.import_module(module), name).STATUS_MAP
+    return table
+
+
+def status_name(solver: str, native_status: object) -> str:
+    """The status name cvxpy gives a native ``solver`` status (``solver_error`` if unknown)."""
+    table = _status_map(solver)
     return str(table.get(native_status, cp.SOLVER_ERROR))
 
 

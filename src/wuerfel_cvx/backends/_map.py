@@ -11,10 +11,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
 
+from .. import _numba, map_kernel, residual_kernel
 from ..formulations.qp import PARAMETER_SLOTS, StepQP
 from ..geometry import FloatArray
 
@@ -72,7 +74,20 @@ class ParameterMap:
         vector[-1] = 1.0  # the constant column
         for start, size, name in self.slots:
             vector[start:start + size] = PARAMETER_SLOTS[name].values(qp)
-        return self.reduced_map @ vector, np.asarray(self.q_map @ vector).ravel()[:-1]
+        both_maps = self._both_maps
+        if _numba.enabled:  # the same sums, without scipy's dispatch
+            both = residual_kernel.csr_product(both_maps.data, both_maps.indices,
+                                               both_maps.indptr, vector)
+        else:
+            both = both_maps @ vector
+        count = self.reduced_map.shape[0]
+        return both[:count], both[count:-1]
+
+    @cached_property
+    def _both_maps(self) -> sp.csr_array:
+        """``reduced_map`` over ``q_map``: one product gives both (each row's sum as alone)."""
+        return sp.csr_array(sp.vstack([self.reduced_map, sp.csr_array(self.q_map)],
+                                      format="csr"))
 
     @property
     def n_matrix_entries(self) -> int:
@@ -125,11 +140,18 @@ class Gather:
 
     def values(self, nonzeros: FloatArray) -> FloatArray:
         """The matrix's nonzeros (CSC order) from the conic data's."""
+        if _numba.enabled:  # the same numbers, by a compiled loop
+            out = np.empty(self.index.shape[0])
+            map_kernel.gather(nonzeros, self.index, self.sign, out)
+            return out
         return np.asarray(self.sign * nonzeros[self.index], dtype=np.float64)
 
     def fill(self, nonzeros: FloatArray) -> sp.csc_matrix:
         """The matrix with the values for ``nonzeros`` (the same object every call)."""
-        self.matrix.data[:] = self.values(nonzeros)
+        if _numba.enabled:
+            map_kernel.gather(nonzeros, self.index, self.sign, self.matrix.data)
+        else:
+            self.matrix.data[:] = self.values(nonzeros)
         return self.matrix
 
     def reproduces(self, reference: sp.csc_array, nonzeros: FloatArray) -> bool:
@@ -171,6 +193,8 @@ class QPForm:
 
     def rhs(self, nonzeros: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``b`` and ``g`` from the conic data's nonzeros."""
+        if _numba.enabled:  # the same numbers, by a compiled loop
+            return map_kernel.right_hand_sides(nonzeros, self.b_index, self.has_b, self.n_eq)
         b_cone = np.where(self.has_b, nonzeros[self.b_index], 0.0)
         return -b_cone[:self.n_eq], b_cone[self.n_eq:]
 
@@ -190,6 +214,20 @@ class QPForm:
         With the Lagrangian ``P x + q + A' y + F' z = 0`` (OSQP's and PIQP's), the
         multiplier of a row with coefficient ``c`` is ``-c`` times it in our convention.
         """
-        return self.mapping.duals(
-            qp, lambda block: -block[1] * eq_multiplier[block[0]],
-            lambda block: -block[1] * ineq_multiplier[block[0] - self.n_eq])
+        return self.mapping.duals(qp, lambda block: scaled(eq_multiplier, block, 0, -1.0),
+                                  lambda block: scaled(ineq_multiplier, block, self.n_eq, -1.0))
+
+
+def scaled(multipliers: FloatArray, block: RowBlock, offset: int, factor: float) -> FloatArray:
+    """``(factor c) m[rows - offset]`` for a block's ``rows`` and coefficients ``c``.
+
+    A solver's multipliers ``m`` of a block's rows in our convention; ``factor`` is 1.0 or
+    -1.0 (a sign flip, exact).
+    """
+    rows, coefficients = block
+    if _numba.enabled:  # the same numbers, by a compiled loop
+        return map_kernel.scaled_take(np.asarray(multipliers, dtype=np.float64), rows,
+                                      coefficients, offset, factor)
+    signed = coefficients if factor == 1.0 else -coefficients
+    return np.asarray(signed * multipliers[rows - offset if offset else rows],
+                      dtype=np.float64)

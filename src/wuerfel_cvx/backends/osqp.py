@@ -1,9 +1,18 @@
 """OSQP's direct backend: cvxpy's QP form updated in a persistent ``osqp.OSQP``.
 
 OSQP takes cvxpy's QP form (:class:`~wuerfel_cvx.backends._map.QPForm`) as
-``l <= [A; F] x <= u``.  Its ``run_time`` includes the update on this path.  A warm start
-from the last step (:mod:`wuerfel_cvx.warm_start`) is mapped into OSQP's variables and
-rows by the inverse of the map that reads its duals.
+``l <= [A; F] x <= u``.  Its ``run_time`` includes the update on this path.
+
+Each step's data go to OSQP's native update and solve calls (:class:`_NativeCalls`): its
+Python ``OSQP.update`` and ``solve`` wrappers look up a constant, copy the vectors into a
+cache kept for derivatives and build a namespace of the solver's report on every call,
+which cost more than OSQP's own update on a small scene.  The numbers OSQP gets are the
+same (bounds clipped to ``+-OSQP_INFTY`` as the wrapper clips them).
+
+OSQP is not handed the last step's solution mapped by contact
+(:mod:`wuerfel_cvx.warm_start`): with its ``warm_starting`` on, a structure's solver starts
+from its own last solution, which took fewer iterations than the mapped start on the
+scenes measured (``reports/step-path``) and gives the same polished answers.
 """
 
 from __future__ import annotations
@@ -24,6 +33,53 @@ from ._map import DirectResult, Gather, QPForm
 
 _NOT_SETTINGS = {"warm_start"}
 
+_INFINITY = 1e30
+"""OSQP's ``OSQP_INFTY``: bounds beyond it are clipped to it (as OSQP's wrapper clips them)."""
+
+
+@dataclass(frozen=True)
+class _Report:
+    """What one OSQP solve returned."""
+
+    x: FloatArray
+    y: FloatArray
+    status: object
+    run_time: float
+    iterations: int
+
+
+class _NativeCalls:
+    """OSQP's update and solve, on its native solver object when the wrapper has one."""
+
+    def __init__(self, wrapper: Any):
+        self.wrapper = wrapper
+        native = getattr(wrapper, "_solver", None)
+        calls = ("update_data_vec", "update_data_mat", "solve", "solution", "info")
+        self.native = native if all(hasattr(native, name) for name in calls) else None
+
+    def update(self, q: FloatArray, lower: FloatArray, upper: FloatArray,
+               Ax: FloatArray) -> None:
+        """Set ``q``, ``l``, ``u`` and the nonzeros of ``A`` (its pattern unchanged)."""
+        if self.native is None:
+            self.wrapper.update(q=q, l=lower, u=upper, Ax=Ax)
+            return
+        self.native.update_data_vec(q=q, l=np.maximum(lower, -_INFINITY),
+                                    u=np.minimum(upper, _INFINITY))
+        self.native.update_data_mat(P_x=None, P_i=None, A_x=Ax, A_i=None)
+
+    def solve(self) -> _Report:
+        """Solve from the current data (without raising on a failed status)."""
+        if self.native is None:
+            result = self.wrapper.solve(raise_error=False)
+            info, x, y = result.info, result.x, result.y
+        else:
+            self.native.solve()
+            info, solution = self.native.info, self.native.solution
+            x, y = solution.x, solution.y
+        return _Report(x=np.asarray(x, dtype=np.float64), y=np.asarray(y, dtype=np.float64),
+                       status=info.status_val, run_time=float(info.run_time),
+                       iterations=int(info.iter))
+
 
 @dataclass
 class DirectOSQP:
@@ -34,63 +90,41 @@ class DirectOSQP:
     """``[A; F]`` from the conic data's nonzeros."""
     solver: Any
     settings: dict[str, Any]
-    last_primal: FloatArray | None = None
-    """OSQP's whole primal vector (with cvxpy's auxiliary variables) of the last solve."""
+    calls: _NativeCalls
+    options: dict[str, Any]
+    """The options :attr:`settings` were made from."""
+    lower: FloatArray
+    """``l`` of ``l <= [A; F] x <= u``: ``b`` is written over its first rows each step."""
 
     def solve(self, qp: StepQP, settings: dict[str, Any],
               warm: WarmStart | None = None) -> DirectResult:
-        """Solve ``qp`` (this structure) with OSQP ``settings``, from ``warm`` if given.
+        """Solve ``qp`` (this structure) with OSQP ``settings`` (options).
 
-        Without ``warm``, OSQP starts from this structure's last solution when its
-        ``warm_starting`` is on, else from zero.
+        OSQP starts from this structure's last solution when its ``warm_starting`` is on,
+        else from zero; ``warm`` is not used (see the module docstring).
         """
+        if settings != self.options:
+            osqp_settings = _settings(settings)
+            if osqp_settings != self.settings:
+                self.solver.update_settings(**osqp_settings)
+                self.settings = osqp_settings
+            self.options = dict(settings)
         values, q = self.form.mapping.values(qp)
         b, g = self.form.rhs(values)
-        lower = np.concatenate([b, np.full(g.shape[0], -np.inf)])
+        lower = self.lower
+        lower[:b.shape[0]] = b
         upper = np.concatenate([b, g])
-        osqp_settings = _settings(settings)
-        if osqp_settings != self.settings:
-            self.solver.update_settings(**osqp_settings)
-            self.settings = osqp_settings
         Ax = self.stacked.values(values)
         started = time.perf_counter()
-        self.solver.update(q=q, l=lower, u=upper, Ax=Ax)
-        if warm is not None and osqp_settings["warm_starting"]:
-            self.solver.warm_start(x=self._primal_guess(qp, warm.x),
-                                   y=self._dual_guess(qp, warm, lower.shape[0]))
-        result = self.solver.solve(raise_error=False)
+        self.calls.update(q, lower, upper, Ax)
+        report = self.calls.solve()
         native_time = time.perf_counter() - started
-        y = np.asarray(result.y, dtype=np.float64)
-        self.last_primal = np.array(result.x, dtype=np.float64)
-        eq_dual, ineq_dual = self.form.duals(qp, y[:self.form.n_eq], y[self.form.n_eq:])
+        n_eq = self.form.n_eq
+        eq_dual, ineq_dual = self.form.duals(qp, report.y[:n_eq], report.y[n_eq:])
         return DirectResult(
-            x=self.form.mapping.primal(result.x, qp), eq_dual=eq_dual, ineq_dual=ineq_dual,
-            status=status_name("OSQP", result.info.status_val),
-            reported_time=float(result.info.run_time), native_time=native_time,
-            iterations=int(result.info.iter))
-
-
-    def _primal_guess(self, qp: StepQP, x: FloatArray) -> FloatArray:
-        """OSQP's primal vector: ``x`` for our unknowns, the last solve's auxiliaries."""
-        mapping = self.form.mapping
-        guess = (np.zeros(mapping.shape[1] - 1) if self.last_primal is None
-                 else self.last_primal.copy())
-        guess[mapping.x_offset:mapping.x_offset + qp.n_variables] = x
-        return guess
-
-    def _dual_guess(self, qp: StepQP, warm: WarmStart, n_rows: int) -> FloatArray:
-        """OSQP's ``y`` of ``[A; F]`` from our multipliers (the inverse of ``form.duals``)."""
-        mapping, y = self.form.mapping, np.zeros(n_rows)
-        rows, coefficient = mapping.eq
-        y[rows] = -warm.eq_dual / coefficient
-        lower = warm.ineq_dual
-        if mapping.upper is not None:  # z = z_lower - z_upper on the two-sided rows
-            lower = np.maximum(lower, 0.0)
-            rows, coefficient = mapping.upper
-            y[rows] = np.maximum(-warm.ineq_dual[qp.upper_rows], 0.0) / coefficient
-        rows, coefficient = mapping.lower
-        y[rows] = -lower / coefficient
-        return y
+            x=self.form.mapping.primal(report.x, qp), eq_dual=eq_dual, ineq_dual=ineq_dual,
+            status=status_name("OSQP", report.status), reported_time=report.run_time,
+            native_time=native_time, iterations=report.iterations)
 
 
 def _settings(options: dict[str, Any]) -> dict[str, Any]:
@@ -115,9 +149,10 @@ def build(problem: cp.Problem, names: dict[int, str], qp: StepQP,
     if not stacked.reproduces(reference, mapping.values(qp)[0]):
         raise Unavailable("the stacked constraint matrix does not reproduce cvxpy's")
     settings = _settings(options)
-    direct = DirectOSQP(form=form, stacked=stacked, solver=osqp.OSQP(), settings=settings)
-    direct.solver.setup(P=sp.csc_matrix(sp.triu(data.P, format="csc")), q=data.q,
-                        A=sp.csc_matrix(reference),
-                        l=np.concatenate([data.b, np.full(data.g.shape[0], -np.inf)]),
-                        u=np.concatenate([data.b, data.g]), **settings)
-    return direct
+    lower = np.concatenate([data.b, np.full(data.g.shape[0], -np.inf)])
+    solver = osqp.OSQP()
+    solver.setup(P=sp.csc_matrix(sp.triu(data.P, format="csc")), q=data.q,
+                 A=sp.csc_matrix(reference), l=lower, u=np.concatenate([data.b, data.g]),
+                 **settings)
+    return DirectOSQP(form=form, stacked=stacked, solver=solver, settings=settings,
+                      calls=_NativeCalls(solver), options=dict(options), lower=lower.copy())

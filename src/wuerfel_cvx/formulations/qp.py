@@ -38,6 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .. import _numba, row_kernel
+from .._sparse import canonical_csr
 from ..contacts import Contacts
 from ..geometry import FloatArray
 
@@ -298,13 +299,18 @@ def point_rows(
         return sp.csr_array(shape)
     index = np.stack([np.asarray(point) for point, _ in blocks], axis=1)  # (R, B)
     grad = np.stack([gradient for _, gradient in blocks], axis=1)  # (R, B, 2)
+    return stacked_point_rows(index, grad, n_points)
+
+
+def stacked_point_rows(index: np.ndarray, grad: FloatArray, n_points: int) -> sp.csr_array:
+    """:func:`point_rows` of the blocks stacked: ``index`` ``(R, B)``, ``grad`` ``(R, B, 2)``."""
+    n_rows = index.shape[0]
+    shape = (n_rows, 2 * n_points)
     if _numba.enabled:  # the same arrays, written by a compiled loop
         data, indices, indptr, canonical = row_kernel.point_rows(
             index.astype(np.int64, copy=False), grad.astype(np.float64, copy=False))
         if canonical:
-            compiled = sp.csr_array((data, indices, indptr), shape=shape)
-            compiled.has_canonical_format = True
-            return compiled
+            return canonical_csr(data, indices, indptr, shape)
     moving = index >= 0
     keep = np.repeat(moving.ravel(), 2)  # entries in (row, block, axis) order
     cols = (2 * index[:, :, None] + np.arange(2)).reshape(-1)[keep]

@@ -20,11 +20,13 @@ lengths hold to round-off.  Fixed tables only.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
 
-from .. import _numba, row_kernel
+from .. import _numba, motion_kernel, row_kernel
+from .._sparse import canonical_csr, empty_rows
 from ..contacts import Contacts
 from ..errors import InputError
 from ..geometry import FloatArray, corner_mean, cross, rot90
@@ -46,11 +48,15 @@ class RigidFormulation(SinglePass, FrictionSettings):
     """Distance (m) within which a point-edge pair is always constrained."""
     name: str = "rigid"
 
+    @cached_property
+    def _velocity(self) -> VelocityFormulation:
+        """The velocity formulation whose reach and contact rows this one takes."""
+        return VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin,
+                                   linearisation="start")
+
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
         """Contact reach (m) per body, as in the velocity formulation."""
-        velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin,
-                                       linearisation="start")
-        return velocity.body_reach(model, state, dt)
+        return self._velocity.body_reach(model, state, dt)
 
     def build(self, model: Model, state: State, contacts: Contacts, dt: float) -> StepQP:
         """The step QP in the boxes' new centre and angular velocities.
@@ -59,30 +65,25 @@ class RigidFormulation(SinglePass, FrictionSettings):
         """
         if model.table_mass is not None:
             raise InputError("the rigid formulation has fixed tables only", field="table_mass")
-        velocity = VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin,
-                                       linearisation="start")
         points = state.points
         all_points = model.all_points(points)
-        corner_rows, rhs = velocity.contact_rows(model, all_points, contacts, dt)
-        corner_rows, rhs, cones = contact_cones(model, all_points, contacts, corner_rows, rhs,
-                                                np.arange(len(contacts)),
-                                                edges=self.friction_model == "ccp")
+        corner_rows, rhs = self._velocity.contact_rows(model, all_points, contacts, dt)
+        cones = None
+        if np.any(model.friction > 0.0):  # else no contact has friction: no cones
+            corner_rows, rhs, cones = contact_cones(model, all_points, contacts, corner_rows,
+                                                    rhs, np.arange(len(contacts)),
+                                                    edges=self.friction_model == "ccp")
         if cones is not None:
             cones = replace(cones, slip=body_rows(cones.slip, points))
-        masses = model.point_masses.reshape(-1, 4)
-        # from the exact squares, not the current corners: constant weights keep the
-        # compiled-problem cache's key constant
-        inertia = np.sum(masses * np.sum(model.reference_corners**2, axis=2), axis=1)
-        centre_velocity, spin = body_velocities(points, state.velocities, masses)
-        weights = np.column_stack([masses.sum(axis=1), masses.sum(axis=1), inertia]).ravel()
-        target = np.column_stack([centre_velocity + dt * model.gravity, spin]).ravel()
-        no_rows = sp.csr_array((0, weights.shape[0]))
-        return declare_qp(weights, target, no_rows, np.zeros(0),
+        weights, target = rigid_objective(model, state, dt)
+        return declare_qp(weights, target, empty_rows(weights.shape[0]), np.zeros(0),
                           body_rows(corner_rows, points), rhs, contacts, cones=cones)
 
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
         """The corner velocities ``(4 n, 2)`` (m/s) of the new body velocities."""
         body = solution.reshape(-1, 3)
+        if _numba.enabled:  # the same numbers, by a compiled loop
+            return motion_kernel.corner_velocities(state.points, body)
         turned = rot90(_offsets(state.points))  # (n, 4, 2)
         # u + omega rot90(r), summed as the sparse corner map (8 n x 3 n) times solution would be
         corners = (0.0 + body[:, None, :2]) + turned * body[:, None, 2:]
@@ -92,6 +93,24 @@ class RigidFormulation(SinglePass, FrictionSettings):
         """Move each square rigidly with its new centre and angular velocity."""
         return rigid_step(model.reference_corners, state.points,
                           self.new_velocities(state, solution, dt), dt)
+
+
+def rigid_objective(model: Model, state: State, dt: float) -> tuple[FloatArray, FloatArray]:
+    """Weights ``(M, M, I)`` and target ``(u0 + dt g, omega0)`` per box, flat ``(3 n,)``.
+
+    ``I`` from the exact squares, not the current corners: constant weights keep the
+    compiled-problem cache's key constant.  With numba, a compiled loop
+    (:func:`wuerfel_cvx.motion_kernel.rigid_objective`) gives the same numbers bit for bit.
+    """
+    masses = model.point_masses.reshape(-1, 4)
+    if _numba.enabled:
+        return motion_kernel.rigid_objective(state.points, state.velocities, masses,
+                                             model.reference_corners, dt * model.gravity)
+    inertia = np.sum(masses * np.sum(model.reference_corners**2, axis=2), axis=1)
+    centre_velocity, spin = body_velocities(state.points, state.velocities, masses)
+    weights = np.column_stack([masses.sum(axis=1), masses.sum(axis=1), inertia]).ravel()
+    target = np.column_stack([centre_velocity + dt * model.gravity, spin]).ravel()
+    return weights, target
 
 
 def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
@@ -108,14 +127,13 @@ def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
     key, stays the same from step to step.
     """
     n_rows = corner_rows.shape[0]
-    turned = rot90(_offsets(points)).reshape(-1)  # per corner coordinate (4 n * 2,)
     n_cols = 3 * (corner_rows.shape[1] // 8)
-    if _numba.enabled:  # the same arrays, written by a compiled loop
-        matrix = sp.csr_array(row_kernel.body_rows(corner_rows.data, corner_rows.indices,
-                                                   corner_rows.indptr, turned),
-                              shape=(n_rows, n_cols))
-        matrix.has_canonical_format = True
-        return matrix
+    if _numba.enabled:  # the same arrays, written by compiled loops
+        return canonical_csr(*row_kernel.body_rows(corner_rows.data, corner_rows.indices,
+                                                   corner_rows.indptr,
+                                                   motion_kernel.turned_offsets(points)),
+                             shape=(n_rows, n_cols))
+    turned = rot90(_offsets(points)).reshape(-1)  # per corner coordinate (4 n * 2,)
     row = np.repeat(np.arange(n_rows, dtype=np.int64), np.diff(corner_rows.indptr))
     col = corner_rows.indices.astype(np.int64)
     value = corner_rows.data

@@ -10,10 +10,13 @@ the velocity form and an acceleration (m/s^2) in the acceleration form.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
+from .. import _numba, row_kernel
 from ..contacts import Contacts
 from ..geometry import FloatArray, edge_parameter, rot90, side_gradients
 from ..model import IntArray, Model
+from .qp import point_rows, stacked_point_rows
 
 
 def unknown_index(model: Model, index: IntArray) -> IntArray:
@@ -49,6 +52,20 @@ def rod_blocks(model: Model, points: FloatArray) -> tuple[list[tuple[IntArray, F
     return [(i, d / length), (j, -d / length)], error
 
 
+def rod_rows(model: Model, points: FloatArray) -> tuple[sp.csr_array, FloatArray]:
+    """The rows of :func:`rod_blocks` (one per rod) in the unknown points' columns, and ``C/l``.
+
+    With numba the blocks are computed by a compiled loop
+    (:func:`wuerfel_cvx.row_kernel.rod_blocks`), with the same numbers bit for bit.
+    """
+    n_unknown = n_unknown_points(model)
+    if not _numba.enabled:
+        blocks, error = rod_blocks(model, points)
+        return point_rows(len(error), n_unknown, blocks), error
+    index, gradient, error = row_kernel.rod_blocks(points, model.rods, model.rod_lengths)
+    return stacked_point_rows(index, gradient, n_unknown), error
+
+
 def side_blocks(all_points: FloatArray, contacts: Contacts,
                 model: Model) -> list[tuple[IntArray, FloatArray]]:
     """Exact gradient of ``A / |p_j - p_i|`` blocks for each contact (edge length fixed).
@@ -62,6 +79,21 @@ def side_blocks(all_points: FloatArray, contacts: Contacts,
     return [(unknown_index(model, contacts.edge_i), g_i * scale),
             (unknown_index(model, contacts.edge_j), g_j * scale),
             (unknown_index(model, contacts.point), g_k * scale)]
+
+
+def side_rows(all_points: FloatArray, contacts: Contacts, model: Model) -> sp.csr_array:
+    """The rows of :func:`side_blocks` (one per contact) in the unknown points' columns.
+
+    With numba the blocks are computed by a compiled loop
+    (:func:`wuerfel_cvx.row_kernel.side_blocks`), with the same numbers bit for bit.
+    """
+    n_unknown = n_unknown_points(model)
+    if not _numba.enabled:
+        return point_rows(len(contacts), n_unknown, side_blocks(all_points, contacts, model))
+    n_moving = model.n_points if model.table_mass is None else -1
+    index, gradient = row_kernel.side_blocks(all_points, contacts.point, contacts.edge_i,
+                                             contacts.edge_j, n_moving)
+    return stacked_point_rows(index, gradient, n_unknown)
 
 
 def seed_side_blocks(all_points: FloatArray, contacts: Contacts,

@@ -48,6 +48,7 @@ from typing import Literal
 import numpy as np
 import scipy.sparse as sp
 
+from .. import _numba, motion_kernel
 from ..contacts import Contacts, find_contacts
 from ..geometry import FloatArray
 from ..model import Model, State
@@ -59,8 +60,8 @@ from .qp import StepQP, declare_qp, point_rows
 from .rows import (
     held_table_blocks,
     n_unknown_points,
-    rod_blocks,
-    side_blocks,
+    rod_rows,
+    side_rows,
     unknown_masses,
 )
 
@@ -89,6 +90,10 @@ class VelocityFormulation(FrictionSettings):
 
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
         """How far (m) each body may travel towards another within one step, plus margin."""
+        if _numba.enabled:  # the same numbers, by a compiled loop
+            return motion_kernel.body_reach(state.velocities, model.n_tables,
+                                            0.5 * self.contact_margin, dt,
+                                            float(dt * np.linalg.norm(model.gravity)))
         speeds = np.linalg.norm(state.velocities, axis=1).reshape(-1, 4).max(axis=1)
         reach_squares = 0.5 * self.contact_margin + dt * (speeds + dt * np.linalg.norm(
             model.gravity))
@@ -107,8 +112,7 @@ class VelocityFormulation(FrictionSettings):
         target[: model.n_points] = velocities + dt * model.gravity
         target[model.n_points:] = dt * model.gravity  # heavy table: held by equalities
 
-        blocks, rod_error = rod_blocks(model, points)
-        rod_matrix = point_rows(len(rod_error), n_unknown, blocks)
+        rod_matrix, rod_error = rod_rows(model, points)
         held = held_table_blocks(model)
         held_matrix = point_rows(len(held[0][0]), n_unknown, held) if held else None
         eq_matrix = (rod_matrix if held_matrix is None else
@@ -199,8 +203,7 @@ class VelocityFormulation(FrictionSettings):
         Speculative for a point outside (``rate = 1/dt``; it may close its gap, its
         distance from the face, :attr:`Contacts.gap`), Baumgarte for one inside.
         """
-        matrix = point_rows(len(contacts), n_unknown_points(model),
-                            side_blocks(all_points, contacts, model))
+        matrix = side_rows(all_points, contacts, model)
         rate = np.where(contacts.distance > 0.0, 1.0 / dt, self.beta / dt)
         return matrix, -rate * contacts.gap
 

@@ -1,0 +1,69 @@
+"""CSR arrays from arrays already in canonical form, without scipy's per-call checks.
+
+``scipy.sparse.csr_array((data, indices, indptr), shape=...)`` checks and converts its
+input on every call: 15 to 25 us, more than the compiled loops that wrote the arrays on a
+small scene (:mod:`wuerfel_cvx.row_kernel`).  The step path's rows are written in canonical
+form by construction (each row's columns sorted, one entry per cell), so
+:func:`canonical_csr` hands the arrays to a new ``csr_array`` directly, with the index
+dtype the constructor would choose (int64 if either index array is int64, else int32).
+The result is the constructor's, attribute for attribute (``tests/test_sparse.py``).
+
+This relies on how a scipy ``csr_array`` keeps its state (the instance attributes
+``_shape``, ``maxprint``, ``data``, ``indices`` and ``indptr``).  That layout is checked
+once, on a matrix the constructor made; if another scipy keeps its state otherwise, every
+call goes through the constructor, with the same results.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from .geometry import FloatArray
+
+_LAYOUT = frozenset({"_shape", "maxprint", "data", "indices", "indptr"})
+"""The instance attributes of a freshly constructed ``csr_array`` (scipy 1.11 to 1.17)."""
+
+_INT32_LIMIT = np.iinfo(np.int32).max
+_INDEX_DTYPES = (np.dtype(np.int32), np.dtype(np.int64))
+
+
+def _template() -> dict[str, object] | None:
+    """A constructed ``csr_array``'s attributes, or ``None`` if the layout is not known."""
+    probe = sp.csr_array((np.zeros(1), np.zeros(1, dtype=np.int32),
+                          np.array([0, 1], dtype=np.int32)), shape=(1, 1))
+    state = dict(vars(probe))
+    return state if frozenset(state) == _LAYOUT else None
+
+
+_TEMPLATE = _template()
+
+
+def canonical_csr(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+                  shape: tuple[int, int]) -> sp.csr_array:
+    """The ``csr_array`` of canonical CSR arrays (sorted columns, no duplicate cells).
+
+    As ``csr_array((data, indices, indptr), shape=shape)`` followed by
+    ``has_canonical_format = True``; the caller vouches for the arrays' form.  ``data`` is
+    float64; ``indices`` and ``indptr`` int32 or int64 (others go through the constructor).
+    """
+    rows, columns = int(shape[0]), int(shape[1])
+    if (_TEMPLATE is None or data.dtype != np.float64
+            or indices.dtype not in _INDEX_DTYPES or indptr.dtype not in _INDEX_DTYPES):
+        matrix = sp.csr_array((data, indices, indptr), shape=(rows, columns))
+    else:  # the index dtype as scipy picks it for a sparse array: int64 if either is
+        wide = (max(rows, columns) > _INT32_LIMIT or indices.dtype == np.int64
+                or indptr.dtype == np.int64)
+        index_dtype = np.int64 if wide else np.int32
+        matrix = sp.csr_array.__new__(sp.csr_array)
+        matrix.__dict__.update(_TEMPLATE, _shape=(rows, columns), data=data,
+                               indices=indices.astype(index_dtype, copy=False),
+                               indptr=indptr.astype(index_dtype, copy=False))
+    matrix.has_canonical_format = True
+    return matrix
+
+
+def empty_rows(n_columns: int) -> sp.csr_array:
+    """A ``csr_array`` with no rows and ``n_columns`` columns (as ``csr_array((0, n))``)."""
+    return canonical_csr(np.zeros(0), np.zeros(0, dtype=np.int32),
+                         np.zeros(1, dtype=np.int32), (0, n_columns))
