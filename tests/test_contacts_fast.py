@@ -344,7 +344,18 @@ def old_functions(monkeypatch: pytest.MonkeyPatch) -> None:
         monkeypatch.setattr(searching, "find_contacts", find_contacts)
     for module in (velocity_module, seed_module):
         monkeypatch.setattr(module, "point_rows", point_rows)
-    monkeypatch.setattr(velocity_module, "side_blocks", side_blocks)
+
+    def old_side_rows(all_points: FloatArray, contacts: Contacts,
+                      model: Model) -> sp.csr_array:
+        return point_rows(len(contacts), n_unknown_points(model),
+                          side_blocks(all_points, contacts, model))
+
+    def old_rod_rows(model: Model, points: FloatArray) -> tuple[sp.csr_array, FloatArray]:
+        blocks, error = rod_blocks(model, points)
+        return point_rows(len(error), n_unknown_points(model), blocks), error
+
+    monkeypatch.setattr(velocity_module, "side_rows", old_side_rows)
+    monkeypatch.setattr(velocity_module, "rod_rows", old_rod_rows)
 
 
 @pytest.mark.parametrize("formulation", ["velocity", "seed"])

@@ -110,16 +110,15 @@ def fit_motion(reference: FloatArray, cos: FloatArray, sin: FloatArray,
 
 @compiled
 def moved(reference: FloatArray, cos: FloatArray, sin: FloatArray, center: FloatArray,
-          center_velocity: FloatArray, spin: FloatArray, dt: float,
-          ) -> tuple[FloatArray, FloatArray]:
-    """Corners and their velocities ``(4 n, 2)`` after ``dt``, at the turned angle.
+          center_velocity: FloatArray, spin: FloatArray, dt: float, points: FloatArray,
+          velocities: FloatArray) -> None:
+    """Write the corners and their velocities ``(4 n, 2)`` after ``dt`` into the last two.
 
     ``cos`` and ``sin`` of the new angle ``(n,)``; ``center`` and ``center_velocity``
-    ``(n, 2)`` and ``spin`` ``(n,)`` of the fitted motion.
+    ``(n, 2)`` and ``spin`` ``(n,)`` of the fitted motion.  The caller allocates the outputs,
+    so the state's arrays are NumPy's own (they are what a trajectory keeps).
     """
     n = reference.shape[0]
-    points = np.empty((4 * n, 2))
-    velocities = np.empty((4 * n, 2))
     for b in range(n):
         new_x = center[b, 0] + dt * center_velocity[b, 0]
         new_y = center[b, 1] + dt * center_velocity[b, 1]
@@ -131,7 +130,6 @@ def moved(reference: FloatArray, cos: FloatArray, sin: FloatArray, center: Float
             points[4 * b + k, 1] = new_y + offset_y
             velocities[4 * b + k, 0] = center_velocity[b, 0] + spin[b] * -offset_y
             velocities[4 * b + k, 1] = center_velocity[b, 1] + spin[b] * offset_x
-    return points, velocities
 
 
 @compiled

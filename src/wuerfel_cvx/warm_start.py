@@ -13,10 +13,12 @@ has a *row id* ``(block, point, edge_i, edge_j)`` (:func:`row_ids`).  The next Q
   contact that is new.
 
 A warm start changes where a solver starts, never the problem: an iterative solver
-(OSQP, PROXQP) stops at the same tolerance, an active-set solver (DAQP) at the same
-optimum, and every answer is checked by the same KKT residuals as a cold one.  QPs whose
-rows are not one block per contact (friction cones) get the unknowns and rod multipliers
-only.
+(PROXQP) stops at the same tolerance, an active-set solver (DAQP) at the same optimum, and
+every answer is checked by the same KKT residuals as a cold one.  QPs whose rows are not one
+block per contact (friction cones) get the unknowns and rod multipliers only.  Only the
+solvers that take such a start (:attr:`~wuerfel_cvx.solvers.SolverSpec.takes_warm_start`)
+have guesses made and solutions kept; OSQP starts from its structure's own last solution
+(:mod:`wuerfel_cvx.backends.osqp`).
 """
 
 from __future__ import annotations

@@ -7,8 +7,9 @@ Two tables, each a CSV and a Markdown table (``python -m wuerfel_cvx.bench.struc
   (:mod:`wuerfel_cvx.slots`): QPs canonicalised by cvxpy (declared afresh or compiled),
   structures compiled, slot layouts, and the median step and solver times;
 * ``warm-starts.csv``: per scene, formulation and solver that takes a start (OSQP, PROXQP,
-  DAQP), cold against warm (:mod:`wuerfel_cvx.warm_start`): iterations per QP and the
-  median solver and step times, on the same steps.
+  DAQP), cold against warm (:mod:`wuerfel_cvx.warm_start`; OSQP warm from its structure's
+  own last solution): iterations per QP and the median solver and step times, on the same
+  steps.
 
 Counts and iterations are exact and repeatable; times are medians of one run on whatever
 machine runs it (read them as ratios within a row).

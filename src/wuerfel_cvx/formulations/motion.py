@@ -99,8 +99,9 @@ def rigid_step(reference: FloatArray, points: FloatArray, velocities: FloatArray
         angle = np.arctan2(cross_sum, dot_sum)
         center_velocity, omega, turned = motion_kernel.fit_motion(
             reference, np.cos(angle), np.sin(angle), velocities, angle, dt)
-        new_points, new_velocities = motion_kernel.moved(
-            reference, np.cos(turned), np.sin(turned), center, center_velocity, omega, dt)
+        new_points, new_velocities = np.empty(points.shape), np.empty(points.shape)
+        motion_kernel.moved(reference, np.cos(turned), np.sin(turned), center,
+                            center_velocity, omega, dt, new_points, new_velocities)
         return State(new_points, new_velocities)
     center, angle, center_velocity, omega = _fit(reference, points, velocities)
     new_offsets = _rotated(angle + omega * dt, reference)
