@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from wuerfel_cvx import Scene, Simulation, _numba, map_kernel
+from kernel_paths import both
+from wuerfel_cvx import Scene, Simulation, map_kernel
 from wuerfel_cvx.backends._map import scaled
 from wuerfel_cvx.compiled import structure_key
 from wuerfel_cvx.formulations.qp import StepQP
@@ -34,15 +35,6 @@ def direct_paths(scene: str, formulation: str, solver: str) -> list[tuple[Any, S
         if compiled is not None and compiled.direct.get(solver) is not None:
             paths.append((compiled.direct[solver], qp))
     return paths
-
-
-def both(monkeypatch: pytest.MonkeyPatch, compute):  # type: ignore[no-untyped-def]
-    """``compute()`` on the NumPy path, then on the kernels."""
-    results = []
-    for enabled in (False, True):
-        monkeypatch.setattr(_numba, "enabled", enabled)
-        results.append(compute())
-    return results
 
 
 def assert_same_bits(compiled: np.ndarray, reference: np.ndarray) -> None:

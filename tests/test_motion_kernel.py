@@ -13,8 +13,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from kernel_paths import both
 from test_contacts_fast import LIBRARY, library_states
-from wuerfel_cvx import _numba, motion_kernel, simulate
+from wuerfel_cvx import motion_kernel, simulate
 from wuerfel_cvx.formulations.motion import rigid_step
 from wuerfel_cvx.formulations.rigid import RigidFormulation, rigid_objective
 from wuerfel_cvx.formulations.velocity import VelocityFormulation
@@ -26,15 +27,6 @@ pytestmark = [pytest.mark.integration,
               pytest.mark.skipif(not motion_kernel.AVAILABLE, reason="numba is not installed")]
 
 DT = 0.01
-
-
-def both(monkeypatch: pytest.MonkeyPatch, build):  # type: ignore[no-untyped-def]
-    """``build()`` on the NumPy path, then on the kernels."""
-    results = []
-    for enabled in (False, True):
-        monkeypatch.setattr(_numba, "enabled", enabled)
-        results.append(build())
-    return results
 
 
 def assert_same_bits(compiled: FloatArray, reference: FloatArray) -> None:

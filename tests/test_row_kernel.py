@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from kernel_paths import both
 from test_contacts_fast import (
     LIBRARY,
     assert_same_matrix,
@@ -20,7 +21,7 @@ from test_contacts_fast import (
     random_model,
     random_points,
 )
-from wuerfel_cvx import _numba, row_kernel
+from wuerfel_cvx import row_kernel
 from wuerfel_cvx.contacts import find_contacts
 from wuerfel_cvx.formulations import get_formulation
 from wuerfel_cvx.formulations.qp import point_rows
@@ -39,15 +40,6 @@ from wuerfel_cvx.model import Model, State
 
 pytestmark = [pytest.mark.integration,
               pytest.mark.skipif(not row_kernel.AVAILABLE, reason="numba is not installed")]
-
-
-def both(monkeypatch: pytest.MonkeyPatch, build):  # type: ignore[no-untyped-def]
-    """``build()`` on the NumPy path, then on the kernels."""
-    results = []
-    for enabled in (False, True):
-        monkeypatch.setattr(_numba, "enabled", enabled)
-        results.append(build())
-    return results
 
 
 def assert_same_rows(monkeypatch: pytest.MonkeyPatch, model: Model, state: State) -> int:
