@@ -52,7 +52,7 @@ Batching
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -119,6 +119,13 @@ class Contacts:
             return 0.0
         return float(max(0.0, -np.min(self.distance)))
 
+    def selected(self, keep: NDArray[np.bool_]) -> Contacts:
+        """The contacts where ``keep`` ``(len,)`` is true, in their order, every field kept."""
+        return Contacts(point=self.point[keep], edge_i=self.edge_i[keep],
+                        edge_j=self.edge_j[keep], point_body=self.point_body[keep],
+                        edge_body=self.edge_body[keep], distance=self.distance[keep],
+                        clearance=None if self.clearance is None else self.clearance[keep])
+
     def restricted(self, boxes: IntArray, n_boxes: int, n_tables: int) -> Contacts:
         """The contacts among ``boxes`` (ascending) and the tables, renumbered for them.
 
@@ -129,17 +136,14 @@ class Contacts:
         new_body = np.full(n_boxes + n_tables, -1, dtype=np.int64)
         new_body[boxes] = np.arange(boxes.size)
         new_body[n_boxes:] = boxes.size + np.arange(n_tables)
-        keep = (new_body[self.point_body] >= 0) & (new_body[self.edge_body] >= 0)
+        kept = self.selected((new_body[self.point_body] >= 0) & (new_body[self.edge_body] >= 0))
 
         def renumbered(points: IntArray) -> IntArray:
             return 4 * new_body[points // 4] + points % 4
 
-        return Contacts(point=renumbered(self.point[keep]), edge_i=renumbered(self.edge_i[keep]),
-                        edge_j=renumbered(self.edge_j[keep]),
-                        point_body=new_body[self.point_body[keep]],
-                        edge_body=new_body[self.edge_body[keep]],
-                        distance=self.distance[keep],
-                        clearance=None if self.clearance is None else self.clearance[keep])
+        return replace(kept, point=renumbered(kept.point), edge_i=renumbered(kept.edge_i),
+                       edge_j=renumbered(kept.edge_j), point_body=new_body[kept.point_body],
+                       edge_body=new_body[kept.edge_body])
 
 
     def keys(self, boxes: IntArray | None = None, n_boxes: int = 0) -> list[ContactKey]:
@@ -269,8 +273,10 @@ def reference_sides(distances: FloatArray, face_length: FloatArray
 
 def choose_edges(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
                  distances: FloatArray, pair_margin: FloatArray
-                 ) -> tuple[IntArray, NDArray[np.bool_]]:
-    """Edge index and whether it holds, ``(4, P)``, for each corner of each pair.
+                 ) -> tuple[IntArray, NDArray[np.bool_], FloatArray]:
+    """Edge index, whether it holds, and how far (m) it projects past the face's end.
+
+    Each is ``(4, P)``, per corner of each pair; the last is < 0 within the face.
 
     ``corners`` ``(n_bodies, 4, 2)`` (m); ``edge_body``, ``point_body`` ``(P,)`` and
     ``distances`` ``(4 corners, 4 edges, P)`` as for :func:`reference_sides`;
@@ -305,7 +311,7 @@ def choose_edges(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
     within = beyond <= TIE_TOLERANCE
     near_end = ((distance > 0.0) & (beyond <= length)
                 & (np.hypot(beyond, distance) <= pair_margin[None, :]))
-    return edge, offered & (within | near_end) & (distance <= pair_margin[None, :])
+    return edge, offered & (within | near_end) & (distance <= pair_margin[None, :]), beyond
 
 
 def find_contacts(
@@ -323,21 +329,11 @@ def find_contacts(
     return _search(model, points, reach)
 
 
-def clearances(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
-               corner: IntArray, edge: IntArray, distance: FloatArray) -> FloatArray:
-    """:attr:`Contacts.clearance` (m) of held rows, all ``(m,)``.
+def clearances(beyond: FloatArray, distance: FloatArray) -> FloatArray:
+    """:attr:`Contacts.clearance` (m) of rows ``beyond`` (m) past their faces' ends.
 
-    Row ``r`` is ``corner[r]`` of ``point_body[r]`` against face ``edge[r]`` of
-    ``edge_body[r]``, at signed line distance ``distance[r]`` (m).  0 for a corner whose
-    projection is within :data:`TIE_TOLERANCE` of the face, else
-    ``sqrt(beyond^2 + distance^2) - distance`` with ``beyond`` (m) past the nearer end.
+    ``distance`` (m): the rows' line distances.  0 within :data:`TIE_TOLERANCE` of the face.
     """
-    start = corners[edge_body, edge]
-    along = corners[edge_body, (edge + 1) % 4] - start
-    length = _lengths(along)
-    offset = corners[point_body, corner] - start
-    place = (offset[:, 0] * along[:, 0] + offset[:, 1] * along[:, 1]) / length
-    beyond = np.maximum(-place, place - length)
     return np.where(beyond > TIE_TOLERANCE,
                     np.sqrt(beyond * beyond + distance * distance) - distance, 0.0)
 
@@ -354,12 +350,12 @@ def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
     """
     distances = pair_distances(corners, edge_body, point_body)
     pair_margin = reach[edge_body] + reach[point_body]
-    edge, keep = choose_edges(corners, edge_body, point_body, distances, pair_margin)
+    edge, keep, beyond = choose_edges(corners, edge_body, point_body, distances, pair_margin)
     chosen = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]  # (4 corners, P)
     pair_index, corner = np.nonzero(keep.T)  # pair-major order
-    face, distance = edge[corner, pair_index], chosen[corner, pair_index]
-    return pair_index, corner, face, distance, clearances(
-        corners, edge_body[pair_index], point_body[pair_index], corner, face, distance)
+    distance = chosen[corner, pair_index]
+    return (pair_index, corner, edge[corner, pair_index], distance,
+            clearances(beyond[corner, pair_index], distance))
 
 
 def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:

@@ -108,8 +108,12 @@ def gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArr
     ``tau`` (s) is ``(m,)`` or ``(m, K)`` for ``m`` contacts; the result has its shape.
     """
     p_i, p_j, p_k = _corners_at(motion, contacts, tau)
-    edge = p_j - p_i
-    return np.asarray(cross(edge, p_k - p_i) / np.hypot(edge[..., 0], edge[..., 1]))
+    return _line_distances(p_j - p_i, p_k - p_i)
+
+
+def _line_distances(edge: FloatArray, offset: FloatArray) -> FloatArray:
+    """Signed distances (m) of points at ``offset`` from an edge's start along ``edge``."""
+    return np.asarray(cross(edge, offset) / np.hypot(edge[..., 0], edge[..., 1]))
 
 
 def face_gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArray:
@@ -121,13 +125,12 @@ def face_gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> Flo
     distance from the face (the segment), ``hypot(beyond, line distance)``, and once it
     has moved over the face, its line distance.
     """
-    gaps = gaps_at(motion, contacts, tau)
     if contacts.clearance is None or not np.any(contacts.clearance > 0.0):
-        return gaps
+        return gaps_at(motion, contacts, tau)
     p_i, p_j, p_k = _corners_at(motion, contacts, tau)
-    edge = p_j - p_i
+    edge, offset = p_j - p_i, p_k - p_i
+    gaps = _line_distances(edge, offset)
     length = np.hypot(edge[..., 0], edge[..., 1])
-    offset = p_k - p_i
     place = (offset[..., 0] * edge[..., 0] + offset[..., 1] * edge[..., 1]) / length
     beyond = np.maximum(-place, place - length)
     past = np.reshape(contacts.clearance > 0.0, (-1,) + (1,) * (np.ndim(tau) - 1)) & (

@@ -68,11 +68,9 @@ class RigidFormulation(SinglePass, FrictionSettings):
         points = state.points
         all_points = model.all_points(points)
         corner_rows, rhs = self._velocity.contact_rows(model, all_points, contacts, dt)
-        cones = None
-        if np.any(model.friction > 0.0):  # else no contact has friction: no cones
-            corner_rows, rhs, cones = contact_cones(model, all_points, contacts, corner_rows,
-                                                    rhs, np.arange(len(contacts)),
-                                                    edges=self.friction_model == "ccp")
+        corner_rows, rhs, cones = contact_cones(model, all_points, contacts, corner_rows, rhs,
+                                                np.arange(len(contacts)),
+                                                edges=self.friction_model == "ccp")
         if cones is not None:
             cones = replace(cones, slip=body_rows(cones.slip, points))
         weights, target = rigid_objective(model, state, dt)

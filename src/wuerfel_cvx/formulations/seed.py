@@ -140,10 +140,7 @@ def _active(contacts: Contacts, all_points: FloatArray, all_velocities: FloatArr
                      all_points[contacts.point], all_velocities[contacts.edge_i],
                      all_velocities[contacts.edge_j], all_velocities[contacts.point])
     keep = (contacts.distance <= touching) & ((rate <= 0.0) | (not require_approach))
-    return Contacts(point=contacts.point[keep], edge_i=contacts.edge_i[keep],
-                    edge_j=contacts.edge_j[keep], point_body=contacts.point_body[keep],
-                    edge_body=contacts.edge_body[keep], distance=contacts.distance[keep],
-                    clearance=None if contacts.clearance is None else contacts.clearance[keep])
+    return contacts.selected(keep)
 
 
 def _pair_faces(contacts: Contacts, all_points: FloatArray) -> Contacts:
