@@ -96,3 +96,24 @@ def test_a_run_is_bit_identical_on_either_narrow_phase(monkeypatch: pytest.Monke
     assert np.array_equal(runs[0].points, runs[1].points)
     assert np.array_equal(runs[0].velocities, runs[1].velocities)
     assert runs[0].metrics["n_contacts"].sum() > 0
+
+
+def test_a_single_leafs_pairs_are_the_trees_in_its_order() -> None:
+    """Up to ``LEAF_SIZE`` centres the compiled loop lists the tree's pairs, in order.
+
+    Random clouds at many scales and radii (from none to all pairs within reach), and
+    integer grids whose distances tie the radius exactly (the tree counts ``d == r`` in).
+    """
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(7)
+    clouds = [rng.normal(size=(int(rng.integers(2, contact_kernel.LEAF_SIZE + 1)), 2))
+              * rng.uniform(0.01, 10.0) for _ in range(400)]
+    grid = np.array([[x, y] for x in range(4) for y in range(4)], dtype=np.float64)
+    clouds += [grid, grid[:5], grid * 0.5]
+    for centers in clouds:
+        for radius in (0.0, 0.5, 1.0, 2.0, float(rng.uniform(0.0, 8.0)), 1e3):
+            expected = cKDTree(centers).query_pairs(r=radius, output_type="ndarray")
+            found = contact_kernel.candidate_pairs(centers, radius)
+            assert found.dtype == expected.dtype
+            assert np.array_equal(found, expected)

@@ -25,7 +25,7 @@ from wuerfel_cvx.bench.report import write_report
 from wuerfel_cvx.bench.report_friction import friction_section
 from wuerfel_cvx.bench.suite import GridPoint, Suite
 from wuerfel_cvx.bench.sweep import RESULTS_FILE, run_sweep
-from wuerfel_cvx.criteria import CRITERIA_COLUMNS
+from wuerfel_cvx.criteria import CRITERIA_COLUMNS, combine_criteria
 from wuerfel_cvx.errors import InputError
 
 pytestmark = pytest.mark.integration
@@ -315,3 +315,16 @@ def test_a_report_without_friction_has_no_friction_section(tmp_path: Path) -> No
     readme = write_report(REPO / "tests" / "fixtures" / "results-small.csv", tmp_path)
     assert "## Friction" not in readme.read_text(encoding="utf-8")
     assert not (readme.parent / "friction-criteria.png").exists()
+
+
+def test_one_qps_criteria_are_combined_as_its_own() -> None:
+    """The one-QP shortcut gives what the general combination gives beside an all-NaN QP."""
+    row = dict.fromkeys(CRITERIA_COLUMNS, math.nan)
+    row |= {column: 0.5 * (index + 1) for index, column in enumerate(CRITERIA_COLUMNS[1:])}
+    unknown = dict.fromkeys(CRITERIA_COLUMNS, math.nan)
+    alone, general = combine_criteria([row]), combine_criteria([row, unknown])
+    assert list(alone) == list(general)
+    for column in CRITERIA_COLUMNS:
+        assert alone[column] == general[column] or (math.isnan(alone[column])
+                                                    and math.isnan(general[column]))
+    assert math.isnan(alone[CRITERIA_COLUMNS[0]]) and alone[CRITERIA_COLUMNS[1]] == 0.5

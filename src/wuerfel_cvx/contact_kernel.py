@@ -9,6 +9,9 @@ then, once both orders of a pair are known, the reference side, the incident fac
 held corners.  The broad phase keeps its tree query (:class:`scipy.spatial.cKDTree`, whose
 order of candidate pairs the contacts' order follows); :func:`bounds` and
 :func:`pairs_within` compute the bounding circles and filter the candidates around it.
+Up to :data:`LEAF_SIZE` squares the tree is a single leaf, whose query lists the pairs
+in index order; :func:`candidate_pairs` then lists them by a compiled loop, the same
+pairs in the same order, without building a tree.
 
 It is the same arithmetic in the same order as the NumPy path (each distance
 ``(e_x o_y - e_y o_x) / |e|``, each projection ``(o_x a_x + o_y a_y) / |a|``, ``hypot`` from
@@ -24,6 +27,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from . import _numba
 from ._numba import compiled
@@ -36,6 +40,9 @@ TIE_TOLERANCE = 1e-9
 
 AVAILABLE = _numba.AVAILABLE
 """Whether the compiled narrow phase can run (numba is importable)."""
+
+LEAF_SIZE = 16
+"""``cKDTree``'s default ``leafsize``: a tree of at most this many points is one leaf."""
 
 
 @compiled
@@ -212,6 +219,38 @@ def _pairs(centers: FloatArray, bound: FloatArray, candidates: IntArray,
         pairs[p, 0], pairs[p, 1] = kept[p, 0], kept[p, 1]
         pairs[count + p, 0], pairs[count + p, 1] = kept[p, 1], kept[p, 0]
     return pairs
+
+
+@compiled
+def _leaf_pairs(centers: FloatArray, radius: float) -> IntArray:
+    """Pairs ``i < j`` with ``|c_i - c_j|^2 <= radius^2``, by ``i``, then ``j``.
+
+    A single leaf's query: every pair's squared distance against the squared radius.
+    """
+    n = centers.shape[0]
+    found = np.empty((n * (n - 1) // 2, 2), dtype=np.int64)
+    limit = radius * radius
+    count = 0
+    for i in range(n):
+        for j in range(i + 1, n):
+            x = centers[i, 0] - centers[j, 0]
+            y = centers[i, 1] - centers[j, 1]
+            if x * x + y * y <= limit:
+                found[count, 0], found[count, 1] = i, j
+                count += 1
+    return found[:count]
+
+
+def candidate_pairs(centers: FloatArray, radius: float) -> IntArray:
+    """``cKDTree(centers).query_pairs(radius, output_type="ndarray")``, in its order.
+
+    Up to :data:`LEAF_SIZE` centres (m) the tree is one leaf, and a compiled loop lists
+    the same pairs in the same order (``tests/test_contact_kernel.py`` checks it against
+    the tree); beyond, the tree is built and queried.
+    """
+    if centers.shape[0] <= LEAF_SIZE:
+        return _leaf_pairs(np.ascontiguousarray(centers, dtype=np.float64), float(radius))
+    return cKDTree(centers).query_pairs(r=radius, output_type="ndarray")
 
 
 def bounds(corners: FloatArray, reach: FloatArray) -> tuple[FloatArray, FloatArray]:

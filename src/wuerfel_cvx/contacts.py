@@ -190,8 +190,7 @@ def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntAr
     corners = all_points.reshape(-1, 4, 2)
     if _numba.enabled:  # the same pairs in the same order, by compiled loops
         centers, bound = contact_kernel.bounds(corners, reach)
-        candidates = (cKDTree(centers[:n]).query_pairs(r=2.0 * float(bound[:n].max()),
-                                                       output_type="ndarray")
+        candidates = (contact_kernel.candidate_pairs(centers[:n], 2.0 * float(bound[:n].max()))
                       if n > 1 else np.zeros((0, 2), dtype=np.int64))
         return contact_kernel.pairs_within(centers, bound, candidates, n)
     centers = corner_mean(corners)

@@ -95,6 +95,8 @@ def combine_criteria(rows: list[dict[str, float]]) -> dict[str, float]:
     """
     if not rows:
         return dict.fromkeys(CRITERIA_COLUMNS, math.nan)
+    if len(rows) == 1:  # one QP: its own numbers (the max or sum of one value, NaN kept)
+        return {column: float(rows[0][column]) for column in CRITERIA_COLUMNS}
     combined = {}
     for column in CRITERIA_COLUMNS:
         values = np.array([row[column] for row in rows])

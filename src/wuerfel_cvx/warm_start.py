@@ -85,13 +85,15 @@ class WarmStarts:
     """Each solver's last verified solution and how to map it onto the next QP."""
 
     _last: dict[str, _Solved] = field(default_factory=dict, repr=False)
+    _ids_of: tuple[StepQP, IntArray | None] | None = field(default=None, repr=False)
+    """The last QP given a guess and its row ids, for :meth:`remember` of the same QP."""
     guesses: int = 0
     """QPs given a warm start so far."""
 
     def remember(self, solver: str, qp: StepQP, x: FloatArray, eq_dual: FloatArray,
                  ineq_dual: FloatArray, scale: float) -> None:
         """Keep ``solver``'s solution of ``qp`` (solver units, unknowns scaled by ``scale``)."""
-        ids = row_ids(qp)
+        ids = self._row_ids(qp)
         order = None if ids is None else np.argsort(ids, kind="stable")
         self._last[solver] = _Solved(
             x=np.array(x, dtype=np.float64), eq_dual=np.array(eq_dual, dtype=np.float64),
@@ -112,7 +114,7 @@ class WarmStarts:
                    else np.zeros(qp.n_equalities))
         ineq_dual = np.zeros(qp.n_inequalities)
         matched = 0
-        ids = row_ids(qp)
+        ids = self._row_ids(qp)
         if ids is not None and last.ids is not None and last.ids.size and ids.size:
             place = np.minimum(np.searchsorted(last.ids, ids), last.ids.size - 1)
             hit = last.ids[place] == ids
@@ -120,3 +122,9 @@ class WarmStarts:
             matched = int(np.count_nonzero(hit))
         self.guesses += 1
         return WarmStart(x=last.x, eq_dual=eq_dual, ineq_dual=ineq_dual, matched_rows=matched)
+
+    def _row_ids(self, qp: StepQP) -> IntArray | None:
+        """:func:`row_ids` of ``qp``, computed once for its guess and its solution."""
+        if self._ids_of is None or self._ids_of[0] is not qp:
+            self._ids_of = (qp, row_ids(qp))
+        return self._ids_of[1]

@@ -22,7 +22,6 @@ whose active set repeats, starts at its optimum.
 from __future__ import annotations
 
 import time
-from ctypes import c_int
 from typing import Any
 
 import numpy as np
@@ -43,22 +42,42 @@ INFINITE_BOUND = 1e30
 
 def daqp_form(qp: StepQP) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
                                    np.ndarray]:
-    """``qp`` as DAQP's dense ``H, f, A, bupper, blower, sense``."""
-    hessian = sp.diags_array(2.0 * qp.weights, format="csr")
+    """``qp`` as DAQP's dense ``H, f, A, bupper, blower, sense``.
+
+    The dense arrays are written straight from the step QP's canonical CSR rows (one entry
+    per cell, :func:`~wuerfel_cvx.formulations.qp.step_qp`), without scipy's constructors:
+    the same numbers as ``toarray()`` of the stacked and summed sparse matrices.
+    """
+    n_eq, n_ineq = qp.n_equalities, qp.n_inequalities
     if qp.cost_factor is not None and qp.n_cost_rows:
         factor = sp.csr_array(qp.cost_factor)
-        hessian = sp.csr_array(hessian + 2.0 * (factor.T @ factor))
-    upper = np.full(qp.n_inequalities, INFINITE_BOUND)
+        dense_hessian = (sp.diags_array(2.0 * qp.weights, format="csr")
+                         + 2.0 * (factor.T @ factor)).toarray()
+    else:
+        dense_hessian = np.diag(2.0 * qp.weights)
+    upper = np.full(n_eq + n_ineq, INFINITE_BOUND)
+    upper[:n_eq] = qp.eq_rhs
     if qp.upper_rows.size:
         assert qp.ineq_upper is not None
-        upper[qp.upper_rows] = qp.ineq_upper[qp.upper_rows]
-    rows = sp.vstack([qp.eq_matrix, qp.ineq_matrix], format="csr")
-    dense_hessian = hessian.toarray()
-    sense = np.concatenate([np.full(qp.n_equalities, EQUALITY),
-                            np.zeros(qp.n_inequalities)]).astype(c_int)
-    return (dense_hessian, -(dense_hessian @ qp.target), rows.toarray(),
-            np.concatenate([qp.eq_rhs, upper]), np.concatenate([qp.eq_rhs, qp.ineq_rhs]),
-            sense)
+        upper[n_eq + qp.upper_rows] = qp.ineq_upper[qp.upper_rows]
+    rows = np.zeros((n_eq + n_ineq, qp.n_variables))
+    _fill_dense(qp.eq_matrix, rows[:n_eq])
+    _fill_dense(qp.ineq_matrix, rows[n_eq:])
+    sense = np.zeros(n_eq + n_ineq, dtype=np.intc)  # C int, as ctypes.c_int
+    sense[:n_eq] = EQUALITY
+    return (dense_hessian, -(dense_hessian @ qp.target), rows, upper,
+            np.concatenate([qp.eq_rhs, qp.ineq_rhs]), sense)
+
+
+def _fill_dense(matrix: sp.csr_array, out: FloatArray) -> None:
+    """Add canonical CSR ``matrix`` (no duplicate cells) to the zeros of ``out``.
+
+    Added, not assigned, as ``toarray`` does: a stored ``-0.0`` becomes ``0.0``.
+    """
+    if not matrix.nnz:
+        return
+    counts = np.diff(matrix.indptr)
+    out[np.repeat(np.arange(matrix.shape[0]), counts), matrix.indices] += matrix.data
 
 
 def solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) -> DirectResult:
@@ -72,7 +91,7 @@ def solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) ->
     if rows.shape[0] == 0:  # DAQP needs a row: one that always holds
         rows = np.zeros((1, qp.n_variables))
         upper, lower = np.array([INFINITE_BOUND]), np.array([-INFINITE_BOUND])
-        sense = np.zeros(1, dtype=c_int)
+        sense = np.zeros(1, dtype=np.intc)
         extra.pop("dual_start", None)
     started = time.perf_counter()
     x, _, exitflag, info = daqp.solve(hessian, linear, rows, upper, lower, sense,
