@@ -160,17 +160,32 @@ def test_direct_path_raising_becomes_a_step_failure(monkeypatch: pytest.MonkeyPa
     with pytest.raises(StepFailure) as caught:
         simulate(SCENE, dt=0.01, steps=5)
     failure = caught.value
-    # Step 1 is declared plainly, step 2 compiles the structure, step 3 is the first
-    # on the direct path.
+    # Step 1 is solved natively (a structure seen once), step 2 compiles the structure,
+    # step 3 is the first on the direct path.
     assert failure.step == 3 and failure.status == "exception"
     assert "direct solver exploded" in failure.detail
     check_partial(failure.trajectory, 2)
 
 
+def test_native_solve_raising_becomes_a_step_failure(monkeypatch: pytest.MonkeyPatch) -> None:
+    from wuerfel_cvx.backends import clarabel
+
+    def explode(*args: Any, **kwargs: Any) -> Any:
+        raise RuntimeError("native solve exploded")
+
+    monkeypatch.setattr(clarabel, "solve_new", explode)
+    with pytest.raises(StepFailure) as caught:
+        simulate(SCENE, dt=0.01, steps=5)
+    failure = caught.value
+    assert failure.step == 1 and failure.status == "exception"  # a structure seen once
+    assert "native solve exploded" in failure.detail
+    check_partial(failure.trajectory, 0)
+
+
 def test_cvxpy_solver_error_becomes_a_step_failure(monkeypatch: pytest.MonkeyPatch) -> None:
     raise_on_call(monkeypatch, 1, lambda: cp.error.SolverError("Solver 'CLARABEL' failed."))
-    with pytest.raises(StepFailure) as caught:
-        simulate(SCENE, dt=0.01, steps=3)
+    with pytest.raises(StepFailure) as caught:  # native_new=False: step 1 through cvxpy
+        simulate(SCENE, dt=0.01, steps=3, native_new=False)
     assert caught.value.step == 1
     assert caught.value.status == "solver_error"
     check_partial(caught.value.trajectory, 0)

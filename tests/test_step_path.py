@@ -176,8 +176,11 @@ def test_ctrl_c_keeps_the_steps_done_so_far() -> None:
 
 def test_every_solved_step_records_its_path() -> None:
     trajectory = simulate("stack-3", dt=0.01, steps=5, solver="OSQP")
-    assert set(trajectory.metrics["path"]) <= {"direct", "compiled", "declared"}
-    assert trajectory.metrics["path"].iloc[0] == "declared"  # a structure seen once
+    assert set(trajectory.metrics["path"]) <= {"direct", "compiled", "native"}
+    assert trajectory.metrics["path"].iloc[0] == "native"  # a structure seen once
+    assert trajectory.metrics["path"].iloc[1] == "compiled"  # seen again: compiled
+    declared = simulate("stack-3", dt=0.01, steps=2, solver="SCS")
+    assert declared.metrics["path"].iloc[0] == "declared"  # SCS has no native form
 
 
 def test_frozen_formulation_options_reach_the_reach() -> None:

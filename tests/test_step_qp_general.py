@@ -214,15 +214,36 @@ def test_non_finite_upper_bounds_are_invalid_data() -> None:
         assert caught.value.status == "invalid_data" and "ineq_upper" in caught.value.detail
 
 
+NATIVE_NEW = [name for name, spec in SOLVERS.items() if spec.solves_new_natively]
+
+
+@pytest.mark.parametrize("solver", NATIVE_NEW)
+def test_a_new_structure_solved_natively_finds_the_exact_solution(solver: str,
+                                                                  exact: Exact) -> None:
+    # a coupling cost, an equality and rows at their lower and at their upper bounds
+    cache = CompiledQPCache()
+    solution = solve_step_qp(wide_qp(), solver, "high", cache=cache)
+    assert solution.path == "native" and solution.verified, solution.residuals
+    assert cache.solved_natively == 1 and cache.canonicalised == 0
+    qp = wide_qp()
+    assert np.max(np.abs(solution.x - exact.x)) <= agreement(qp, exact)
+    np.testing.assert_allclose(solution.ineq_dual, exact.z, rtol=0,
+                               atol=agreement(qp, exact) * (1 + np.abs(exact.z).max()))
+
+
 def test_paths_on_a_repeated_structure() -> None:
-    # compile_after=2: a structure seen once is declared, the second sighting compiles it
-    # and the third is solved on the direct path (SCS has no direct backend).
-    for solver, third in (("OSQP", "direct"), ("SCS", "compiled")):
-        cache = CompiledQPCache()
+    # compile_after=2: a structure seen once is solved natively (OSQP) or declared (SCS, or
+    # with native_new off), the second sighting compiles it and the third is solved on the
+    # direct path (SCS has no direct backend).
+    for solver, first, third, native_new in (("OSQP", "native", "direct", True),
+                                             ("OSQP", "declared", "direct", False),
+                                             ("SCS", "declared", "compiled", True)):
+        cache = CompiledQPCache(native_new=native_new)
         paths = [solve_step_qp(wide_qp(), solver, "high", cache=cache).path
                  for _ in range(3)]
-        assert paths == ["declared", "compiled", third]
-    assert set(SOLVE_PATHS) == {"declared", "compiled", "direct"}
+        assert paths == [first, "compiled", third]
+        assert cache.compiled == 1
+    assert set(SOLVE_PATHS) == {"declared", "compiled", "direct", "native"}
     assert solve_step_qp(wide_qp(), "OSQP", "high").path == "declared"  # no cache
 
 

@@ -63,16 +63,33 @@ def test_formulation_variants_side_by_side_on_a_drop() -> None:
 
 def test_a_failing_variant_is_a_row_with_its_step_and_status() -> None:
     # OSQP at 1e9 kg per table corner: with weights 0.25 and 1e9 kg in one QP it reports
-    # the step infeasible (see notebooks/03); the run must keep going for the others.
+    # the step infeasible in cvxpy's form (see notebooks/03), from step 2, the first
+    # through cvxpy (step 1's structure is new: solved natively, and verified); the run
+    # must keep going for the others.
     variants = [Variant("fixed", formulation="seed-baumgarte"),
                 Variant("heavy", formulation="seed-baumgarte", solver="OSQP", table_mass=1e9)]
     _, summary = run_variants("tilted-drop", variants, dt=0.01, steps=5, reference="fixed")
     heavy = summary.set_index("label").loc["heavy"]
-    assert heavy["failed_step"] == 1
-    assert heavy["steps_completed"] == 0
+    assert heavy["failed_step"] == 2
+    assert heavy["steps_completed"] == 1
     assert "OSQP" in heavy["failure"]
-    assert np.isnan(heavy["error_m"])  # no step in common: no error to report
+    assert heavy["error_m"] < 1e-12  # one step in common, a free fall: the target itself
     assert summary.set_index("label").loc["fixed", "steps_completed"] == 5
+
+
+def test_a_variant_failing_its_first_step_has_no_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    from wuerfel_cvx.backends import osqp
+
+    def explode(*args: object, **kwargs: object) -> object:
+        raise RuntimeError("OSQP exploded")
+
+    monkeypatch.setattr(osqp, "solve_new", explode)  # step 1's structure is new: native
+    variants = [Variant("fixed"), Variant("broken", solver="OSQP")]
+    _, summary = run_variants("tilted-drop", variants, dt=0.01, steps=3, reference="fixed")
+    broken = summary.set_index("label").loc["broken"]
+    assert broken["failed_step"] == 1 and broken["steps_completed"] == 0
+    assert "OSQP exploded" in broken["failure"]
+    assert np.isnan(broken["error_m"])  # no step in common: no error to report
 
 
 def test_bad_labels_are_refused() -> None:

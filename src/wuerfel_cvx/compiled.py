@@ -24,7 +24,9 @@ solves a compiled structure on the direct path (:mod:`wuerfel_cvx.backends`).
 A structure is compiled the second time it is seen (``compile_after=2``): a structure that
 occurs once, as in a pile where contacts change every step, costs a plain declaration and
 not the dearer parametrised compilation.  A resting scene repeats one structure and so
-compiles once.
+compiles once.  Solvers that can (:attr:`~wuerfel_cvx.solvers.SolverSpec.solves_new_natively`)
+solve such a one-off structure from the step QP's own numbers instead
+(:mod:`wuerfel_cvx.backends._native`, the path :data:`NATIVE`), unless ``native_new`` is off.
 """
 
 from __future__ import annotations
@@ -45,8 +47,9 @@ from .warm_start import WarmStarts
 
 StructureKey = tuple[object, ...]
 
-DECLARED, COMPILED, DIRECT = "declared", "compiled", "direct"
-"""How a step was solved: declared afresh, through a compiled problem, on the direct path."""
+DECLARED, COMPILED, DIRECT, NATIVE = "declared", "compiled", "direct", "native"
+"""How a step was solved: declared afresh, through a compiled problem, on the direct path,
+or (a one-off structure) from its own numbers without cvxpy."""
 
 
 def structure_key(qp: StepQP) -> StructureKey:
@@ -132,6 +135,11 @@ class CompiledQPCache:
     """Solve each QP in its slot structure (:mod:`wuerfel_cvx.slots`; ``None``: exact rows)."""
     canonicalised: int = 0
     """QPs that went through cvxpy's canonicalisation (declared afresh, or compiled)."""
+    native_new: bool = True
+    """Solve a structure not due for compiling natively where the solver can (else declare
+    it afresh in cvxpy)."""
+    solved_natively: int = 0
+    """One-off structures solved from their own numbers (:data:`NATIVE`)."""
     _problems: OrderedDict[StructureKey, CompiledQP] = field(default_factory=OrderedDict,
                                                              repr=False)
     _sightings: dict[StructureKey, int] = field(default_factory=dict, repr=False)
@@ -152,11 +160,8 @@ class CompiledQPCache:
             self._problems.move_to_end(key)
             self.reused += 1
             return compiled.load(qp), COMPILED
-        seen = self._sightings.get(key, 0) + 1
-        if seen < self.compile_after:
-            self._sightings[key] = seen
-            if len(self._sightings) > 16 * self.capacity:  # forget old one-off structures
-                self._sightings.clear()
+        if self.one_off(key):
+            self._sight(key)
             self.canonicalised += 1
             return qp.declared(), DECLARED
         self._sightings.pop(key, None)
@@ -167,6 +172,22 @@ class CompiledQPCache:
         self.compiled += 1
         self.canonicalised += 1
         return compiled.load(qp), COMPILED
+
+    def one_off(self, key: StructureKey) -> bool:
+        """Whether a QP of structure ``key`` is, now, not compiled and not due for compiling."""
+        return (key not in self._problems
+                and self._sightings.get(key, 0) + 1 < self.compile_after)
+
+    def solve_natively(self, key: StructureKey) -> None:
+        """Count a :meth:`one_off` structure's QP as solved from its own numbers."""
+        self._sight(key)
+        self.solved_natively += 1
+
+    def _sight(self, key: StructureKey) -> None:
+        """Count one sighting of a structure not compiled."""
+        self._sightings[key] = self._sightings.get(key, 0) + 1
+        if len(self._sightings) > 16 * self.capacity:  # forget old one-off structures
+            self._sightings.clear()
 
     def direct_solver(self, qp: StepQP, solver: str, options: dict[str, Any],
                       key: StructureKey | None = None) -> DirectSolver | None:

@@ -43,7 +43,8 @@ The row's own diagnostics (rod drift, penetration, energies) are measured outsid
 ``step_time_s``.  ``solver`` and ``status`` are those of the solver that produced the
 step; ``primary_status`` is the run's own solver's status on it, which differs only when
 that solver failed and a ``fallback`` solver took over.  ``path`` is how the step's QPs
-reached the solver: ``direct``, ``compiled`` or ``declared`` (joined by ``+`` when a
+reached the solver: ``direct``, ``compiled``, ``declared`` or ``native`` (a structure seen
+once, solved from its own numbers without cvxpy; joined by ``+`` when a
 step's island QPs went different ways; ``none`` when no QP was solved, ``peer`` for a
 peer engine).  ``passes`` is the number of QPs solved one after another for the step (the
 most of any island): 1 for a single-pass formulation, up to ``max_passes`` for the
@@ -85,7 +86,7 @@ def run_info(scene: Scene, *, formulation: str, solver: str, tol: str, dt: float
         "versions": {key: package_version(package) for key, package in
                      {"wuerfel_cvx": "wuerfel_cvx", **(packages or {})}.items()},
         "compiled_structures": None, "steps_reusing_a_compiled_structure": None,
-        "canonicalised_qps": None, "slot_layout_changes": None,
+        "canonicalised_qps": None, "natively_solved_qps": None, "slot_layout_changes": None,
     }
 
 

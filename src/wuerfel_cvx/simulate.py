@@ -60,6 +60,7 @@ def simulate(
     fallback: Sequence[str] = (),
     friction_model: str | None = None,
     warm_start: bool = True,
+    native_new: bool = True,
 ) -> Trajectory:
     """Simulate ``steps`` steps of ``dt`` seconds, one QP per step; the trajectory.
 
@@ -71,7 +72,7 @@ def simulate(
     ----------
     scene, dt, solver, formulation, tol, table_mass, extra_rod, compiled, sleep, islands
         As for :class:`~wuerfel_cvx.simulation.Simulation`; ``scene`` may be a name or path.
-    fallback, friction_model, warm_start
+    fallback, friction_model, warm_start, native_new
         As for :class:`~wuerfel_cvx.simulation.Simulation`.
     steps:
         Number of steps, non-negative.
@@ -100,7 +101,8 @@ def simulate(
     simulation = Simulation(scene, dt, solver, formulation, tol, table_mass=table_mass,
                             extra_rod=extra_rod, compiled=compiled, sleep=sleep,
                             islands=islands, fallback=fallback,
-                            friction_model=friction_model, warm_start=warm_start)
+                            friction_model=friction_model, warm_start=warm_start,
+                            native_new=native_new)
     with _noticing_ctrl_c() as ctrl_c:
         try:
             for _ in tqdm(range(int(steps)), disable=not progress, unit="step",

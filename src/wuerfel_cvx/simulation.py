@@ -134,6 +134,13 @@ class Simulation:
         onto this step's rows by contact (:mod:`wuerfel_cvx.warm_start`), in the solvers
         that take such a start (PROXQP, DAQP); OSQP starts from its structure's own last
         solution.  ``False``: every solve starts cold.  Same answers to solver tolerance.
+    native_new:
+        With ``compiled``, solve a QP whose structure the cache has not compiled (and will
+        not compile yet: seen for the first time) from its own numbers, in OSQP, PIQP and
+        Clarabel (:mod:`wuerfel_cvx.backends._native`; path ``native``), instead of
+        declaring it afresh in cvxpy.  The same QP in another form: answers agree to
+        solver tolerance, and each is checked by the same KKT residuals.  ``False``:
+        every QP reaches these solvers through cvxpy.
 
     Raises
     ------
@@ -147,7 +154,8 @@ class Simulation:
                  *, table_mass: float | None = None, extra_rod: bool = False,
                  compiled: bool = True, sleep: SleepSettings | None = None,
                  islands: bool = False, fallback: Sequence[str] = (),
-                 friction_model: str | None = None, warm_start: bool = True):
+                 friction_model: str | None = None, warm_start: bool = True,
+                 native_new: bool = True):
         self.dt = checked_dt(dt)
         self.solvers = [get_solver(name).name for name in (solver, *fallback)]
         tolerance_value(tol)
@@ -155,7 +163,8 @@ class Simulation:
         self.model = Model.from_scene(scene, table_mass=table_mass, extra_rod=extra_rod)
         self.formulation = with_friction_model(get_formulation(formulation), friction_model,
                                                bool(np.any(self.model.friction > 0.0)))
-        self.cache = (CompiledQPCache(warm_starts=WarmStarts() if warm_start else None)
+        self.cache = (CompiledQPCache(warm_starts=WarmStarts() if warm_start else None,
+                                      native_new=native_new)
                       if compiled else None)
         columns = getattr(self.formulation, "slot_columns", None)
         if (self.cache is not None and columns is not None and table_mass is None
@@ -239,6 +248,7 @@ class Simulation:
             info["compiled_structures"] = self.cache.compiled
             info["steps_reusing_a_compiled_structure"] = self.cache.reused
             info["canonicalised_qps"] = self.cache.canonicalised
+            info["natively_solved_qps"] = self.cache.solved_natively
             if self.cache.slots is not None:
                 info["slot_layout_changes"] = self.cache.slots.changes
         return self.recorder.trajectory()

@@ -29,8 +29,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _numba, residual_kernel
-from .backends import native_backend
-from .compiled import COMPILED, DECLARED, DIRECT, CompiledQPCache, structure_key
+from .backends import native_backend, new_structure_backend
+from .compiled import COMPILED, DECLARED, DIRECT, NATIVE, CompiledQPCache, structure_key
 from .errors import StepFailure
 from .formulations.qp import DeclaredQP, StepQP
 from .geometry import FloatArray
@@ -52,7 +52,7 @@ VERIFY_FACTOR = 100.0
 
 SOLVED = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
 
-SOLVE_PATHS = (DIRECT, COMPILED, DECLARED)
+SOLVE_PATHS = (DIRECT, COMPILED, DECLARED, NATIVE)
 """How a step can be solved (:attr:`StepSolution.path`): on a direct backend
 (:mod:`wuerfel_cvx.backends`), through a compiled problem (:mod:`wuerfel_cvx.compiled`), or
 declared afresh in cvxpy."""
@@ -217,6 +217,13 @@ def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
     else:
         key = structure_key(qp)  # once per solve: both look-ups below take it
         direct = cache.direct_solver(qp, spec.name, options, key)
+        if direct is None and spec.solves_new_natively and cache.native_new \
+                and cache.one_off(key):
+            cache.solve_natively(key)
+            assert spec.backend is not None
+            raw = new_structure_backend(spec.backend).solve_new(qp, options)
+            return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
+                           raw.iterations, NATIVE, raw.native_time)
         if direct is None:
             declared, path = cache.prepare(qp, key)
             if path == COMPILED and cache.slots is not None:  # a slot structure repeats:

@@ -95,6 +95,10 @@ class SolverSpec:
     native: str | None = None
     """Module of :mod:`wuerfel_cvx.backends` whose ``solve(qp, options)`` solves every step
     QP from its own numbers, on every path, without cvxpy (``None``: through cvxpy)."""
+    solves_new_natively: bool = False
+    """Whether its direct backend module has ``solve_new(qp, options)``, which solves a
+    structure the compiled cache has not seen before from the step QP's own numbers
+    (:mod:`wuerfel_cvx.backends._native`) instead of declaring it afresh in cvxpy."""
     takes_warm_start: bool = False
     """Whether its backend starts from a guess of the last step's solution
     (:mod:`wuerfel_cvx.warm_start`); for the others none is mapped or kept."""
@@ -110,15 +114,18 @@ SOLVERS: dict[str, SolverSpec] = {
         SolverSpec("CLARABEL", "CLARABEL", lambda eps: {
             "tol_gap_abs": eps, "tol_gap_rel": eps, "tol_feas": eps, "tol_ktratio": eps,
             "max_iter": 200}, "interior-point", "clarabel", ("#1f77b4", "o"), "clarabel",
-            Timing(note="its solve_time reads above the wall time of the call it times")),
+            Timing(note="its solve_time reads above the wall time of the call it times"),
+            solves_new_natively=True),
         SolverSpec("OSQP", "OSQP", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, _osqp_polish_option(): True, "max_iter": 200_000},
             "ADMM", "osqp", ("#ff7f0e", "s"), "osqp",
-            Timing(note="its run_time includes the data update on the direct path")),
+            Timing(note="its run_time includes the data update on the direct path"),
+            solves_new_natively=True),
         SolverSpec("PIQP", "PIQP", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, "max_iter": 250, "compute_timings": True},
             "proximal interior-point", "piqp", ("#2ca02c", "^"), "piqp",
-            Timing(note="its run_time includes the data update on the direct path")),
+            Timing(note="its run_time includes the data update on the direct path"),
+            solves_new_natively=True),
         # Called natively (backends/proxqp.py): cvxpy (1.9) drops the infeasibility
         # tolerances, whose default 1e-4 let PROXQP certify feasible QPs infeasible.
         SolverSpec("PROXQP", "PROXQP", lambda eps: {

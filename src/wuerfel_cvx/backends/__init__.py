@@ -18,6 +18,10 @@ The duals of our rows are read from the solver's by the row and coefficient each
 right-hand side takes in the conic data, so every step is checked by the same independent
 KKT residuals as any other solve.
 
+A structure the cache has not compiled, and will not compile yet, is solved by OSQP, PIQP and
+Clarabel from the step QP's own numbers (each module's ``solve_new``, :mod:`._native`)
+rather than declared afresh in cvxpy.
+
 PROXQP's and DAQP's backends (:mod:`.proxqp`, :mod:`.daqp`) are of another kind:
 *native*, they take the step QP's own numbers rather than cvxpy's map, and serve every
 path (:func:`native_backend`).
@@ -40,8 +44,8 @@ from ..warm_start import WarmStart
 from ._cvxpy import INTERNALS_CHANGED, DirectPathWarning, Unavailable, warn_unavailable
 from ._map import DirectResult
 
-__all__ = ["DirectPathWarning", "DirectResult", "DirectSolver", "NativeBackend", "build_direct",
-           "native_backend"]
+__all__ = ["DirectPathWarning", "DirectResult", "DirectSolver", "NativeBackend",
+           "NewStructureBackend", "build_direct", "native_backend", "new_structure_backend"]
 
 
 class DirectSolver(Protocol):
@@ -72,6 +76,20 @@ class NativeBackend(Protocol):
 def native_backend(name: str) -> NativeBackend:
     """The native backend module ``name`` (a solver's ``SolverSpec.native``)."""
     module: NativeBackend = importlib.import_module(f".{name}", __name__)
+    return module
+
+
+class NewStructureBackend(Protocol):
+    """A direct backend module that also solves a one-off structure natively (:mod:`._native`)."""
+
+    def solve_new(self, qp: StepQP, options: dict[str, Any]) -> DirectResult:
+        """Solve ``qp`` on a fresh solver from its own numbers, with the solver's ``options``."""
+        ...
+
+
+def new_structure_backend(name: str) -> NewStructureBackend:
+    """The direct backend module ``name`` (a solver's ``SolverSpec.backend``), for ``solve_new``."""
+    module: NewStructureBackend = importlib.import_module(f".{name}", __name__)
     return module
 
 

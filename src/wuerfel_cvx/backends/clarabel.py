@@ -5,6 +5,12 @@ of a row with coefficient ``c`` is ``c z`` for an equality and ``-c z`` for an i
 in our sign convention.  Clarabel's settings are fixed when a structure is set up.  Each
 solve hands Clarabel ``A``'s nonzeros alone (its pattern is the structure's), which its
 binding reads faster than a scipy matrix, with the same results.
+
+:func:`solve_new` solves a structure seen for the first time from the step QP's own
+numbers (:mod:`._native`, in ``d = x - t``) on a fresh solver, as ``[E; -G; G_u] d + s``
+equal to its shifted ``[e; -h; u]``, with
+``s`` in the zero cone, then the nonnegative cone; with ``P x + q + A' z = 0`` the
+package's ``y`` is ``z`` on the first rows and its ``z`` is ``z_l - z_u``.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from ..geometry import FloatArray
 from ..warm_start import WarmStart
 from ._cvxpy import Unavailable, clarabel_settings, compile_conic, status_name
 from ._map import DirectResult, ParameterMap, scaled
+from ._native import NativeData
 
 
 @dataclass
@@ -82,3 +89,32 @@ def build(problem: Any, names: dict[int, str], qp: StepQP,
     return DirectClarabel(mapping=mapping,
                           b_rows=np.asarray(mapping.indices[mapping.n_matrix_entries:]),
                           solver=solver, a_values=np.zeros(mapping.n_matrix_entries))
+
+
+def solve_new(qp: StepQP, options: dict[str, Any]) -> DirectResult:
+    """Solve ``qp`` on a fresh Clarabel solver from its own numbers (:mod:`._native`)."""
+    import clarabel
+
+    data = NativeData.of(qp)
+    upper_rows = np.flatnonzero(data.has_upper)
+    n_eq, n_ineq = qp.n_equalities, qp.n_inequalities
+    rows = sp.csc_matrix(sp.vstack([data.eq, -data.ineq, data.ineq[upper_rows]],
+                                   format="csc"))
+    cones = [clarabel.ZeroConeT(n_eq)] if n_eq else []
+    if n_ineq + upper_rows.size:
+        cones.append(clarabel.NonnegativeConeT(n_ineq + upper_rows.size))
+    started = time.perf_counter()
+    solver = clarabel.DefaultSolver(data.upper_triangle, data.linear, rows,
+                                    np.concatenate([data.eq_rhs, -data.lower,
+                                                    data.upper[upper_rows]]),
+                                    cones, clarabel_settings(options))
+    result = solver.solve()
+    native_time = time.perf_counter() - started
+    z = np.asarray(result.z, dtype=np.float64)
+    ineq_dual = z[n_eq:n_eq + n_ineq].copy()
+    ineq_dual[upper_rows] -= z[n_eq + n_ineq:]
+    return DirectResult(
+        x=data.unknowns(result.x), eq_dual=z[:n_eq].copy(), ineq_dual=ineq_dual,
+        status=status_name("CLARABEL", str(result.status)),
+        reported_time=float(result.solve_time), native_time=native_time,
+        iterations=int(result.iterations))

@@ -13,6 +13,10 @@ OSQP is not handed the last step's solution mapped by contact
 (:mod:`wuerfel_cvx.warm_start`): with its ``warm_starting`` on, a structure's solver starts
 from its own last solution, which took fewer iterations than the mapped start on the
 scenes measured (``reports/step-path``) and gives the same polished answers.
+
+:func:`solve_new` solves a structure seen for the first time from the step QP's own
+numbers (:mod:`._native`, in ``d = x - t``) on a fresh solver, as ``l <= [E; G] d <= u``; OSQP's
+``P x + q + A' y = 0`` makes the package's ``y`` its first rows' and ``z = -y`` on ``G``.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from ..geometry import FloatArray
 from ..warm_start import WarmStart
 from ._cvxpy import Unavailable, compile_qp, status_name
 from ._map import DirectResult, Gather, QPForm
+from ._native import NativeData
 
 _NOT_SETTINGS = {"warm_start"}
 
@@ -125,6 +130,26 @@ class DirectOSQP:
             x=self.form.mapping.primal(report.x, qp), eq_dual=eq_dual, ineq_dual=ineq_dual,
             status=status_name("OSQP", report.status), reported_time=report.run_time,
             native_time=native_time, iterations=report.iterations)
+
+
+def solve_new(qp: StepQP, options: dict[str, Any]) -> DirectResult:
+    """Solve ``qp`` on a fresh OSQP solver from its own numbers (:mod:`._native`)."""
+    import osqp
+
+    data = NativeData.of(qp)
+    solver = osqp.OSQP()
+    started = time.perf_counter()
+    solver.setup(P=data.upper_triangle, q=data.linear,
+                 A=sp.csc_matrix(sp.vstack([data.eq, data.ineq], format="csc")),
+                 l=np.concatenate([data.eq_rhs, data.lower]),
+                 u=np.concatenate([data.eq_rhs, data.upper]), **_settings(options))
+    report = _NativeCalls(solver).solve()
+    native_time = time.perf_counter() - started
+    n_eq = qp.n_equalities
+    return DirectResult(
+        x=data.unknowns(report.x), eq_dual=report.y[:n_eq], ineq_dual=-report.y[n_eq:],
+        status=status_name("OSQP", report.status), reported_time=report.run_time,
+        native_time=native_time, iterations=report.iterations)
 
 
 def _settings(options: dict[str, Any]) -> dict[str, Any]:

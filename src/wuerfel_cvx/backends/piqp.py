@@ -3,6 +3,10 @@
 PIQP takes cvxpy's QP form as ``A x = b``, ``F x <= h_u`` (no lower bound, as cvxpy
 passes it).  Its ``run_time``, the time cvxpy reports for PIQP, is the update of the data
 plus the solve here (setup plus solve on a fresh solver); PIQP has no warm start.
+
+:func:`solve_new` solves a structure seen for the first time from the step QP's own
+numbers (:mod:`._native`, in ``d = x - t``), as ``E d = b``, ``h_l <= G d <= h_u``; PIQP's
+Lagrangian has ``A' y + G' (z_u - z_l)``, so the package's ``z`` is ``z_l - z_u``.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from ..formulations.qp import StepQP
 from ..warm_start import WarmStart
 from ._cvxpy import Unavailable, compile_qp, status_name
 from ._map import DirectResult, QPForm
+from ._native import NativeData
 
 _NOT_SETTINGS = {"warm_start", "backend"}
 
@@ -57,6 +62,33 @@ class DirectPIQP:
             ineq_dual=ineq_dual, status=status_name("PIQP", result.info.status.name),
             reported_time=float(result.info.run_time), native_time=native_time,
             iterations=int(result.info.iter))
+
+
+def solve_new(qp: StepQP, options: dict[str, Any]) -> DirectResult:
+    """Solve ``qp`` on a fresh sparse PIQP solver from its own numbers (:mod:`._native`)."""
+    import piqp
+
+    if options.get("backend", "sparse") != "sparse":
+        raise Unavailable("only PIQP's sparse backend solves new structures natively")
+    data = NativeData.of(qp)
+    solver = piqp.SparseSolver()
+    _apply_settings(solver, _settings(options))
+    has_eq, has_ineq = qp.n_equalities > 0, qp.n_inequalities > 0
+    started = time.perf_counter()
+    solver.setup(P=data.hessian, c=data.linear, A=data.eq if has_eq else None,
+                 b=data.eq_rhs if has_eq else None, G=data.ineq if has_ineq else None,
+                 h_l=data.lower if has_ineq else None, h_u=data.upper if has_ineq else None)
+    solver.solve()
+    native_time = time.perf_counter() - started
+    result = solver.result
+    return DirectResult(
+        x=data.unknowns(result.x),
+        eq_dual=np.array(result.y, dtype=np.float64)[:qp.n_equalities],
+        ineq_dual=(np.array(result.z_l, dtype=np.float64)
+                   - np.array(result.z_u, dtype=np.float64))[:qp.n_inequalities],
+        status=status_name("PIQP", result.info.status.name),
+        reported_time=float(result.info.run_time), native_time=native_time,
+        iterations=int(result.info.iter))
 
 
 def _settings(options: dict[str, Any]) -> dict[str, Any]:

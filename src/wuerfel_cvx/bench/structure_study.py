@@ -5,6 +5,7 @@ Two tables, each a CSV and a Markdown table (``python -m wuerfel_cvx.bench.struc
 
 * ``structure-counts.csv``: per scene, with exact rows and in slot structures
   (:mod:`wuerfel_cvx.slots`): QPs canonicalised by cvxpy (declared afresh or compiled),
+  QPs of a structure seen once solved from their own numbers instead (``native_qps``),
   structures compiled, slot layouts, and the median step and solver times;
 * ``warm-starts.csv``: per scene, formulation and solver that takes a start (OSQP, PROXQP,
   DAQP), cold against warm (:mod:`wuerfel_cvx.warm_start`; OSQP warm from its structure's
@@ -76,6 +77,7 @@ def count_rows(runs: Sequence[tuple[str, str, int]] = COUNT_RUNS,
             rows.append({
                 "scene": scene, "formulation": formulation, "structure": structure,
                 "solver": solver, "steps": steps, "canonicalised_qps": cache.canonicalised,
+                "native_qps": cache.solved_natively,
                 "compiled_structures": cache.compiled,
                 "slot_layouts": cache.slots.changes if cache.slots is not None else "",
                 "direct_steps": int((metrics["path"] == "direct").sum()),
