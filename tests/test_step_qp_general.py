@@ -255,3 +255,16 @@ def test_mismatched_shapes_are_rejected() -> None:
     with pytest.raises(ValueError, match="cost_factor"):
         declare_qp(qp.weights, qp.target, qp.eq_matrix, qp.eq_rhs, qp.ineq_matrix,
                    qp.ineq_rhs, qp.contacts, cost_factor=sp.csr_array(np.ones((1, 3))))
+
+
+def test_a_native_solve_with_no_active_row_prints_nothing(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    # OSQP's polishing reports an empty active set on stdout, whatever its verbose
+    apart = declare_qp(np.array([1.0, 1.0]), np.array([0.5, 0.5]), sp.csr_array((0, 2)),
+                       np.zeros(0), sp.csr_array(np.array([[1.0, 0.0], [0.0, 1.0]])),
+                       np.array([-1.0, -1.0]), Contacts.empty())
+    for solver in NATIVE_NEW:
+        solution = solve_step_qp(apart, solver, "high", cache=CompiledQPCache())
+        assert solution.path == "native" and solution.verified
+        np.testing.assert_allclose(solution.x, [0.5, 0.5], rtol=0, atol=1e-7)
+    assert capsys.readouterr().out == ""

@@ -21,6 +21,8 @@ numbers (:mod:`._native`, in ``d = x - t``) on a fresh solver, as ``l <= [E; G] 
 
 from __future__ import annotations
 
+import contextlib
+import io
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -143,7 +145,10 @@ def solve_new(qp: StepQP, options: dict[str, Any]) -> DirectResult:
                  A=sp.csc_matrix(sp.vstack([data.eq, data.ineq], format="csc")),
                  l=np.concatenate([data.eq_rhs, data.lower]),
                  u=np.concatenate([data.eq_rhs, data.upper]), **_settings(options))
-    report = _NativeCalls(solver).solve()
+    # With no row active at the optimum (all contacts apart; cvxpy's form always has active
+    # rows), OSQP prints "Polishing not needed ..." to sys.stdout whatever its verbose.
+    with contextlib.redirect_stdout(io.StringIO()):
+        report = _NativeCalls(solver).solve()
     native_time = time.perf_counter() - started
     n_eq = qp.n_equalities
     return DirectResult(
