@@ -56,3 +56,54 @@ def test_an_unknown_scipy_layout_goes_through_the_constructor(
     data, indices, indptr = np.array([2.0]), np.array([1]), np.array([0, 0, 1])
     _assert_same(canonical_csr(data, indices, indptr, (2, 2)),
                  _constructed(data, indices, indptr, (2, 2)))
+
+
+def _assert_same_csc(ours: sp.csc_matrix, theirs: sp.csc_matrix) -> None:
+    assert type(ours) is type(theirs) is sp.csc_matrix
+    assert ours.shape == theirs.shape and ours.nnz == theirs.nnz
+    assert sorted(vars(ours)) == sorted(vars(theirs))
+    for name in ("data", "indices", "indptr"):
+        mine, reference = getattr(ours, name), getattr(theirs, name)
+        assert mine.dtype == reference.dtype
+        assert np.array_equal(mine, reference)
+    assert ours.has_canonical_format and ours.has_sorted_indices
+
+
+def _constructed_csc(rows: sp.csr_array) -> sp.csc_matrix:
+    matrix = sp.csc_matrix(rows)
+    matrix.has_canonical_format = True
+    return matrix
+
+
+@pytest.mark.parametrize("shape", [(0, 5), (4, 0), (3, 6), (40, 17)])
+def test_csc_of_canonical_rows_is_the_constructors(shape: tuple[int, int]) -> None:
+    rng = np.random.default_rng(sum(shape))
+    rows = sp.csr_array(rng.normal(size=shape) * (rng.random(shape) < 0.3))
+    if rows.nnz:
+        rows.data[0] = -0.0  # a stored zero of either sign stays an entry
+    assert rows.has_canonical_format
+    ours = _sparse.csc_matrix_of(rows)
+    _assert_same_csc(ours, _constructed_csc(rows))
+    assert np.array_equal(ours @ np.arange(float(shape[1])), rows @ np.arange(float(shape[1])))
+
+
+def test_csc_without_a_known_layout_goes_through_the_constructor(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(_sparse, "_CSC_TEMPLATE", None)
+    rows = sp.csr_array(np.array([[0.0, 2.0], [1.0, 0.0]]))
+    _assert_same_csc(_sparse.csc_matrix_of(rows), _constructed_csc(rows))
+
+
+def test_stacked_blocks_are_scipys_stack() -> None:
+    from wuerfel_cvx.backends._native import stacked
+
+    rng = np.random.default_rng(3)
+    blocks = [sp.csr_array(rng.normal(size=(rows, 7)) * (rng.random((rows, 7)) < 0.4))
+              for rows in (0, 3, 5)]
+    ours = stacked((blocks[0], 1.0), (blocks[1], -1.0), (blocks[2], 1.0))
+    reference = sp.vstack([blocks[0], -blocks[1], blocks[2]], format="csc")
+    assert type(ours) is sp.csc_matrix and ours.has_canonical_format
+    assert ours.shape == reference.shape
+    assert np.array_equal(ours.toarray(), reference.toarray())
+    assert np.array_equal(ours.indptr, reference.indptr)
+    assert np.array_equal(ours.indices, reference.indices)

@@ -1,4 +1,4 @@
-"""CSR arrays from arrays already in canonical form, without scipy's per-call checks.
+"""CSR arrays (and CSC matrices) from arrays in canonical form, without scipy's per-call checks.
 
 ``scipy.sparse.csr_array((data, indices, indptr), shape=...)`` checks and converts its
 input on every call: 15 to 25 us, more than the compiled loops that wrote the arrays on a
@@ -28,15 +28,17 @@ _INT32_LIMIT = np.iinfo(np.int32).max
 _INDEX_DTYPES = (np.dtype(np.int32), np.dtype(np.int64))
 
 
-def _template() -> dict[str, object] | None:
-    """A constructed ``csr_array``'s attributes, or ``None`` if the layout is not known."""
-    probe = sp.csr_array((np.zeros(1), np.zeros(1, dtype=np.int32),
-                          np.array([0, 1], dtype=np.int32)), shape=(1, 1))
+def _template(kind: type = sp.csr_array) -> dict[str, object] | None:
+    """A constructed ``kind``'s attributes, or ``None`` if the layout is not known."""
+    probe = kind((np.zeros(1), np.zeros(1, dtype=np.int32),
+                  np.array([0, 1], dtype=np.int32)), shape=(1, 1))
     state = dict(vars(probe))
     return state if frozenset(state) == _LAYOUT else None
 
 
 _TEMPLATE = _template()
+_CSC_TEMPLATE = _template(sp.csc_matrix)
+"""The same for scipy's ``csc_matrix``, the solvers' input (:mod:`wuerfel_cvx.backends._native`)."""
 
 
 def canonical_csr(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
@@ -67,3 +69,42 @@ def empty_rows(n_columns: int) -> sp.csr_array:
     """A ``csr_array`` with no rows and ``n_columns`` columns (as ``csr_array((0, n))``)."""
     return canonical_csr(np.zeros(0), np.zeros(0, dtype=np.int32),
                          np.zeros(1, dtype=np.int32), (0, n_columns))
+
+
+def csc_matrix_of(matrix: sp.csr_array) -> sp.csc_matrix:
+    """``scipy.sparse.csc_matrix(matrix)`` of a canonical CSR ``matrix``, int32 indices.
+
+    The transpose of the pattern by a stable sort of the column indices (each column's
+    rows stay ascending), wrapped without the constructor's checks; the constructor's
+    result, attribute for attribute (``tests/test_sparse.py``).  Matrices too large for
+    int32 indices, or another scipy layout, go through the constructor.
+    """
+    rows, columns = int(matrix.shape[0]), int(matrix.shape[1])
+    if _CSC_TEMPLATE is None or max(rows, columns, matrix.nnz) >= _INT32_LIMIT:
+        converted = sp.csc_matrix(matrix)
+        converted.has_canonical_format = True  # the conversion of canonical rows
+        return converted
+    row_of_entry = np.repeat(np.arange(rows, dtype=np.int32), np.diff(matrix.indptr))
+    order = np.argsort(matrix.indices, kind="stable")
+    indptr = np.zeros(columns + 1, dtype=np.int32)
+    indptr[1:] = np.cumsum(np.bincount(matrix.indices, minlength=columns))
+    return canonical_csc(np.asarray(matrix.data, dtype=np.float64)[order], row_of_entry[order],
+                         indptr, (rows, columns))
+
+
+def canonical_csc(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+                  shape: tuple[int, int]) -> sp.csc_matrix:
+    """The ``csc_matrix`` of canonical CSC arrays with int32 indices (sorted, no duplicates).
+
+    As ``csc_matrix((data, indices, indptr), shape=shape)`` with ``has_canonical_format``.
+    """
+    rows, columns = int(shape[0]), int(shape[1])
+    if (_CSC_TEMPLATE is None or data.dtype != np.float64 or indices.dtype != np.int32
+            or indptr.dtype != np.int32):
+        matrix = sp.csc_matrix((data, indices, indptr), shape=(rows, columns))
+    else:
+        matrix = sp.csc_matrix.__new__(sp.csc_matrix)
+        matrix.__dict__.update(_CSC_TEMPLATE, _shape=(rows, columns), data=data,
+                               indices=indices, indptr=indptr)
+    matrix.has_canonical_format = True
+    return matrix

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from .._sparse import canonical_csc, canonical_csr, csc_matrix_of
 from ..formulations.qp import StepQP
 from ..geometry import FloatArray
 
@@ -39,34 +40,43 @@ class NativeData:
     """``P`` (full, symmetric)."""
     target: FloatArray
     """``t``: the unknowns are ``x = t + d``."""
-    eq: sp.csc_matrix
-    """``E``."""
     eq_rhs: FloatArray
     """``e - E t``."""
-    ineq: sp.csc_matrix
-    """``G``."""
     lower: FloatArray
     """``h - G t``."""
     upper: FloatArray
     """``u - G t`` per row of ``G`` (``+inf`` where there is none)."""
+    rows: tuple[sp.csr_array, sp.csr_array]
+    """``E`` and ``G`` as the step QP holds them (canonical CSR)."""
 
     @classmethod
     def of(cls, qp: StepQP) -> NativeData:
         """``qp``'s data."""
-        hessian = sp.diags_array(2.0 * qp.weights, format="csc")
+        n = qp.n_variables
+        diagonal = np.arange(n + 1, dtype=np.int32)
+        hessian = canonical_csc(2.0 * qp.weights, diagonal[:n], diagonal, (n, n))
         if qp.cost_factor is not None and qp.n_cost_rows:
             factor = sp.csc_array(qp.cost_factor)
-            hessian = sp.csc_array(hessian + 2.0 * (factor.T @ factor))
+            hessian = sp.csc_matrix(hessian + 2.0 * (factor.T @ factor))
         at_target = qp.ineq_matrix @ qp.target
         upper = np.full(qp.n_inequalities, np.inf)
         if qp.upper_rows.size:
             assert qp.ineq_upper is not None
-            rows = qp.upper_rows
-            upper[rows] = qp.ineq_upper[rows] - at_target[rows]
-        return cls(hessian=sp.csc_matrix(hessian), target=qp.target,
-                   eq=sp.csc_matrix(qp.eq_matrix), eq_rhs=qp.eq_rhs - qp.eq_matrix @ qp.target,
-                   ineq=sp.csc_matrix(qp.ineq_matrix), lower=qp.ineq_rhs - at_target,
-                   upper=upper)
+            bounded = qp.upper_rows
+            upper[bounded] = qp.ineq_upper[bounded] - at_target[bounded]
+        return cls(hessian=hessian, target=qp.target,
+                   eq_rhs=qp.eq_rhs - qp.eq_matrix @ qp.target, lower=qp.ineq_rhs - at_target,
+                   upper=upper, rows=(qp.eq_matrix, qp.ineq_matrix))
+
+    @property
+    def eq(self) -> sp.csc_matrix:
+        """``E``."""
+        return csc_matrix_of(self.rows[0])
+
+    @property
+    def ineq(self) -> sp.csc_matrix:
+        """``G``."""
+        return csc_matrix_of(self.rows[1])
 
     @property
     def linear(self) -> FloatArray:
@@ -75,7 +85,9 @@ class NativeData:
 
     @property
     def upper_triangle(self) -> sp.csc_matrix:
-        """``P``'s upper triangle (OSQP's and Clarabel's input)."""
+        """``P``'s upper triangle (OSQP's and Clarabel's input): ``P`` itself if diagonal."""
+        if self.hessian.nnz == self.hessian.shape[0]:  # 2 W, one entry per column
+            return self.hessian
         return sp.csc_matrix(sp.triu(self.hessian, format="csc"))
 
     @property
@@ -87,3 +99,22 @@ class NativeData:
         """``x = t + d`` from a solver's ``d``."""
         return np.asarray(self.target + np.asarray(deviation, dtype=np.float64),
                           dtype=np.float64)
+
+
+def stacked(*blocks: tuple[sp.csr_array, float]) -> sp.csc_matrix:
+    """Canonical CSR ``blocks`` (each times its sign, 1.0 or -1.0) one below the other.
+
+    The rows' arrays are joined as they are (a sign flip is exact), then transposed once
+    (:func:`~wuerfel_cvx._sparse.csc_matrix_of`); all blocks have the same columns.
+    """
+    columns = int(blocks[0][0].shape[1])
+    data, indices, indptr, offset = [], [], [np.zeros(1, dtype=np.int64)], 0
+    for matrix, sign in blocks:
+        data.append(matrix.data if sign == 1.0 else -matrix.data)
+        indices.append(matrix.indices.astype(np.int64, copy=False))
+        indptr.append(matrix.indptr[1:].astype(np.int64) + offset)
+        offset += matrix.nnz
+    rows = sum(int(matrix.shape[0]) for matrix, _ in blocks)
+    return csc_matrix_of(canonical_csr(np.concatenate(data).astype(np.float64, copy=False),
+                                       np.concatenate(indices), np.concatenate(indptr),
+                                       (rows, columns)))

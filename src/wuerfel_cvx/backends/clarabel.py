@@ -27,7 +27,7 @@ from ..geometry import FloatArray
 from ..warm_start import WarmStart
 from ._cvxpy import Unavailable, clarabel_settings, compile_conic, status_name
 from ._map import DirectResult, ParameterMap, scaled
-from ._native import NativeData
+from ._native import NativeData, stacked
 
 
 @dataclass
@@ -98,8 +98,8 @@ def solve_new(qp: StepQP, options: dict[str, Any]) -> DirectResult:
     data = NativeData.of(qp)
     upper_rows = np.flatnonzero(data.has_upper)
     n_eq, n_ineq = qp.n_equalities, qp.n_inequalities
-    rows = sp.csc_matrix(sp.vstack([data.eq, -data.ineq, data.ineq[upper_rows]],
-                                   format="csc"))
+    rows = stacked((qp.eq_matrix, 1.0), (qp.ineq_matrix, -1.0),
+                   (sp.csr_array(qp.ineq_matrix[upper_rows]), 1.0))
     cones = [clarabel.ZeroConeT(n_eq)] if n_eq else []
     if n_ineq + upper_rows.size:
         cones.append(clarabel.NonnegativeConeT(n_ineq + upper_rows.size))

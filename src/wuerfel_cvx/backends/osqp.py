@@ -36,7 +36,7 @@ from ..geometry import FloatArray
 from ..warm_start import WarmStart
 from ._cvxpy import Unavailable, compile_qp, status_name
 from ._map import DirectResult, Gather, QPForm
-from ._native import NativeData
+from ._native import NativeData, stacked
 
 _NOT_SETTINGS = {"warm_start"}
 
@@ -142,7 +142,7 @@ def solve_new(qp: StepQP, options: dict[str, Any]) -> DirectResult:
     solver = osqp.OSQP()
     started = time.perf_counter()
     solver.setup(P=data.upper_triangle, q=data.linear,
-                 A=sp.csc_matrix(sp.vstack([data.eq, data.ineq], format="csc")),
+                 A=stacked((qp.eq_matrix, 1.0), (qp.ineq_matrix, 1.0)),
                  l=np.concatenate([data.eq_rhs, data.lower]),
                  u=np.concatenate([data.eq_rhs, data.upper]), **_settings(options))
     # With no row active at the optimum (all contacts apart; cvxpy's form always has active
