@@ -98,22 +98,28 @@ def test_a_run_is_bit_identical_on_either_narrow_phase(monkeypatch: pytest.Monke
     assert runs[0].metrics["n_contacts"].sum() > 0
 
 
-def test_a_single_leafs_pairs_are_the_trees_in_its_order() -> None:
-    """Up to ``LEAF_SIZE`` centres the compiled loop lists the tree's pairs, in order.
+def test_the_all_pairs_loop_lists_the_sorted_trees_pairs() -> None:
+    """Up to ``ALL_PAIRS_LIMIT`` centres the compiled loop lists the tree's pairs, sorted.
 
-    Random clouds at many scales and radii (from none to all pairs within reach), and
-    integer grids whose distances tie the radius exactly (the tree counts ``d == r`` in).
+    Random clouds at many scales and radii (from none to all pairs within reach), on both
+    sides of the limit, and integer grids whose distances tie the radius exactly (the tree
+    counts ``d == r`` in).
     """
     from scipy.spatial import cKDTree
 
     rng = np.random.default_rng(7)
-    clouds = [rng.normal(size=(int(rng.integers(2, contact_kernel.LEAF_SIZE + 1)), 2))
-              * rng.uniform(0.01, 10.0) for _ in range(400)]
-    grid = np.array([[x, y] for x in range(4) for y in range(4)], dtype=np.float64)
+    limit = contact_kernel.ALL_PAIRS_LIMIT
+    clouds = [rng.normal(size=(int(rng.integers(2, limit + 20)), 2)) * rng.uniform(0.01, 10.0)
+              for _ in range(300)]
+    grid = np.array([[x, y] for x in range(8) for y in range(8)], dtype=np.float64)
     clouds += [grid, grid[:5], grid * 0.5]
     for centers in clouds:
         for radius in (0.0, 0.5, 1.0, 2.0, float(rng.uniform(0.0, 8.0)), 1e3):
-            expected = cKDTree(centers).query_pairs(r=radius, output_type="ndarray")
+            tree = cKDTree(centers).query_pairs(r=radius, output_type="set")
+            expected = contact_kernel.tree_pairs(centers, radius)
+            assert {tuple(pair) for pair in expected.tolist()} == tree  # the tree's pairs
+            assert np.array_equal(expected, np.array(sorted(tree), dtype=np.int64
+                                                     ).reshape(-1, 2))  # sorted
             found = contact_kernel.candidate_pairs(centers, radius)
             assert found.dtype == expected.dtype
             assert np.array_equal(found, expected)

@@ -2,7 +2,8 @@
 
 The old implementations are kept below verbatim as oracles (from ``contacts.py``,
 ``formulations/rows.py`` and ``formulations/qp.py`` before vectorisation), except that the
-contact search's oracle applies the current per-pair manifold rule one pair at a time.  The new
+contact search's oracle applies the current per-pair manifold rule one pair at a time and
+takes the broad phase's pairs by index, as the search now does.  The new
 ones must return the same contacts in the same order with bit-identical distances,
 and the same sparse matrices, so that trajectories stay bit-for-bit comparable.
 """
@@ -63,6 +64,8 @@ def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntAr
     if n > 1:
         tree = cKDTree(centers[:n])
         candidates = tree.query_pairs(r=2.0 * float(bound[:n].max()), output_type="ndarray")
+        # by index, not in the tree's traversal order (changed with the compiled broad phase)
+        candidates = candidates[np.lexsort((candidates[:, 1], candidates[:, 0]))]
         if len(candidates):
             dist = np.linalg.norm(centers[candidates[:, 0]] - centers[candidates[:, 1]], axis=1)
             keep = dist <= bound[candidates[:, 0]] + bound[candidates[:, 1]]

@@ -6,12 +6,12 @@ costs more in NumPy's per-call overhead than in arithmetic, so the search is dom
 overhead.  :func:`narrow_phase` here runs the same manifold rule over the same pairs as
 one loop compiled by numba: per ordered pair the sixteen signed distances, the best face,
 then, once both orders of a pair are known, the reference side, the incident face and the
-held corners.  The broad phase keeps its tree query (:class:`scipy.spatial.cKDTree`, whose
-order of candidate pairs the contacts' order follows); :func:`bounds` and
-:func:`pairs_within` compute the bounding circles and filter the candidates around it.
-Up to :data:`LEAF_SIZE` squares the tree is a single leaf, whose query lists the pairs
-in index order; :func:`candidate_pairs` then lists them by a compiled loop, the same
-pairs in the same order, without building a tree.
+held corners.  The broad phase's candidate pairs (:func:`candidate_pairs`) are listed in
+index order, which the contacts' order follows: up to :data:`ALL_PAIRS_LIMIT` squares by a
+compiled loop over all pairs, beyond by a tree query (:class:`scipy.spatial.cKDTree`)
+sorted (:func:`tree_pairs`, which the NumPy path always takes), so that the order depends
+neither on the path nor on the tree's traversal; :func:`bounds` and :func:`pairs_within`
+compute the bounding circles and filter the candidates around it.
 
 It is the same arithmetic in the same order as the NumPy path (each distance
 ``(e_x o_y - e_y o_x) / |e|``, each projection ``(o_x a_x + o_y a_y) / |a|``, ``hypot`` from
@@ -41,8 +41,9 @@ TIE_TOLERANCE = 1e-9
 AVAILABLE = _numba.AVAILABLE
 """Whether the compiled narrow phase can run (numba is importable)."""
 
-LEAF_SIZE = 16
-"""``cKDTree``'s default ``leafsize``: a tree of at most this many points is one leaf."""
+ALL_PAIRS_LIMIT = 64
+"""Up to this many squares the broad phase checks every pair (a compiled loop) rather than
+build a tree: on 20 to 64 squares the loop took 1 to 5 us, the tree query 18 to 22 us."""
 
 
 @compiled
@@ -222,10 +223,10 @@ def _pairs(centers: FloatArray, bound: FloatArray, candidates: IntArray,
 
 
 @compiled
-def _leaf_pairs(centers: FloatArray, radius: float) -> IntArray:
+def _all_pairs(centers: FloatArray, radius: float) -> IntArray:
     """Pairs ``i < j`` with ``|c_i - c_j|^2 <= radius^2``, by ``i``, then ``j``.
 
-    A single leaf's query: every pair's squared distance against the squared radius.
+    Each pair's squared distance against the squared radius, as the tree query tests it.
     """
     n = centers.shape[0]
     found = np.empty((n * (n - 1) // 2, 2), dtype=np.int64)
@@ -241,16 +242,25 @@ def _leaf_pairs(centers: FloatArray, radius: float) -> IntArray:
     return found[:count]
 
 
-def candidate_pairs(centers: FloatArray, radius: float) -> IntArray:
-    """``cKDTree(centers).query_pairs(radius, output_type="ndarray")``, in its order.
+def tree_pairs(centers: FloatArray, radius: float) -> IntArray:
+    """Pairs ``(i, j)``, ``i < j``, of ``centers`` (m) within ``radius`` (m), in index order.
 
-    Up to :data:`LEAF_SIZE` centres (m) the tree is one leaf, and a compiled loop lists
-    the same pairs in the same order (``tests/test_contact_kernel.py`` checks it against
-    the tree); beyond, the tree is built and queried.
+    ``cKDTree.query_pairs`` lists them in the order its traversal meets them, which
+    depends on the tree; sorted by ``i``, then ``j``, they are in an order of their own.
     """
-    if centers.shape[0] <= LEAF_SIZE:
-        return _leaf_pairs(np.ascontiguousarray(centers, dtype=np.float64), float(radius))
-    return cKDTree(centers).query_pairs(r=radius, output_type="ndarray")
+    found = cKDTree(centers).query_pairs(r=radius, output_type="ndarray")
+    return found[np.lexsort((found[:, 1], found[:, 0]))]
+
+
+def candidate_pairs(centers: FloatArray, radius: float) -> IntArray:
+    """:func:`tree_pairs`: the same pairs in the same order.
+
+    Up to :data:`ALL_PAIRS_LIMIT` centres a compiled loop over all pairs lists them
+    (``tests/test_contact_kernel.py`` checks it against the tree); beyond, the tree.
+    """
+    if centers.shape[0] <= ALL_PAIRS_LIMIT:
+        return _all_pairs(np.ascontiguousarray(centers, dtype=np.float64), float(radius))
+    return tree_pairs(centers, radius)
 
 
 def bounds(corners: FloatArray, reach: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -2,8 +2,9 @@
 
 Broad phase
     A :class:`scipy.spatial.cKDTree` on square centres keeps square pairs whose
-    bounding circles come within the margin; squares against tables are checked
-    directly (there are few tables).  Only those pairs are examined further.
+    bounding circles come within the margin, sorted by their indices (the tree's own
+    order depends on its traversal); squares against tables are checked directly (there
+    are few tables).  Only those pairs are examined further.
 
 Manifold rule (one contact normal per body pair, as Box2D's polygon manifolds)
     For each unordered pair of bodies {A, B} (squares and tables) the *reference face*
@@ -56,7 +57,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from . import _numba, contact_kernel
 from .geometry import FloatArray, corner_mean
@@ -184,7 +184,8 @@ def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntAr
 
     ``reach`` ``(n_bodies,)`` (m) is how far beyond its circumcircle each body must be
     looked for.  Table-table pairs are never returned.  Order: the square pairs kept
-    from the tree query, then the square-table pairs, then all of them reversed.
+    from the tree query (by first, then second index), then the square-table pairs, then
+    all of them reversed.
     """
     n, t = model.n_boxes, model.n_tables
     corners = all_points.reshape(-1, 4, 2)
@@ -198,8 +199,7 @@ def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntAr
     bound = radii + reach
     found = [np.zeros((0, 2), dtype=np.int64)]
     if n > 1:
-        tree = cKDTree(centers[:n])
-        candidates = tree.query_pairs(r=2.0 * float(bound[:n].max()), output_type="ndarray")
+        candidates = contact_kernel.tree_pairs(centers[:n], 2.0 * float(bound[:n].max()))
         dist = _lengths(centers[candidates[:, 0]] - centers[candidates[:, 1]])
         found.append(candidates[dist <= bound[candidates[:, 0]] + bound[candidates[:, 1]]])
     if t:
