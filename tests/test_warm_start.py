@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
+from kernel_paths import both
 from qp_bank import AGREEMENT
-from wuerfel_cvx import Scene, Simulation, simulate
+from wuerfel_cvx import Scene, Simulation, _numba, simulate
 from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations import StepQP, get_formulation, step_qp
 from wuerfel_cvx.model import Model, State
@@ -99,3 +102,16 @@ def test_warm_starts_save_iterations_on_a_resting_stack(solver: str) -> None:
                          warm_start=warm)
         totals.append(sum(sim.step().solutions[0].iterations for _ in range(20)))
     assert totals[1] < totals[0]
+
+
+@pytest.mark.skipif(not _numba.AVAILABLE, reason="numba is not installed")
+@pytest.mark.parametrize("formulation", ["rigid", "velocity"])
+def test_compiled_row_ids_are_the_numpy_ids(monkeypatch: pytest.MonkeyPatch,
+                                            formulation: str) -> None:
+    qp = _qp("stack-3", formulation)
+    reference, compiled = both(monkeypatch, lambda: row_ids(qp))
+    assert reference is not None and compiled is not None
+    assert compiled.dtype == reference.dtype and np.array_equal(compiled, reference)
+    big = dataclasses.replace(qp, contacts=dataclasses.replace(
+        qp.contacts, point=qp.contacts.point + (1 << 16)))  # past the ids' 16 bits
+    assert both(monkeypatch, lambda: row_ids(big)) == [None, None]

@@ -1,4 +1,4 @@
-"""The direct path's gathers as compiled loops (numba), when numba is installed.
+"""The direct path's gathers, DAQP's dense rows and the warm starts' row ids as compiled loops.
 
 On the direct path (:mod:`wuerfel_cvx.backends`) each solve reads a solver's matrices and
 right-hand sides out of the conic data's nonzeros (:class:`~wuerfel_cvx.backends._map.Gather`,
@@ -8,6 +8,10 @@ fancy index, a sign, a negation), whose per-call overhead outweighs their work o
 scene.  The loops here do the same operations entry by entry (a product by a sign or a
 coefficient rounds as NumPy's does), so they return the NumPy paths' numbers bit for bit
 (``tests/test_map_kernel.py``), which stay the reference and run without numba.
+
+:func:`dense_rows` writes DAQP's dense constraint rows
+(:func:`wuerfel_cvx.backends.daqp.daqp_form`) and :func:`row_ids` the warm starts' row ids
+(:func:`wuerfel_cvx.warm_start.row_ids`) in one loop each, for the same reason.
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ from ._numba import AVAILABLE, compiled
 from .geometry import FloatArray
 from .model import IntArray
 
-__all__ = ["AVAILABLE", "gather", "right_hand_sides", "scaled_take"]
+__all__ = ["AVAILABLE", "dense_rows", "gather", "right_hand_sides", "row_ids", "scaled_take"]
 
 
 @compiled
@@ -52,3 +56,41 @@ def scaled_take(multipliers: FloatArray, rows: IntArray, coefficients: FloatArra
     for k in range(rows.shape[0]):
         out[k] = (factor * coefficients[k]) * multipliers[rows[k] - offset]
     return out
+
+
+@compiled
+def dense_rows(eq_data: FloatArray, eq_indices: np.ndarray, eq_indptr: np.ndarray,
+               ineq_data: FloatArray, ineq_indices: np.ndarray, ineq_indptr: np.ndarray,
+               n_columns: int) -> FloatArray:
+    """``[E; G]`` dense from canonical CSR arrays, each entry added to 0.0 as ``toarray``."""
+    n_eq, n_ineq = eq_indptr.shape[0] - 1, ineq_indptr.shape[0] - 1
+    out = np.zeros((n_eq + n_ineq, n_columns))
+    for row in range(n_eq):
+        for k in range(eq_indptr[row], eq_indptr[row + 1]):
+            out[row, eq_indices[k]] += eq_data[k]
+    for row in range(n_ineq):
+        for k in range(ineq_indptr[row], ineq_indptr[row + 1]):
+            out[n_eq + row, ineq_indices[k]] += ineq_data[k]
+    return out
+
+
+@compiled
+def row_ids(point: IntArray, edge_i: IntArray, edge_j: IntArray, blocks: int,
+            index_bits: int) -> IntArray:
+    """Each block's contacts' ids ``block << 3b | point << 2b | edge_i << b | edge_j``.
+
+    Empty (size 0) when an index does not fit ``b = index_bits`` bits.
+    """
+    count = point.shape[0]
+    limit = 1 << index_bits
+    for k in range(count):
+        if point[k] >= limit or edge_i[k] >= limit or edge_j[k] >= limit:
+            return np.zeros(0, dtype=np.int64)
+    ids = np.empty(blocks * count, dtype=np.int64)
+    for block in range(blocks):
+        for k in range(count):
+            ids[block * count + k] = ((np.int64(point[k]) << (2 * index_bits))
+                                      | (np.int64(edge_i[k]) << index_bits)
+                                      | np.int64(edge_j[k])) + (np.int64(block)
+                                                                << (3 * index_bits))
+    return ids

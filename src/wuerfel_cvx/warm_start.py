@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import _numba, map_kernel
 from .formulations.qp import StepQP
 from .geometry import FloatArray
 from .model import IntArray
@@ -47,6 +48,12 @@ def row_ids(qp: StepQP) -> IntArray | None:
         return np.zeros(0, dtype=np.int64)
     if qp.cones is not None or count == 0 or rows % count:
         return None
+    if _numba.enabled:  # the same ids, by a compiled loop
+        ids = map_kernel.row_ids(contacts.point.astype(np.int64, copy=False),
+                                 contacts.edge_i.astype(np.int64, copy=False),
+                                 contacts.edge_j.astype(np.int64, copy=False),
+                                 rows // count, _INDEX_BITS)
+        return ids if ids.size else None
     limit = 1 << _INDEX_BITS
     if max(int(contacts.point.max()), int(contacts.edge_i.max()),
            int(contacts.edge_j.max())) >= limit:
