@@ -57,10 +57,14 @@ def proxsuite_form(qp: StepQP) -> tuple[dict[str, Any], FloatArray]:
     ``i`` is ``-G_i`` (sign ``+1``) for a one-sided row and ``G_i`` (sign ``-1``) for one
     with a finite upper bound.
     """
-    hessian = sp.diags_array(2.0 * qp.weights, format="csc")
     if qp.cost_factor is not None and qp.n_cost_rows:
         factor = sp.csc_array(qp.cost_factor)
-        hessian = sp.csc_array(hessian + 2.0 * (factor.T @ factor))
+        hessian = sp.csc_array(sp.diags_array(2.0 * qp.weights, format="csc")
+                               + 2.0 * (factor.T @ factor))
+        dense_hessian, linear = hessian.toarray(), -(hessian @ qp.target)
+    else:  # 2 W: the sparse product's sums of one term each, 0.0 + 2 w t
+        diagonal = 2.0 * qp.weights
+        dense_hessian, linear = np.diag(diagonal), -(0.0 + diagonal * qp.target)
     sign = np.ones(qp.n_inequalities)
     sign[qp.upper_rows] = -1.0
     lower = np.where(sign > 0, -np.inf, qp.ineq_rhs)
@@ -69,12 +73,26 @@ def proxsuite_form(qp: StepQP) -> tuple[dict[str, Any], FloatArray]:
         assert qp.ineq_upper is not None
         upper[qp.upper_rows] = qp.ineq_upper[qp.upper_rows]
     has_eq, has_ineq = qp.n_equalities > 0, qp.n_inequalities > 0
-    form = {"H": hessian.toarray(), "g": -(hessian @ qp.target),
-            "A": qp.eq_matrix.toarray() if has_eq else None,
+    form = {"H": dense_hessian, "g": linear,
+            "A": dense(qp.eq_matrix) if has_eq else None,
             "b": qp.eq_rhs if has_eq else None,
-            "C": (sp.diags_array(-sign) @ qp.ineq_matrix).toarray() if has_ineq else None,
+            "C": dense(qp.ineq_matrix, row_factor=-sign) if has_ineq else None,
             "l": lower if has_ineq else None, "u": upper if has_ineq else None}
     return form, sign
+
+
+def dense(rows: sp.csr_array, row_factor: FloatArray | None = None) -> FloatArray:
+    """Canonical CSR ``rows`` (each row times ``row_factor``, +-1) as a dense array.
+
+    As ``toarray()`` of ``rows`` (of ``diags(row_factor) @ rows``): each stored entry, after
+    its exact sign flip, is added to 0.0 (a stored ``-0.0`` becomes ``0.0``).
+    """
+    counts = np.diff(rows.indptr)
+    row_of_entry = np.repeat(np.arange(rows.shape[0]), counts)
+    values = rows.data if row_factor is None else row_factor[row_of_entry] * rows.data
+    out = np.zeros(rows.shape)
+    out[row_of_entry, rows.indices] += values
+    return out
 
 
 def solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) -> DirectResult:

@@ -1,4 +1,8 @@
-"""DAQP's dense form, written from the canonical rows, is scipy's construction bit for bit."""
+"""The native backends' dense forms (DAQP, PROXQP) are scipy's bit for bit.
+
+Both are written from the step QP's canonical rows without scipy's constructors; scipy's
+construction (summed, stacked, ``toarray``) is the reference.
+"""
 
 from __future__ import annotations
 
@@ -68,3 +72,38 @@ def test_the_dense_form_is_scipys_bit_for_bit(source: str, compiled: bool,
             assert mine.shape == theirs.shape
             assert np.array_equal(mine, theirs)
             assert mine.tobytes() == np.asarray(theirs, dtype=mine.dtype).tobytes()
+
+
+def scipy_proxsuite_form(qp: StepQP) -> dict[str, np.ndarray | None]:
+    """PROXQP's dense form as scipy's constructors build it."""
+    hessian = sp.diags_array(2.0 * qp.weights, format="csc")
+    if qp.cost_factor is not None and qp.n_cost_rows:
+        factor = sp.csc_array(qp.cost_factor)
+        hessian = sp.csc_array(hessian + 2.0 * (factor.T @ factor))
+    sign = np.ones(qp.n_inequalities)
+    sign[qp.upper_rows] = -1.0
+    return {"H": hessian.toarray(), "g": -(hessian @ qp.target),
+            "A": qp.eq_matrix.toarray() if qp.n_equalities else None,
+            "C": (sp.diags_array(-sign) @ qp.ineq_matrix).toarray()
+            if qp.n_inequalities else None}
+
+
+@pytest.mark.parametrize("source", ["wide", "stack-10 rigid", "card-house velocity",
+                                    "tilted-drop velocity"])
+def test_proxsuites_dense_form_is_scipys_bit_for_bit(source: str) -> None:
+    from wuerfel_cvx.backends.proxqp import proxsuite_form
+
+    if source == "wide":
+        qps = [wide_qp()]
+    else:
+        scene, formulation = source.split()
+        qps = step_qps(scene, formulation, 12)
+    for qp in qps:
+        form, _ = proxsuite_form(qp)
+        for name, reference in scipy_proxsuite_form(qp).items():
+            ours = form[name]
+            if reference is None:
+                assert ours is None
+                continue
+            assert ours is not None and ours.shape == reference.shape
+            assert np.asarray(ours).tobytes() == np.asarray(reference).tobytes()
