@@ -268,3 +268,14 @@ def test_a_native_solve_with_no_active_row_prints_nothing(
         assert solution.path == "native" and solution.verified
         np.testing.assert_allclose(solution.x, [0.5, 0.5], rtol=0, atol=1e-7)
     assert capsys.readouterr().out == ""
+
+
+def test_a_new_structure_without_rows_is_solved_natively() -> None:
+    # a free fall in the rigid formulation: weights and a target, nothing else
+    free = declare_qp(np.array([1.0, 1.0, 0.5]), np.array([0.25, -0.5, 2.0]),
+                      sp.csr_array((0, 3)), np.zeros(0), sp.csr_array((0, 3)), np.zeros(0),
+                      Contacts.empty())
+    for solver in NATIVE_NEW:
+        solution = solve_step_qp(free, solver, "high", cache=CompiledQPCache())
+        assert solution.path == "native" and solution.verified
+        np.testing.assert_allclose(solution.x, free.target, rtol=0, atol=1e-9)
