@@ -1,8 +1,8 @@
 """Solving a step QP and checking the answer independently of the solver.
 
-:func:`solve_step_qp` calls the solver (declared afresh, through a compiled problem, or on
-a direct backend: :data:`SOLVE_PATHS`) and then recomputes, from the QP's own numeric
-data, the residuals of the KKT conditions of
+:func:`solve_step_qp` calls the solver (declared afresh, through a compiled problem, on
+a direct backend, or a new structure from its own numbers: :data:`SOLVE_PATHS`) and then
+recomputes, from the QP's own numeric data, the residuals of the KKT conditions of
 
     min sum w (x - t)^2 + |F (x - t)|^2
     s.t.  E x = e  (multiplier y),   h <= G x <= u  (multiplier z = z_lower - z_upper)
@@ -29,7 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _numba, residual_kernel
-from .backends import native_backend, new_structure_backend
+from .backends import DirectResult, native_backend, new_structure_backend
 from .compiled import COMPILED, DECLARED, DIRECT, NATIVE, CompiledQPCache, structure_key
 from .errors import StepFailure
 from .formulations.qp import DeclaredQP, StepQP
@@ -54,8 +54,9 @@ SOLVED = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
 
 SOLVE_PATHS = (DIRECT, COMPILED, DECLARED, NATIVE)
 """How a step can be solved (:attr:`StepSolution.path`): on a direct backend
-(:mod:`wuerfel_cvx.backends`), through a compiled problem (:mod:`wuerfel_cvx.compiled`), or
-declared afresh in cvxpy."""
+(:mod:`wuerfel_cvx.backends`), through a compiled problem (:mod:`wuerfel_cvx.compiled`),
+declared afresh in cvxpy, or (a structure seen once, OSQP, PIQP, Clarabel) from the step
+QP's own numbers without cvxpy (:mod:`wuerfel_cvx.backends._native`)."""
 
 INVALID_DATA = "invalid_data"
 """Status of a step whose QP data holds NaN or inf: no solver is called."""
@@ -150,7 +151,9 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     ordinary data); the solution and multipliers are mapped back and checked on ``qp``.
 
     With a ``cache``, a QP whose structure repeats is solved through its compiled,
-    parametrised problem (:mod:`wuerfel_cvx.compiled`); without, it is declared afresh.
+    parametrised problem (:mod:`wuerfel_cvx.compiled`) and one seen for the first time, by a
+    solver that can, from its own numbers (the cache's ``native_new``); without a cache, it
+    is declared afresh.
 
     Raises :class:`StepFailure` (with ``step``) if the QP's data is not finite (status
     ``invalid_data``, before any solver runs), if the solver raises, reports a status
@@ -204,14 +207,14 @@ def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
     """Solve on the direct path if the cache has one for ``qp``, else through cvxpy.
 
     A solver with a native backend (:attr:`~wuerfel_cvx.solvers.SolverSpec.native`) is
-    always called on it, with or without a cache.  ``warm`` (:mod:`wuerfel_cvx.warm_start`)
-    goes to the native and direct backends that take one; with a cache that keeps no warm
-    starts, the direct path starts cold too.
+    always called on it, with or without a cache.  A structure the cache has not compiled
+    and will not compile yet goes, in a solver that
+    :attr:`~wuerfel_cvx.solvers.SolverSpec.solves_new_natively`, to its ``solve_new``.
+    ``warm`` (:mod:`wuerfel_cvx.warm_start`) goes to the native and direct backends that
+    take one; with a cache that keeps no warm starts, the direct path starts cold too.
     """
     if spec.native is not None:
-        raw = native_backend(spec.native).solve(qp, options, warm)
-        return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
-                       raw.iterations, DIRECT, raw.native_time)
+        return _Answer.of(native_backend(spec.native).solve(qp, options, warm), DIRECT)
     if cache is None:
         declared, path = qp.declared(), DECLARED
     else:
@@ -221,9 +224,7 @@ def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
                 and cache.one_off(key):
             cache.solve_natively(key)
             assert spec.backend is not None
-            raw = new_structure_backend(spec.backend).solve_new(qp, options)
-            return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
-                           raw.iterations, NATIVE, raw.native_time)
+            return _Answer.of(new_structure_backend(spec.backend).solve_new(qp, options), NATIVE)
         if direct is None:
             declared, path = cache.prepare(qp, key)
             if path == COMPILED and cache.slots is not None:  # a slot structure repeats:
@@ -231,8 +232,7 @@ def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
         if direct is not None:
             cold = cache.warm_starts is None
             raw = direct.solve(qp, {**options, "warm_start": False} if cold else options, warm)
-            return _Answer(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
-                           raw.iterations, DIRECT, raw.native_time)
+            return _Answer.of(raw, DIRECT)
     return _solve_with_cvxpy(qp, declared, spec.cvxpy_name, {"warm_start": False, **options},
                              path)
 
@@ -268,6 +268,12 @@ class _Answer:
     path: str
     native_time: float | None = None
     """On the direct path, wall time (s) of the native update and solve calls."""
+
+    @classmethod
+    def of(cls, raw: DirectResult, path: str) -> _Answer:
+        """The answer of a backend's solve (:mod:`wuerfel_cvx.backends`) on ``path``."""
+        return cls(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
+                   raw.iterations, path, raw.native_time)
 
 
 def _solve_with_cvxpy(qp: StepQP, declared: DeclaredQP, solver: str,
