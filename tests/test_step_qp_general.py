@@ -279,3 +279,4 @@ def test_a_new_structure_without_rows_is_solved_natively() -> None:
         solution = solve_step_qp(free, solver, "high", cache=CompiledQPCache())
         assert solution.path == "native" and solution.verified
         np.testing.assert_allclose(solution.x, free.target, rtol=0, atol=1e-9)
+
