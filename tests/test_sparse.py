@@ -65,10 +65,15 @@ def _constructed_csc(rows: sp.csr_array) -> sp.csc_matrix:
     return matrix
 
 
+@pytest.mark.parametrize("index_dtype", [np.int32, np.int64])
 @pytest.mark.parametrize("shape", [(0, 5), (4, 0), (3, 6), (40, 17)])
-def test_csc_of_canonical_rows_is_the_constructors(shape: tuple[int, int]) -> None:
+def test_csc_of_canonical_rows_is_the_constructors(shape: tuple[int, int],
+                                                   index_dtype: type) -> None:
     rng = np.random.default_rng(sum(shape))
-    rows = sp.csr_array(rng.normal(size=shape) * (rng.random(shape) < 0.3))
+    dense = sp.csr_array(rng.normal(size=shape) * (rng.random(shape) < 0.3))
+    rows = sp.csr_array((dense.data, dense.indices.astype(index_dtype),
+                         dense.indptr.astype(index_dtype)), shape=shape)
+    assert rows.indices.dtype == index_dtype  # the step QPs' rows come with either
     if rows.nnz:
         rows.data[0] = -0.0  # a stored zero of either sign stays an entry
     assert rows.has_canonical_format

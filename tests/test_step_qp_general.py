@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from wuerfel_cvx import solve as solve_module
 from wuerfel_cvx.compiled import CompiledQPCache
 from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations.qp import PARAMETER_SLOTS, StepQP, declare_qp
@@ -280,3 +281,19 @@ def test_a_new_structure_without_rows_is_solved_natively() -> None:
         assert solution.path == "native" and solution.verified
         np.testing.assert_allclose(solution.x, free.target, rtol=0, atol=1e-9)
 
+
+def test_options_without_a_native_form_go_through_cvxpy() -> None:
+    # PIQP's native form is its sparse backend: the dense one is solved through cvxpy
+    from wuerfel_cvx.backends._native import NativeData
+
+    cache = CompiledQPCache()
+    dense = {**SOLVERS["PIQP"].options(HIGH), "backend": "dense"}
+    answer = solve_module._solve(wide_qp(), SOLVERS["PIQP"], dense, cache)
+    assert answer.path == "declared" and cache.solved_natively == 0
+    # a Hessian with one entry per column, off the diagonal in two: not taken as diagonal
+    coupled = dataclasses.replace(wide_qp(), weights=np.zeros(4), _declared=None,
+                                  cost_factor=sp.csr_array(np.array([[1.0, 1.0, 0.0, 0.0],
+                                                                     [0.0, 1.0, 0.0, 0.0]])))
+    assert NativeData.of(coupled).hessian.nnz == 4  # 2 F' F: four entries in four columns
+    triangle = NativeData.of(coupled).upper_triangle
+    assert np.array_equal(triangle.toarray(), np.triu(NativeData.of(coupled).hessian.toarray()))

@@ -72,21 +72,24 @@ def empty_rows(n_columns: int) -> sp.csr_array:
 
 
 def csc_matrix_of(matrix: sp.csr_array) -> sp.csc_matrix:
-    """``scipy.sparse.csc_matrix(matrix)`` of a canonical CSR ``matrix``, int32 indices.
+    """``scipy.sparse.csc_matrix(matrix)`` of a canonical CSR ``matrix``.
 
     The transpose of the pattern by a stable sort of the column indices (each column's
-    rows stay ascending), wrapped without the constructor's checks; the constructor's
-    result, attribute for attribute (``tests/test_sparse.py``).  Matrices too large for
-    int32 indices, or another scipy layout, go through the constructor.
+    rows stay ascending), wrapped without the constructor's checks; the conversion's
+    result, attribute for attribute, its index dtype included (int64 if the rows' indices
+    are, else int32; ``tests/test_sparse.py``).  Matrices too large for int32 indices, or
+    another scipy layout, go through the constructor.
     """
     rows, columns = int(matrix.shape[0]), int(matrix.shape[1])
     if _CSC_TEMPLATE is None or max(rows, columns, matrix.nnz) >= _INT32_LIMIT:
         converted = sp.csc_matrix(matrix)
         converted.has_canonical_format = True  # the conversion of canonical rows
         return converted
-    row_of_entry = np.repeat(np.arange(rows, dtype=np.int32), np.diff(matrix.indptr))
+    wide = np.int64 in (matrix.indices.dtype, matrix.indptr.dtype)
+    index_dtype = np.int64 if wide else np.int32
+    row_of_entry = np.repeat(np.arange(rows, dtype=index_dtype), np.diff(matrix.indptr))
     order = np.argsort(matrix.indices, kind="stable")
-    indptr = np.zeros(columns + 1, dtype=np.int32)
+    indptr = np.zeros(columns + 1, dtype=index_dtype)
     indptr[1:] = np.cumsum(np.bincount(matrix.indices, minlength=columns))
     return canonical_csc(np.asarray(matrix.data, dtype=np.float64)[order], row_of_entry[order],
                          indptr, (rows, columns))
@@ -94,13 +97,14 @@ def csc_matrix_of(matrix: sp.csr_array) -> sp.csc_matrix:
 
 def canonical_csc(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
                   shape: tuple[int, int]) -> sp.csc_matrix:
-    """The ``csc_matrix`` of canonical CSC arrays with int32 indices (sorted, no duplicates).
+    """The ``csc_matrix`` of canonical CSC arrays (sorted, no duplicates), index dtype kept.
 
-    As ``csc_matrix((data, indices, indptr), shape=shape)`` with ``has_canonical_format``.
+    As ``csc_matrix((data, indices, indptr), shape=shape)`` with ``has_canonical_format``,
+    for int32 indices; int64 indices (both arrays) are kept as a conversion keeps them.
     """
     rows, columns = int(shape[0]), int(shape[1])
-    if (_CSC_TEMPLATE is None or data.dtype != np.float64 or indices.dtype != np.int32
-            or indptr.dtype != np.int32):
+    same_width = indices.dtype == indptr.dtype and indices.dtype in _INDEX_DTYPES
+    if _CSC_TEMPLATE is None or data.dtype != np.float64 or not same_width:
         matrix = sp.csc_matrix((data, indices, indptr), shape=(rows, columns))
     else:
         matrix = sp.csc_matrix.__new__(sp.csc_matrix)

@@ -1,10 +1,11 @@
 """Finding point-versus-edge contacts: a broad phase and a per-pair contact manifold.
 
 Broad phase
-    A :class:`scipy.spatial.cKDTree` on square centres keeps square pairs whose
-    bounding circles come within the margin, sorted by their indices (the tree's own
-    order depends on its traversal); squares against tables are checked directly (there
-    are few tables).  Only those pairs are examined further.
+    Square pairs whose bounding circles come within the margin, by their indices: from a
+    :class:`scipy.spatial.cKDTree` on square centres, sorted (the tree's own order depends
+    on its traversal), or with numba and up to 64 squares from a compiled loop over all
+    pairs (:mod:`wuerfel_cvx.contact_kernel`); squares against tables are checked directly
+    (there are few tables).  Only those pairs are examined further.
 
 Manifold rule (one contact normal per body pair, as Box2D's polygon manifolds)
     For each unordered pair of bodies {A, B} (squares and tables) the *reference face*

@@ -29,7 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _numba, residual_kernel
-from .backends import DirectResult, native_backend, new_structure_backend
+from .backends import DirectResult, Unavailable, native_backend, new_structure_backend
 from .compiled import COMPILED, DECLARED, DIRECT, NATIVE, CompiledQPCache, structure_key
 from .errors import StepFailure
 from .formulations.qp import DeclaredQP, StepQP
@@ -222,9 +222,14 @@ def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
         direct = cache.direct_solver(qp, spec.name, options, key)
         if direct is None and spec.solves_new_natively and cache.native_new \
                 and cache.one_off(key):
-            cache.solve_natively(key)
             assert spec.backend is not None
-            return _Answer.of(new_structure_backend(spec.backend).solve_new(qp, options), NATIVE)
+            try:
+                raw = new_structure_backend(spec.backend).solve_new(qp, options)
+            except Unavailable:  # these options have no native form: through cvxpy
+                pass
+            else:
+                cache.solve_natively(key)
+                return _Answer.of(raw, NATIVE)
         if direct is None:
             declared, path = cache.prepare(qp, key)
             if path == COMPILED and cache.slots is not None:  # a slot structure repeats:

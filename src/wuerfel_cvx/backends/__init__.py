@@ -45,7 +45,8 @@ from ._cvxpy import INTERNALS_CHANGED, DirectPathWarning, Unavailable, warn_unav
 from ._map import DirectResult
 
 __all__ = ["DirectPathWarning", "DirectResult", "DirectSolver", "NativeBackend",
-           "NewStructureBackend", "build_direct", "native_backend", "new_structure_backend"]
+           "NewStructureBackend", "Unavailable", "build_direct", "native_backend",
+           "new_structure_backend"]
 
 
 class DirectSolver(Protocol):
@@ -83,7 +84,11 @@ class NewStructureBackend(Protocol):
     """A direct backend module that also solves a one-off structure natively (:mod:`._native`)."""
 
     def solve_new(self, qp: StepQP, options: dict[str, Any]) -> DirectResult:
-        """Solve ``qp`` on a fresh solver from its own numbers, with the solver's ``options``."""
+        """Solve ``qp`` on a fresh solver from its own numbers, with the solver's ``options``.
+
+        Raises :class:`Unavailable` when ``options`` ask for what this form cannot give
+        (the caller then goes through cvxpy).
+        """
         ...
 
 

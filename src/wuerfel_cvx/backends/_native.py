@@ -86,8 +86,9 @@ class NativeData:
     @property
     def upper_triangle(self) -> sp.csc_matrix:
         """``P``'s upper triangle (OSQP's and Clarabel's input): ``P`` itself if diagonal."""
-        if self.hessian.nnz == self.hessian.shape[0]:  # 2 W, one entry per column
-            return self.hessian
+        n = self.hessian.shape[0]
+        if self.hessian.nnz == n and np.array_equal(self.hessian.indices, np.arange(n)):
+            return self.hessian  # 2 W: each column's one entry on the diagonal
         return sp.csc_matrix(sp.triu(self.hessian, format="csc"))
 
     @property

@@ -55,7 +55,7 @@ def daqp_form(qp: StepQP) -> tuple[FloatArray, FloatArray, FloatArray, FloatArra
         dense_hessian = (sp.diags_array(2.0 * qp.weights, format="csr")
                          + 2.0 * (factor.T @ factor)).toarray()
     else:
-        dense_hessian = np.diag(2.0 * qp.weights)
+        dense_hessian = np.diag(2.0 * qp.weights)  # as toarray for weights >= 0 (a -0.0 stays)
     upper = np.full(n_eq + n_ineq, INFINITE_BOUND)
     upper[:n_eq] = qp.eq_rhs
     if qp.upper_rows.size:

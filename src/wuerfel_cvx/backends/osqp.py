@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import threading
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -39,6 +40,9 @@ from ._map import DirectResult, Gather, QPForm
 from ._native import NativeData, stacked
 
 _NOT_SETTINGS = {"warm_start"}
+
+_STDOUT_LOCK = threading.Lock()
+"""Held while :func:`solve_new` sends OSQP's stdout elsewhere."""
 
 _INFINITY = 1e30
 """OSQP's ``OSQP_INFTY``: bounds beyond it are clipped to it (as OSQP's wrapper clips them)."""
@@ -146,8 +150,10 @@ def solve_new(qp: StepQP, options: dict[str, Any]) -> DirectResult:
                  l=np.concatenate([data.eq_rhs, data.lower]),
                  u=np.concatenate([data.eq_rhs, data.upper]), **_settings(options))
     # With no row active at the optimum (all contacts apart; cvxpy's form always has active
-    # rows), OSQP prints "Polishing not needed ..." to sys.stdout whatever its verbose.
-    with contextlib.redirect_stdout(io.StringIO()):
+    # rows), OSQP prints "Polishing not needed ..." to sys.stdout whatever its verbose.  The
+    # redirect swaps the process's sys.stdout: the lock keeps two threads' solves from
+    # undoing each other's (another thread's prints in that window are lost).
+    with _STDOUT_LOCK, contextlib.redirect_stdout(io.StringIO()):
         report = _NativeCalls(solver).solve()
     native_time = time.perf_counter() - started
     n_eq = qp.n_equalities
