@@ -1,4 +1,4 @@
-"""The direct path's gathers, DAQP's dense rows and the warm starts' row ids as compiled loops.
+"""The direct path's gathers, dense rows and the warm starts' row ids as compiled loops.
 
 On the direct path (:mod:`wuerfel_cvx.backends`) each solve reads a solver's matrices and
 right-hand sides out of the conic data's nonzeros (:class:`~wuerfel_cvx.backends._map.Gather`,
@@ -22,7 +22,7 @@ from ._numba import AVAILABLE, compiled
 from .geometry import FloatArray
 from .model import IntArray
 
-__all__ = ["AVAILABLE", "dense_rows", "gather", "right_hand_sides", "row_ids", "scaled_take"]
+__all__ = ["AVAILABLE", "add_rows", "gather", "right_hand_sides", "row_ids", "scaled_take"]
 
 
 @compiled
@@ -59,19 +59,12 @@ def scaled_take(multipliers: FloatArray, rows: IntArray, coefficients: FloatArra
 
 
 @compiled
-def dense_rows(eq_data: FloatArray, eq_indices: np.ndarray, eq_indptr: np.ndarray,
-               ineq_data: FloatArray, ineq_indices: np.ndarray, ineq_indptr: np.ndarray,
-               n_columns: int) -> FloatArray:
-    """``[E; G]`` dense from canonical CSR arrays, each entry added to 0.0 as ``toarray``."""
-    n_eq, n_ineq = eq_indptr.shape[0] - 1, ineq_indptr.shape[0] - 1
-    out = np.zeros((n_eq + n_ineq, n_columns))
-    for row in range(n_eq):
-        for k in range(eq_indptr[row], eq_indptr[row + 1]):
-            out[row, eq_indices[k]] += eq_data[k]
-    for row in range(n_ineq):
-        for k in range(ineq_indptr[row], ineq_indptr[row + 1]):
-            out[n_eq + row, ineq_indices[k]] += ineq_data[k]
-    return out
+def add_rows(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+             out: FloatArray) -> None:
+    """Add canonical CSR rows' entries to ``out``'s rows, in place, as ``toarray`` does."""
+    for row in range(indptr.shape[0] - 1):
+        for k in range(indptr[row], indptr[row + 1]):
+            out[row, indices[k]] += data[k]
 
 
 @compiled

@@ -91,11 +91,6 @@ class NativeData:
             return self.hessian  # 2 W: each column's one entry on the diagonal
         return sp.csc_matrix(sp.triu(self.hessian, format="csc"))
 
-    @property
-    def has_upper(self) -> np.ndarray:
-        """Whether each row of ``G`` has a finite upper bound."""
-        return np.isfinite(self.upper)
-
     def unknowns(self, deviation: FloatArray) -> FloatArray:
         """``x = t + d`` from a solver's ``d``."""
         return np.asarray(self.target + np.asarray(deviation, dtype=np.float64),

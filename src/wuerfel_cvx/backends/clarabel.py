@@ -96,7 +96,7 @@ def solve_new(qp: StepQP, options: dict[str, Any]) -> DirectResult:
     import clarabel
 
     data = NativeData.of(qp)
-    upper_rows = np.flatnonzero(data.has_upper)
+    upper_rows = qp.upper_rows
     n_eq, n_ineq = qp.n_equalities, qp.n_inequalities
     rows = stacked((qp.eq_matrix, 1.0), (qp.ineq_matrix, -1.0),
                    (sp.csr_array(qp.ineq_matrix[upper_rows]), 1.0))

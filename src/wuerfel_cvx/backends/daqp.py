@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from .. import _numba, map_kernel
+from .._sparse import dense_rows
 from ..formulations.qp import StepQP
 from ..geometry import FloatArray
 from ..warm_start import WarmStart
@@ -61,29 +61,13 @@ def daqp_form(qp: StepQP) -> tuple[FloatArray, FloatArray, FloatArray, FloatArra
     if qp.upper_rows.size:
         assert qp.ineq_upper is not None
         upper[n_eq + qp.upper_rows] = qp.ineq_upper[qp.upper_rows]
-    if _numba.enabled:  # the same numbers, by a compiled loop
-        eq, ineq = qp.eq_matrix, qp.ineq_matrix
-        rows = map_kernel.dense_rows(eq.data, eq.indices, eq.indptr, ineq.data, ineq.indices,
-                                     ineq.indptr, qp.n_variables)
-    else:
-        rows = np.zeros((n_eq + n_ineq, qp.n_variables))
-        _fill_dense(qp.eq_matrix, rows[:n_eq])
-        _fill_dense(qp.ineq_matrix, rows[n_eq:])
+    rows = np.zeros((n_eq + n_ineq, qp.n_variables))
+    dense_rows(qp.eq_matrix, out=rows[:n_eq])
+    dense_rows(qp.ineq_matrix, out=rows[n_eq:])
     sense = np.zeros(n_eq + n_ineq, dtype=np.intc)  # C int, as ctypes.c_int
     sense[:n_eq] = EQUALITY
     return (dense_hessian, -(dense_hessian @ qp.target), rows, upper,
             np.concatenate([qp.eq_rhs, qp.ineq_rhs]), sense)
-
-
-def _fill_dense(matrix: sp.csr_array, out: FloatArray) -> None:
-    """Add canonical CSR ``matrix`` (no duplicate cells) to the zeros of ``out``.
-
-    Added, not assigned, as ``toarray`` does: a stored ``-0.0`` becomes ``0.0``.
-    """
-    if not matrix.nnz:
-        return
-    counts = np.diff(matrix.indptr)
-    out[np.repeat(np.arange(matrix.shape[0]), counts), matrix.indices] += matrix.data
 
 
 def solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) -> DirectResult:

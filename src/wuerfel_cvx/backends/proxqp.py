@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from .._sparse import dense_rows
 from ..formulations.qp import StepQP
 from ..geometry import FloatArray
 from ..warm_start import WarmStart
@@ -74,25 +75,11 @@ def proxsuite_form(qp: StepQP) -> tuple[dict[str, Any], FloatArray]:
         upper[qp.upper_rows] = qp.ineq_upper[qp.upper_rows]
     has_eq, has_ineq = qp.n_equalities > 0, qp.n_inequalities > 0
     form = {"H": dense_hessian, "g": linear,
-            "A": dense(qp.eq_matrix) if has_eq else None,
+            "A": dense_rows(qp.eq_matrix) if has_eq else None,
             "b": qp.eq_rhs if has_eq else None,
-            "C": dense(qp.ineq_matrix, row_factor=-sign) if has_ineq else None,
+            "C": dense_rows(qp.ineq_matrix, row_factor=-sign) if has_ineq else None,
             "l": lower if has_ineq else None, "u": upper if has_ineq else None}
     return form, sign
-
-
-def dense(rows: sp.csr_array, row_factor: FloatArray | None = None) -> FloatArray:
-    """Canonical CSR ``rows`` (each row times ``row_factor``, +-1) as a dense array.
-
-    As ``toarray()`` of ``rows`` (of ``diags(row_factor) @ rows``): each stored entry, after
-    its exact sign flip, is added to 0.0 (a stored ``-0.0`` becomes ``0.0``).
-    """
-    counts = np.diff(rows.indptr)
-    row_of_entry = np.repeat(np.arange(rows.shape[0]), counts)
-    values = rows.data if row_factor is None else row_factor[row_of_entry] * rows.data
-    out = np.zeros(rows.shape)
-    out[row_of_entry, rows.indices] += values
-    return out
 
 
 def solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) -> DirectResult:
