@@ -39,7 +39,7 @@ def lighter(scene: Scene, factor: float) -> Scene:
 def test_weights_scale_is_the_smallest_power_of_four_reaching_the_floor(largest: float) -> None:
     bank_qp = qp_bank()[0].build()
     weights = np.linspace(largest / 7.0, largest, bank_qp.n_variables)
-    qp = dataclasses.replace(bank_qp, weights=weights, _declared=None)
+    qp = dataclasses.replace(bank_qp, weights=weights)
     scale = weights_scale(qp)
     expected = 1.0 if largest >= WEIGHT_FLOOR else 4.0 ** math.ceil(
         math.log(WEIGHT_FLOOR / largest, 4.0) - 1e-12)

@@ -33,7 +33,7 @@ def large_qp() -> StepQP:
     assert qp.ineq_upper is not None
     return dataclasses.replace(qp, target=LARGE * qp.target, eq_rhs=LARGE * qp.eq_rhs,
                                ineq_rhs=LARGE * qp.ineq_rhs,
-                               ineq_upper=LARGE * qp.ineq_upper, _declared=None)
+                               ineq_upper=LARGE * qp.ineq_upper)
 
 
 def test_the_scale_is_the_smallest_power_of_two_that_brings_the_data_to_the_limit() -> None:

@@ -133,7 +133,7 @@ def test_the_kkt_check_sees_a_wrong_sign_a_violated_upper_bound_and_slack(
 
 def test_the_coupling_cost_enters_the_gradient(exact: Exact) -> None:
     qp = wide_qp()
-    without = dataclasses.replace(qp, cost_factor=None, _declared=None)
+    without = dataclasses.replace(qp, cost_factor=None)
     assert kkt_residuals(without, exact.x, exact.y, exact.z).dual > 1e-2
 
 
@@ -173,7 +173,7 @@ def test_new_numbers_in_the_same_structure_are_solved_anew() -> None:
     moved.ineq_upper[0] = 1.5  # another upper bound, same rows bounded: same structure
     assert moved.structure() == wide_qp().structure()
     direct = solve_step_qp(moved, "OSQP", "high", cache=cache)
-    fresh = solve_step_qp(dataclasses.replace(moved, _declared=None), "CLARABEL", "high")
+    fresh = solve_step_qp(dataclasses.replace(moved), "CLARABEL", "high")
     assert direct.path == "direct" and direct.verified
     assert np.max(np.abs(direct.x - fresh.x)) <= 2 * agreement(moved, exact_of(moved))
     assert (moved.ineq_matrix @ direct.x)[0] <= 1.5 + 1e-6
@@ -182,7 +182,7 @@ def test_new_numbers_in_the_same_structure_are_solved_anew() -> None:
 def exact_of(qp: StepQP) -> Exact:
     """The exact solution of ``qp`` with the active set of a tight CLARABEL solve."""
     assert qp.ineq_upper is not None
-    x = solve_step_qp(dataclasses.replace(qp, _declared=None), "CLARABEL", "high").x
+    x = solve_step_qp(dataclasses.replace(qp), "CLARABEL", "high").x
     lhs = qp.ineq_matrix @ x
     return exact_solution(qp, np.flatnonzero(np.abs(lhs - qp.ineq_rhs) < 1e-6),
                           np.flatnonzero(np.abs(lhs - qp.ineq_upper) < 1e-6))
@@ -191,7 +191,7 @@ def exact_of(qp: StepQP) -> Exact:
 def test_slots_and_structure_follow_the_data() -> None:
     qp = wide_qp()
     assert qp.slots() == tuple(PARAMETER_SLOTS)  # this QP fills every slot
-    plain = dataclasses.replace(qp, ineq_upper=None, cost_factor=None, _declared=None)
+    plain = dataclasses.replace(qp, ineq_upper=None, cost_factor=None)
     assert plain.slots() == ("weighted_target", "eq_values", "eq_rhs", "ineq_values",
                              "ineq_rhs")
     assert plain.structure() != qp.structure()
@@ -291,7 +291,7 @@ def test_options_without_a_native_form_go_through_cvxpy() -> None:
     answer = solve_module._solve(wide_qp(), SOLVERS["PIQP"], dense, cache)
     assert answer.path == "declared" and cache.solved_natively == 0
     # a Hessian with one entry per column, off the diagonal in two: not taken as diagonal
-    coupled = dataclasses.replace(wide_qp(), weights=np.zeros(4), _declared=None,
+    coupled = dataclasses.replace(wide_qp(), weights=np.zeros(4),
                                   cost_factor=sp.csr_array(np.array([[1.0, 1.0, 0.0, 0.0],
                                                                      [0.0, 1.0, 0.0, 0.0]])))
     assert NativeData.of(coupled).hessian.nnz == 4  # 2 F' F: four entries in four columns

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from .errors import InputError, Interrupted, StepFailure, WuerfelError
 from .scene import Box, Scene, Square, Table
+from .settings import Settings
 from .simulate import simulate
 from .simulation import Simulation
 from .solvers import available_solvers
@@ -19,5 +20,5 @@ from .trajectory import Trajectory
 
 __version__ = "0.1.0"
 
-__all__ = ["Box", "InputError", "Interrupted", "Scene", "Simulation", "Square", "StepFailure",
+__all__ = ["Box", "InputError", "Interrupted", "Scene", "Settings", "Simulation", "Square", "StepFailure",
            "Table", "Trajectory", "WuerfelError", "available_solvers", "simulate"]

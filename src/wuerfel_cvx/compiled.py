@@ -1,60 +1,102 @@
-"""Compile once per QP structure: parametrised (DPP) step problems, cached by sparsity.
+"""The step QP in cvxpy: declared afresh, or compiled once per structure (DPP).
 
-Declaring a step's QP afresh makes cvxpy canonicalise it on every step, which costs
-several times the solver's own time.  Here a step QP's *structure*
-(:meth:`~wuerfel_cvx.formulations.qp.StepQP.structure`: sizes, weights, sparsity
-patterns) is compiled once into a disciplined-parametrised problem::
+Two of the solve paths of :mod:`wuerfel_cvx.solve` go through cvxpy's public API:
 
-    minimise    sum (sqrt(w) x - sqrt(w) t)^2  +  sum (F(p) x - (F t)(p))^2
-    subject to  E(p) x == e(p),  G(p) x >= h(p),  (G(p) x)[r] <= u(p)
+``declared``
+    :func:`declare` writes the QP's numbers into a new :class:`cvxpy.Problem`, which cvxpy
+    canonicalises on every solve.
+``compiled``
+    A step QP's *structure* (:meth:`~wuerfel_cvx.formulations.qp.StepQP.structure`: sizes,
+    weights, sparsity patterns) is declared once as a disciplined-parametrised problem::
 
-with one cvxpy parameter per slot of
-:data:`~wuerfel_cvx.formulations.qp.PARAMETER_SLOTS` the QP fills (the nonzeros of
-``E``, ``G`` and ``F`` as sparse parameters).  The objective has the same form as a fresh
-declaration, so both reach the solver as the same canonical problem.  It keeps the
-objective's constant: ``x' W x - 2 (W t)' x`` has the same minimiser and fewer variables,
-but without the constant the solvers' relative stopping tests see another problem.
-A later step with the same structure only sets parameter values, and cvxpy re-solves
-through its cached parameter map without canonicalising again.  The model is the same
-cvxpy model; only its numbers change.
+        minimise    sum (sqrt(w) x - sqrt(w) t)^2  +  sum (F(p) x - (F t)(p))^2
+        subject to  E(p) x == e(p),  G(p) x >= h(p),  (G(p) x)[r] <= u(p)
 
-A solver with a direct backend (:attr:`~wuerfel_cvx.solvers.SolverSpec.backend`) then
-solves a compiled structure on the direct path (:mod:`wuerfel_cvx.backends`).
+    with one cvxpy parameter per slot of :data:`~wuerfel_cvx.formulations.qp.PARAMETER_SLOTS`
+    the QP fills, the matrices ``E``, ``G`` and ``F`` as parameters declared by their
+    sparsity patterns.  A later step of the structure only sets parameter values, and
+    cvxpy re-solves through its cached parameter map without canonicalising again.
 
-A structure is compiled the second time it is seen (``compile_after=2``): a structure that
-occurs once, as in a pile where contacts change every step, costs a plain declaration and
-not the dearer parametrised compilation.  A resting scene repeats one structure and so
-compiles once.  Solvers that can (:attr:`~wuerfel_cvx.solvers.SolverSpec.solves_new_natively`)
-solve such a one-off structure from the step QP's own numbers instead
-(:mod:`wuerfel_cvx.backends._native`, the path :data:`NATIVE`), unless ``native_new`` is off.
+Both objectives keep the constant, so both reach the solver as the same canonical problem:
+``x' W x - 2 (W t)' x`` has the same minimiser, but without the constant the solvers'
+relative stopping tests see another problem.
+
+A structure is compiled the second time it is seen (``compile_after=2``): one that occurs
+once, as in a pile whose contacts change every step, costs a plain declaration and not the
+dearer parametrised compilation.  cvxpy (1.9) still reads a sparse parameter's dense value
+while solving (``Parameter.value`` in its reductions' checks), so a structure whose matrix
+parameter would hold more than :data:`DENSE_ENTRY_LIMIT` dense entries is not compiled:
+it is declared afresh on every step, with memory growing with the nonzeros.
 """
 
 from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Any
 
 import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
-from .backends import DirectSolver, build_direct
-from .formulations.qp import PARAMETER_SLOTS, DeclaredQP, StepQP
-from .slots import SlotLayout
-from .solvers import SOLVERS
-from .warm_start import WarmStarts
+from .formulations.qp import PARAMETER_SLOTS, StepQP, upper_bounds
 
 StructureKey = tuple[object, ...]
 
-DECLARED, COMPILED, DIRECT, NATIVE = "declared", "compiled", "direct", "native"
-"""How a step was solved: declared afresh, through a compiled problem, on the direct path,
-or (a one-off structure) from its own numbers without cvxpy."""
+DECLARED, COMPILED, NATIVE = "declared", "compiled", "native"
+"""The solve paths: a cvxpy problem per step, a cvxpy DPP problem per structure, or the
+solver's own API on the step QP's numbers (:mod:`wuerfel_cvx.backends`)."""
+
+DENSE_ENTRY_LIMIT = 1 << 24
+"""Most dense entries (rows x columns) of a matrix parameter of a compiled structure: cvxpy
+allocates a parameter's dense shape when it reads its value (16.8 million float64 entries
+are 134 MB).  A larger structure is declared afresh instead."""
+
+
+@dataclass(frozen=True)
+class DeclaredQP:
+    """A step QP declared in cvxpy: the problem and the handles to read a solution."""
+
+    problem: cp.Problem
+    variable: cp.Variable
+    eq_constraint: cp.Constraint | None
+    ineq_constraint: cp.Constraint | None
+    """``G x >= h`` (every inequality row)."""
+    upper_constraint: cp.Constraint | None = None
+    """``(G x)[r] <= u[r]`` for the rows ``r`` with a finite upper bound."""
+
+
+def declare(qp: StepQP) -> DeclaredQP:
+    """``qp`` as its own cvxpy problem, its numbers constants."""
+    x = cp.Variable(qp.n_variables, name="x")
+    cost = cp.sum_squares(cp.multiply(np.sqrt(qp.weights), x - qp.target))
+    if qp.cost_factor is not None and qp.n_cost_rows:
+        cost = cost + cp.sum_squares(qp.cost_factor @ x - qp.cost_factor @ qp.target)
+    constraints: list[cp.Constraint] = []
+    eq_constraint = ineq_constraint = upper_constraint = None
+    if qp.n_equalities:
+        eq_constraint = qp.eq_matrix @ x == qp.eq_rhs
+        constraints.append(eq_constraint)
+    if qp.n_inequalities:
+        ineq_constraint = qp.ineq_matrix @ x >= qp.ineq_rhs
+        constraints.append(ineq_constraint)
+    rows = qp.upper_rows
+    if rows.size:
+        upper_constraint = qp.ineq_matrix[rows] @ x <= upper_bounds(qp)
+        constraints.append(upper_constraint)
+    return DeclaredQP(cp.Problem(cp.Minimize(cost), constraints), x, eq_constraint,
+                      ineq_constraint, upper_constraint)
 
 
 def structure_key(qp: StepQP) -> StructureKey:
     """What a compiled problem depends on: sizes, weights and sparsity patterns."""
     return qp.structure()
+
+
+def compilable(qp: StepQP) -> bool:
+    """Whether ``qp``'s matrix parameters are small enough dense (:data:`DENSE_ENTRY_LIMIT`)."""
+    matrices = (qp.eq_matrix, qp.ineq_matrix, qp.cost_factor)
+    return all(matrix is None or matrix.shape[0] * matrix.shape[1] <= DENSE_ENTRY_LIMIT
+               for matrix in matrices)
 
 
 @dataclass
@@ -64,13 +106,6 @@ class CompiledQP:
     declared: DeclaredQP
     parameters: dict[str, cp.Parameter]
     """One parameter per slot the structure fills, by slot name."""
-    direct: dict[str, DirectSolver | None] = field(default_factory=dict)
-    """Per solver, the direct path for this structure once tried (``None``: it does not
-    apply)."""
-
-    def parameter_names(self) -> dict[int, str]:
-        """Our parameters' ids and the slot whose numbers each holds."""
-        return {param.id: name for name, param in self.parameters.items()}
 
     @classmethod
     def of(cls, qp: StepQP) -> CompiledQP:
@@ -122,99 +157,43 @@ class CompiledQPCache:
     """Compiled problems by structure, least recently used dropped beyond ``capacity``."""
 
     capacity: int = 64
-    """Most structures kept (each holds a compiled problem and the solver's cache)."""
+    """Most structures kept (each holds a compiled problem and cvxpy's cache of it)."""
     compile_after: int = 2
     """Compile a structure when it is seen this many times (1: always)."""
     compiled: int = 0
     """Structures compiled so far."""
     reused: int = 0
-    """Steps that re-solved an already compiled structure."""
-    warm_starts: WarmStarts | None = None
-    """Each solver's last solution, to warm-start the next QP (``None``: cold starts)."""
-    slots: SlotLayout | None = None
-    """Solve each QP in its slot structure (:mod:`wuerfel_cvx.slots`; ``None``: exact rows)."""
+    """Solves of an already compiled structure."""
     canonicalised: int = 0
     """QPs that went through cvxpy's canonicalisation (declared afresh, or compiled)."""
-    native_new: bool = True
-    """Solve a structure not due for compiling natively where the solver can (else declare
-    it afresh in cvxpy)."""
-    solved_natively: int = 0
-    """One-off structures solved from their own numbers (:data:`NATIVE`)."""
     _problems: OrderedDict[StructureKey, CompiledQP] = field(default_factory=OrderedDict,
                                                              repr=False)
     _sightings: dict[StructureKey, int] = field(default_factory=dict, repr=False)
 
-    def declared_for(self, qp: StepQP) -> DeclaredQP:
-        """A cvxpy problem holding ``qp``'s numbers: a compiled one if its structure repeats."""
-        return self.prepare(qp)[0]
-
-    def prepare(self, qp: StepQP,
-                key: StructureKey | None = None) -> tuple[DeclaredQP, str]:
-        """:meth:`declared_for` and how: :data:`COMPILED` or :data:`DECLARED` afresh.
-
-        ``key``: ``qp``'s :func:`structure_key` if the caller has it already.
-        """
-        key = structure_key(qp) if key is None else key
+    def prepare(self, qp: StepQP) -> tuple[DeclaredQP, str]:
+        """A cvxpy problem holding ``qp``'s numbers, and how: :data:`COMPILED` or :data:`DECLARED`."""
+        key = structure_key(qp)
         compiled = self._problems.get(key)
         if compiled is not None:
             self._problems.move_to_end(key)
             self.reused += 1
             return compiled.load(qp), COMPILED
-        if self.one_off(key):
-            self._sight(key)
-            self.canonicalised += 1
-            return qp.declared(), DECLARED
+        self.canonicalised += 1
+        if not compilable(qp):
+            return declare(qp), DECLARED
+        seen = self._sightings.get(key, 0) + 1
+        if seen < self.compile_after:
+            self._sightings[key] = seen
+            if len(self._sightings) > 16 * self.capacity:  # forget old one-off structures
+                self._sightings.clear()
+            return declare(qp), DECLARED
         self._sightings.pop(key, None)
         compiled = CompiledQP.of(qp)
         self._problems[key] = compiled
         if len(self._problems) > self.capacity:
             self._problems.popitem(last=False)
         self.compiled += 1
-        self.canonicalised += 1
         return compiled.load(qp), COMPILED
-
-    def one_off(self, key: StructureKey) -> bool:
-        """Whether a QP of structure ``key`` is, now, not compiled and not due for compiling."""
-        return (key not in self._problems
-                and self._sightings.get(key, 0) + 1 < self.compile_after)
-
-    def solve_natively(self, key: StructureKey) -> None:
-        """Count a :meth:`one_off` structure's QP as solved from its own numbers."""
-        self._sight(key)
-        self.solved_natively += 1
-
-    def _sight(self, key: StructureKey) -> None:
-        """Count one sighting of a structure not compiled."""
-        self._sightings[key] = self._sightings.get(key, 0) + 1
-        if len(self._sightings) > 16 * self.capacity:  # forget old one-off structures
-            self._sightings.clear()
-
-    def direct_solver(self, qp: StepQP, solver: str, options: dict[str, Any],
-                      key: StructureKey | None = None) -> DirectSolver | None:
-        """The direct path of ``solver`` for ``qp``'s compiled structure.
-
-        ``None`` means: solve through cvxpy (not compiled yet, a solver without a direct
-        backend, or the path does not apply).  A structure's path is set up with the
-        options of its first use.  ``key``: ``qp``'s :func:`structure_key` if the caller has
-        it already.
-        """
-        backend = SOLVERS[solver].backend
-        if backend is None:
-            return None
-        key = structure_key(qp) if key is None else key
-        compiled = self._problems.get(key)
-        if compiled is None:
-            return None
-        self._problems.move_to_end(key)
-        if solver not in compiled.direct:
-            compiled.load(qp)
-            compiled.direct[solver] = build_direct(
-                solver, backend, compiled.declared.problem, compiled.parameter_names(), qp,
-                options)
-        direct = compiled.direct[solver]
-        if direct is not None:
-            self.reused += 1
-        return direct
 
     def __len__(self) -> int:
         return len(self._problems)

@@ -98,7 +98,7 @@ def with_friction_impulse(qp: StepQP, friction: FloatArray) -> StepQP:
     if qp.cones is None:
         return qp
     shift = (qp.cones.slip.T @ friction) / qp.weights
-    return dataclasses.replace(qp, target=qp.target + shift, _declared=None)
+    return dataclasses.replace(qp, target=qp.target + shift)
 
 
 @dataclass(frozen=True)
@@ -149,7 +149,7 @@ def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP
                 converged = True
                 break
             linearisations += 1
-            base, friction = dataclasses.replace(refined, target=target, _declared=None), \
+            base, friction = dataclasses.replace(refined, target=target), \
                 np.zeros(len(refined.contacts))
             continue
         normal = normal_impulses(contact_qp, solution.ineq_dual)
@@ -166,7 +166,7 @@ def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP
         # the next contact QP is the first pass of a new impulse, or the next pass of this one
         linearisations = 1 if new_impulse else linearisations + 1
         if refined is not None:
-            base = dataclasses.replace(refined, target=target, _declared=None)
+            base = dataclasses.replace(refined, target=target)
             friction = _carried(friction, contact_qp.contacts, base.contacts)
             previous = None if previous is None else _carried(previous, contact_qp.contacts,
                                                               base.contacts)

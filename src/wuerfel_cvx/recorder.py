@@ -7,17 +7,18 @@ same functions of :mod:`wuerfel_cvx.metrics`, and the same ``info``.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from .formulations import Formulation, get_formulation
 from .geometry import FloatArray
 from .metrics import kinetic_energy, potential_energy, rod_length_drift
 from .model import Model, State
 from .scene import Scene
+from .settings import Settings
 from .trajectory import NULLABLE_COLUMNS, Trajectory
 from .versions import package_version
 
@@ -43,9 +44,8 @@ The row's own diagnostics (rod drift, penetration, energies) are measured outsid
 ``step_time_s``.  ``solver`` and ``status`` are those of the solver that produced the
 step; ``primary_status`` is the run's own solver's status on it, which differs only when
 that solver failed and a ``fallback`` solver took over.  ``path`` is how the step's QPs
-reached the solver: ``direct``, ``compiled``, ``declared`` or ``native`` (a structure seen
-once, solved from its own numbers without cvxpy; joined by ``+`` when a
-step's island QPs went different ways; ``none`` when no QP was solved, ``peer`` for a
+reached the solver: ``native``, ``compiled`` or ``declared`` (:class:`~wuerfel_cvx.solve.SolvePath`;
+joined by ``+`` when a step's QPs went different ways; ``none`` when no QP was solved, ``peer`` for a
 peer engine).  ``passes`` is the number of QPs solved one after another for the step (the
 most of any island): 1 for a single-pass formulation, up to ``max_passes`` for the
 closest-approach Gauss-Newton passes of ``velocity``, 0 for a step that solved none; its
@@ -68,26 +68,34 @@ def physical_metrics(model: Model, state: State, penetration: float) -> dict[str
             "total_energy_J": kinetic + potential}
 
 
-def run_info(scene: Scene, *, formulation: str, solver: str, tol: str, dt: float,
-             steps: int, table_mass: float | None = None, extra_rod: bool = False,
-             fallback: Sequence[str] = (), friction_model: str | None = None,
-             packages: dict[str, str] | None = None) -> dict[str, Any]:
-    """A run's ``info``: its scene (name and data), model options, settings and versions.
+def run_info(scene: Scene, settings: Settings, *, formulation: Formulation | None = None,
+             steps: int = 0, packages: dict[str, str] | None = None) -> dict[str, Any]:
+    """A run's ``info``: its scene (name and data), its settings and the versions.
+
+    ``formulation``: the run's formulation object, when it differs from the settings' (a
+    friction model set); ``packages`` maps a key of ``info["versions"]`` to a
+    distribution whose version it records (``wuerfel_cvx`` is always recorded).
+    ``friction_model`` is ``None`` for a formulation without friction.
+    """
+    formulation = get_formulation(settings.formulation) if formulation is None else formulation
+    friction = formulation.friction
+    return info_of(scene, {**settings.to_dict(), "formulation": formulation.name,
+                           "steps": int(steps),
+                           "friction_model": None if friction is None
+                           else friction.friction_model}, packages)
+
+
+def info_of(scene: Scene, fields: dict[str, Any],
+            packages: dict[str, str] | None = None) -> dict[str, Any]:
+    """A trajectory's ``info``: the scene (name and data), ``fields`` and the versions.
 
     ``packages`` maps a key of ``info["versions"]`` to a distribution whose version it
-    records (``wuerfel_cvx`` is always recorded).  ``friction_model`` is ``None`` for a
-    formulation without friction.
+    records (``wuerfel_cvx`` is always recorded).  A peer engine's run
+    (:mod:`wuerfel_cvx.peers`) gives its own ``fields``.
     """
-    return {
-        "scene": scene.name, "scene_data": scene.to_dict(), "formulation": formulation,
-        "solver": solver, "tol": tol, "dt": float(dt), "steps": int(steps),
-        "table_mass": table_mass, "extra_rod": extra_rod, "fallback": list(fallback),
-        "friction_model": friction_model,
-        "versions": {key: package_version(package) for key, package in
-                     {"wuerfel_cvx": "wuerfel_cvx", **(packages or {})}.items()},
-        "compiled_structures": None, "steps_reusing_a_compiled_structure": None,
-        "canonicalised_qps": None, "natively_solved_qps": None, "slot_layout_changes": None,
-    }
+    return {"scene": scene.name, "scene_data": scene.to_dict(), **fields,
+            "versions": {key: package_version(package) for key, package in
+                         {"wuerfel_cvx": "wuerfel_cvx", **(packages or {})}.items()}}
 
 
 @dataclass

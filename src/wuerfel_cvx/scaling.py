@@ -123,5 +123,4 @@ def scaled_qp(qp: StepQP, scale: float, weight_scale: float = 1.0) -> StepQP:
     factor = None if qp.cost_factor is None else qp.cost_factor * math.sqrt(weight_scale)
     return dataclasses.replace(qp, weights=qp.weights * weight_scale, cost_factor=factor,
                                target=qp.target / scale, eq_rhs=qp.eq_rhs / scale,
-                               ineq_rhs=qp.ineq_rhs / scale, ineq_upper=upper,
-                               _declared=None)
+                               ineq_rhs=qp.ineq_rhs / scale, ineq_upper=upper)

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import signal
 import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from types import FrameType
+from typing import Any
 
 from tqdm.auto import tqdm
 
@@ -15,8 +16,8 @@ from .errors import InputError, Interrupted, StepFailure
 from .formulations import Formulation, StepQP
 from .recorder import METRIC_COLUMNS
 from .scene import Scene
-from .simulation import ASLEEP, DT_RANGE, Simulation, checked_steps
-from .sleep import SleepSettings
+from .settings import DT_RANGE, Settings
+from .simulation import ASLEEP, Simulation, checked_steps
 from .solve import StepSolution
 from .trajectory import Trajectory
 
@@ -50,32 +51,28 @@ def simulate(
     formulation: str | Formulation = "velocity",
     tol: str | float = "default",
     *,
-    table_mass: float | None = None,
-    extra_rod: bool = False,
     progress: bool = False,
     observer: StepObserver | None = None,
-    compiled: bool = True,
-    sleep: SleepSettings | None = None,
-    islands: bool = False,
-    fallback: Sequence[str] = (),
-    friction_model: str | None = None,
-    warm_start: bool = True,
-    native_new: bool = True,
+    settings: Settings | None = None,
+    **options: Any,
 ) -> Trajectory:
     """Simulate ``steps`` steps of ``dt`` seconds, one QP per step; the trajectory.
 
-    A loop over :meth:`Simulation.step <wuerfel_cvx.simulation.Simulation.step>`, whose
-    class documents the scene, step and solver arguments (``scene`` may also be a library
-    name such as ``"stack-10"`` or a TOML path here).
+    A loop over :meth:`Simulation.step <wuerfel_cvx.simulation.Simulation.step>`.
 
     Parameters
     ----------
-    scene, dt, solver, formulation, tol, table_mass, extra_rod, compiled, sleep, islands
-        As for :class:`~wuerfel_cvx.simulation.Simulation`; ``scene`` may be a name or path.
-    fallback, friction_model, warm_start, native_new
-        As for :class:`~wuerfel_cvx.simulation.Simulation`.
+    scene:
+        A :class:`Scene`, a library name such as ``"stack-10"``, or a TOML path.
     steps:
         Number of steps, non-negative.
+    dt, solver, formulation, tol, **options:
+        The run's settings: the fields of :class:`~wuerfel_cvx.settings.Settings` (each
+        documented there with its unit and default: ``solve_path``, ``friction_model``,
+        ``table_mass``, ``extra_rod``, ``sleep``, ``islands``, ``fallback``,
+        ``warm_start``).
+    settings:
+        All of them at once, instead of the keywords.
     progress:
         Show a progress bar.
     observer:
@@ -98,11 +95,7 @@ def simulate(
     """
     steps = checked_steps(steps)
     scene = resolve_scene(scene)
-    simulation = Simulation(scene, dt, solver, formulation, tol, table_mass=table_mass,
-                            extra_rod=extra_rod, compiled=compiled, sleep=sleep,
-                            islands=islands, fallback=fallback,
-                            friction_model=friction_model, warm_start=warm_start,
-                            native_new=native_new)
+    simulation = Simulation(scene, dt, solver, formulation, tol, settings=settings, **options)
     with _noticing_ctrl_c() as ctrl_c:
         try:
             for _ in tqdm(range(int(steps)), disable=not progress, unit="step",

@@ -16,15 +16,12 @@ Nothing is kept between calls but the object's own state: no module-level memo.
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from .compiled import CompiledQPCache
 from .contacts import Contacts, find_contacts
 from .coulomb import (
     CoulombStep,
@@ -42,27 +39,22 @@ from .formulations import (
     with_friction_model,
 )
 from .friction import ContactForces
-from .friction_problem import FrictionCache, solve_friction_with_fallback
+from .friction_problem import solve_friction_with_fallback
 from .model import IntArray, Model, State
 from .recorder import TrajectoryRecorder, physical_metrics, run_info
 from .scene import Scene
-from .sleep import IslandPlanner, SleepSettings, merge, restrict
-from .slots import SlotLayout
+from .settings import Settings
+from .sleep import IslandPlanner, merge, restrict
 from .solve import (
     Residuals,
+    SolvePath,
     StepSolution,
     combine_solutions,
     first_failed_status,
     solve_with_fallback,
 )
-from .solvers import SOLVERS, get_solver, tolerance_value
+from .solvers import SOLVERS
 from .trajectory import Trajectory
-from .warm_start import WarmStarts
-
-DT_RANGE = (1e-6, 100.0)
-"""Accepted time steps (s).  Baumgarte's ``beta / dt`` turns round-off in rod lengths
-into speed, so a tiny step turns round-off into energy; a huge one overflows the contact
-reach."""
 
 ASLEEP = "asleep"
 """Status of a step in which every island slept: no QP was solved, nothing moved.  Its
@@ -84,63 +76,10 @@ class StepRecord:
 class Simulation:
     """A scene being stepped: ``Simulation(scene, dt, ...)``, then :meth:`step` repeatedly.
 
-    :func:`wuerfel_cvx.simulate` is a loop over this object.
-
-    Parameters
-    ----------
-    scene:
-        The :class:`Scene` to simulate.
-    dt:
-        Time step (s), positive.
-    solver:
-        Solver registry name, case-insensitive (see :func:`available_solvers`).
-    formulation:
-        ``"velocity"`` (default) or ``"seed"``, or a formulation object.
-    friction_model:
-        How contacts with friction (the scene's ``friction`` keys) are modelled: ``"ccp"``
-        (default; Anitescu's cone complementarity, one QP) or ``"coulomb"`` (exact Coulomb
-        friction by a fixed point of QPs).  ``None`` (default) is ``"ccp"``, or the model of
-        a formulation object built with one.  ``velocity`` and ``rigid`` take both;
-        ``seed`` has no friction, and a scene with friction is an :class:`InputError` for it.
-    tol:
-        Tolerance preset (``low``, ``default``, ``high``) or a number.
-    table_mass:
-        ``None``: tables are fixed constants.  A mass (kg per corner): the seed's
-        heavy table, whose corners are variables held still by equalities.
-    extra_rod:
-        Add the redundant second diagonal (a 6th rod) to every square.
-    compiled:
-        Re-solve repeated QP structures through a compiled, parametrised problem
-        (:class:`~wuerfel_cvx.compiled.CompiledQPCache`) instead of declaring each step's
-        problem afresh.  Same model and answers (to solver tolerance); less cvxpy time.
-    sleep:
-        ``None`` (default): every square takes part in every step.  Settings: islands of
-        squares that have been still long enough sleep (frozen, left out of the QP) until
-        an awake square touches them (:mod:`wuerfel_cvx.sleep`).  A step in which every
-        island sleeps has status ``"asleep"`` and no QP.
-    islands:
-        Solve each island (squares connected by contacts) as its own QP, each cached by its
-        own structure, instead of all awake squares in one QP (see :mod:`wuerfel_cvx.sleep`
-        for the trade-off).  Same model; answers agree to solver tolerance.  A step's
-        metrics row then sums sizes and times over the islands and takes the worst
-        residuals and status; ``observer`` is called once per island QP.
-    fallback:
-        Solvers to try, in order, on a step that ``solver`` fails (a status other than
-        optimal, non-finite or unusable data, an exception).  The step's metrics row then
-        names the solver that succeeded in ``solver`` and keeps the failed status in
-        ``primary_status``.  Only when every solver fails does the run stop.
-    warm_start:
-        With ``compiled``, start each QP's solver from the last step's solution, mapped
-        onto this step's rows by contact (:mod:`wuerfel_cvx.warm_start`), in the solvers
-        that take such a start (PROXQP, DAQP); OSQP starts from its structure's own last
-        solution.  ``False``: every solve starts cold.  Same answers to solver tolerance.
-    native_new:
-        With ``compiled``, solve a QP whose structure the cache has not compiled (and will
-        not compile yet: seen for the first time) from its own numbers, in OSQP, PIQP and
-        Clarabel (:mod:`wuerfel_cvx.backends._native`; path ``native``), instead of
-        declaring it afresh in cvxpy.  The same QP in another form: answers agree to
-        solver tolerance, and each is checked by the same KKT residuals.  ``False``:
-        every QP reaches these solvers through cvxpy.
+    :func:`wuerfel_cvx.simulate` is a loop over this object.  The keyword arguments are the
+    fields of :class:`~wuerfel_cvx.settings.Settings` (each documented there, with its unit
+    and default), or ``settings`` gives them all at once (the keywords then must not be
+    given).
 
     Raises
     ------
@@ -151,39 +90,29 @@ class Simulation:
 
     def __init__(self, scene: Scene, dt: float = 0.01, solver: str = "CLARABEL",
                  formulation: str | Formulation = "velocity", tol: str | float = "default",
-                 *, table_mass: float | None = None, extra_rod: bool = False,
-                 compiled: bool = True, sleep: SleepSettings | None = None,
-                 islands: bool = False, fallback: Sequence[str] = (),
-                 friction_model: str | None = None, warm_start: bool = True,
-                 native_new: bool = True):
-        self.dt = checked_dt(dt)
-        self.solvers = [get_solver(name).name for name in (solver, *fallback)]
-        tolerance_value(tol)
-        self.tol = tol
-        self.model = Model.from_scene(scene, table_mass=table_mass, extra_rod=extra_rod)
-        self.formulation = with_friction_model(get_formulation(formulation), friction_model,
-                                               bool(np.any(self.model.friction > 0.0)))
-        self.cache = (CompiledQPCache(warm_starts=WarmStarts() if warm_start else None,
-                                      native_new=native_new)
-                      if compiled else None)
-        columns = getattr(self.formulation, "slot_columns", None)
-        if (self.cache is not None and columns is not None and table_mass is None
-                and sleep is None and not islands):  # slots number every body of the model
-            self.cache.slots = SlotLayout(columns)
-        self._friction_cache = FrictionCache() if compiled else None
-        self._coulomb = (getattr(self.formulation, "friction_model", None) == "coulomb"
-                         and bool(np.any(self.model.friction > 0.0)))
+                 *, settings: Settings | None = None, **options: Any):
+        settings = settings_of(settings, dt=dt, solver=solver, formulation=formulation,
+                               tol=tol, **options)
+        self.settings = settings
+        self.dt, self.tol, self.solvers = settings.dt, settings.tol, list(settings.solvers)
+        self.model = Model.from_scene(scene, table_mass=settings.table_mass,
+                                      extra_rod=settings.extra_rod)
+        has_friction = bool(np.any(self.model.friction > 0.0))
+        self.formulation = with_friction_model(get_formulation(settings.formulation),
+                                               settings.friction_model, has_friction)
+        friction = self.formulation.friction
+        self.path = SolvePath(settings.solve_path, warm_start=settings.warm_start)
+        self._coulomb = (friction is not None and friction.friction_model == "coulomb"
+                         and has_friction)
         self._coulomb_warned = False  # a run warns of its first unconverged step only
         self._friction_memory = FrictionMemory(self.model.n_boxes)
-        self.planner = IslandPlanner(self.model.n_boxes, sleep, islands)
+        self.planner = IslandPlanner(self.model.n_boxes, settings.sleep, settings.islands)
         self.state = State.initial(scene)
         self.step_index = 0
         self.contacts, self._search_time = self._search(self.state)
         self.recorder = TrajectoryRecorder.start(self.model, run_info(
-            scene, formulation=self.formulation.name, solver=self.solvers[0], tol=str(tol),
-            dt=self.dt, steps=0, table_mass=table_mass, extra_rod=extra_rod,
-            fallback=self.solvers[1:], packages=_packages(self.solvers[0]),
-            friction_model=getattr(self.formulation, "friction_model", None)), self.state)
+            scene, settings, formulation=self.formulation,
+            packages=_packages(self.solvers[0])), self.state)
 
     def step(self) -> StepRecord:
         """Advance by one step of ``dt``; the QPs solved and their solutions.
@@ -193,9 +122,6 @@ class Simulation:
         """
         step = self.step_index + 1
         started = time.perf_counter()
-        if self.cache is not None and self.cache.slots is not None:
-            self.cache.slots.track(self.model, self.state.points, self.state.velocities,
-                                   self.dt)
         plan = self.planner.plan(self.contacts)
         if plan.all_asleep:
             return self._sleep(step, started)
@@ -244,13 +170,7 @@ class Simulation:
         """The trajectory so far: every completed step, with the run's settings."""
         info = self.recorder.info
         info["steps"] = self.step_index
-        if self.cache is not None:
-            info["compiled_structures"] = self.cache.compiled
-            info["steps_reusing_a_compiled_structure"] = self.cache.reused
-            info["canonicalised_qps"] = self.cache.canonicalised
-            info["natively_solved_qps"] = self.cache.solved_natively
-            if self.cache.slots is not None:
-                info["slot_layout_changes"] = self.cache.slots.changes
+        info.update(self.path.counts())
         return self.recorder.trajectory()
 
     # ------------------------------------------------------------------ parts of a step
@@ -271,17 +191,18 @@ class Simulation:
         fails its own check makes the step unverified.
         """
         def solve(pass_qp: StepQP) -> tuple[StepSolution, str]:
-            return solve_with_fallback(pass_qp, self.solvers, self.tol, step, self.cache)
+            return solve_with_fallback(pass_qp, self.solvers, self.tol, step, self.path)
 
         coulomb = None
         if qp.cones is not None and self._coulomb:
             coulomb = fixed_point(
                 self.formulation, model, state, qp, self.dt, solve,
                 lambda problem: solve_friction_with_fallback(problem, self.solvers, self.tol,
-                                                             step, self._friction_cache),
+                                                             step, None),
                 coulomb_settings(self.formulation),
                 self._friction_memory.initial(qp.contacts, boxes)
-                if getattr(self.formulation, "coulomb_warm_start", False) else None)
+                if self.formulation.friction is not None
+                and self.formulation.friction.coulomb_warm_start else None)
             qp, solved = coulomb.qp, coulomb.solved
         else:
             solved = [solve(qp)]
@@ -370,15 +291,25 @@ def checked_steps(steps: int) -> int:
     return int(steps)
 
 
-def checked_dt(dt: float) -> float:
-    """``dt`` (s) as a float, or :class:`InputError` if it is not within :data:`DT_RANGE`."""
-    if isinstance(dt, bool) or not (isinstance(dt, int | float) and math.isfinite(dt)
-                                    and dt > 0):
-        raise InputError(f"must be a positive finite number of seconds, got {dt}", field="dt")
-    if not DT_RANGE[0] <= dt <= DT_RANGE[1]:
-        raise InputError(f"must be between {DT_RANGE[0]:g} and {DT_RANGE[1]:g} s, got {dt:g}",
-                         field="dt")
-    return float(dt)
+def settings_of(settings: Settings | None, **options: Any) -> Settings:
+    """``settings``, or the :class:`Settings` of ``options`` (the keyword arguments).
+
+    Raises :class:`InputError` when both are given and ``options`` differ from the
+    defaults, or an option is not a setting.
+    """
+    if settings is None:
+        try:
+            return Settings(**options)
+        except TypeError as error:  # an unknown keyword
+            raise InputError(str(error), field="settings") from None
+    defaults = {name: getattr(Settings, name) for name in options if hasattr(Settings, name)}
+    unknown = sorted(set(options) - set(defaults))
+    changed = sorted(name for name, value in options.items()
+                     if name in defaults and value != defaults[name])
+    if unknown or changed:
+        raise InputError(f"give either settings or {', '.join(unknown + changed)}, not both",
+                         field="settings")
+    return settings
 
 
 def _packages(solver: str) -> dict[str, str]:

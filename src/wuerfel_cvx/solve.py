@@ -1,8 +1,8 @@
 """Solving a step QP and checking the answer independently of the solver.
 
-:func:`solve_step_qp` calls the solver (declared afresh, through a compiled problem, on
-a direct backend, or a new structure from its own numbers: :data:`SOLVE_PATHS`) and then
-recomputes, from the QP's own numeric data, the residuals of the KKT conditions of
+:func:`solve_step_qp` calls the solver on the run's solve path (:class:`SolvePath`: a cvxpy
+problem per QP, a cvxpy problem compiled per structure, or the solver's own API on the QP's
+numbers) and then recomputes, from the QP's own numeric data, the residuals of the KKT conditions of
 
     min sum w (x - t)^2 + |F (x - t)|^2
     s.t.  E x = e  (multiplier y),   h <= G x <= u  (multiplier z = z_lower - z_upper)
@@ -17,10 +17,10 @@ when all three are below ``VERIFY_FACTOR * eps``.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 import warnings
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -29,10 +29,19 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _numba, residual_kernel
-from .backends import DirectResult, Unavailable, native_backend, new_structure_backend
-from .compiled import COMPILED, DECLARED, DIRECT, NATIVE, CompiledQPCache, structure_key
-from .errors import StepFailure
-from .formulations.qp import DeclaredQP, StepQP
+from .backends import Adapter, Answer, NativeData, adapter_for
+from .backends._native import PatternChanged
+from .compiled import (
+    COMPILED,
+    DECLARED,
+    NATIVE,
+    CompiledQPCache,
+    DeclaredQP,
+    declare,
+    structure_key,
+)
+from .errors import InputError, StepFailure
+from .formulations.qp import StepQP
 from .geometry import FloatArray
 from .scaling import (
     scale_of_magnitude,
@@ -41,9 +50,8 @@ from .scaling import (
     unknowns_scale,
     weights_scale,
 )
-from .slots import padded_warm_start
 from .solvers import SolverSpec, get_solver, tolerance_value
-from .warm_start import WarmStart
+from .warm_start import WarmStart, WarmStarts
 
 #: A solution is verified when its relative residuals are below this multiple of ``eps``.
 #: Solvers measure their own stopping criteria in scaled or differently normed units, so
@@ -52,11 +60,10 @@ VERIFY_FACTOR = 100.0
 
 SOLVED = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
 
-SOLVE_PATHS = (DIRECT, COMPILED, DECLARED, NATIVE)
-"""How a step can be solved (:attr:`StepSolution.path`): on a direct backend
-(:mod:`wuerfel_cvx.backends`), through a compiled problem (:mod:`wuerfel_cvx.compiled`),
-declared afresh in cvxpy, or (a structure seen once, OSQP, PIQP, Clarabel) from the step
-QP's own numbers without cvxpy (:mod:`wuerfel_cvx.backends._native`)."""
+SOLVE_PATHS = (NATIVE, COMPILED, DECLARED)
+"""The solve paths (:class:`SolvePath`, :attr:`StepSolution.path`): the solver's own API on
+the step QP's numbers (:mod:`wuerfel_cvx.backends`), a cvxpy problem compiled once per
+structure, or a cvxpy problem declared afresh per QP (:mod:`wuerfel_cvx.compiled`)."""
 
 INVALID_DATA = "invalid_data"
 """Status of a step whose QP data holds NaN or inf: no solver is called."""
@@ -141,19 +148,87 @@ def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
     return Residuals(primal=primal, dual=dual, complementarity=complementarity)
 
 
+class SolvePath:
+    """How a run's QPs reach their solvers: one of :data:`SOLVE_PATHS`, with its caches.
+
+    ``native``: a solver with an adapter (:mod:`wuerfel_cvx.backends`) gets the step QP's
+    own numbers, one persistent solver per structure and solver, updated in place; a solver
+    without one (SCS, HiGHS) goes ``compiled``.  ``compiled``: a cvxpy DPP problem per
+    structure (:mod:`wuerfel_cvx.compiled`).  ``declared``: a cvxpy problem per QP.  PROXQP
+    and DAQP take their adapters on every path
+    (:attr:`~wuerfel_cvx.solvers.SolverSpec.native_only`).
+    ``warm_start``: start the solvers that take one from the last step's solution mapped by
+    contact (:mod:`wuerfel_cvx.warm_start`), and OSQP from its structure's last solution.
+    """
+
+    def __init__(self, name: str = NATIVE, *, warm_start: bool = True, capacity: int = 64):
+        if name not in SOLVE_PATHS:
+            raise InputError(f"unknown solve path '{name}' (one of {', '.join(SOLVE_PATHS)})",
+                             field="solve_path")
+        self.name = name
+        self.compiled = CompiledQPCache(capacity=capacity)
+        self.warm_starts = WarmStarts() if warm_start else None
+        self.capacity = capacity
+        self.native_setups = 0
+        """Native solvers set up so far (a structure and solver seen for the first time)."""
+        self.native_updates = 0
+        """Native solves of a structure already set up (its solver updated in place)."""
+        self._adapters: OrderedDict[tuple[object, ...], Adapter] = OrderedDict()
+
+    def solve(self, qp: StepQP, spec: SolverSpec, options: dict[str, object],
+              warm: WarmStart | None) -> tuple[Answer, str]:
+        """Solve ``qp`` (in the solver's units) on this path; the answer and the path taken."""
+        if spec.adapter is not None and (self.name == NATIVE or spec.native_only):
+            return self._native(qp, spec, options, warm), NATIVE
+        if self.name == DECLARED:
+            declared, path = declare(qp), DECLARED
+        else:
+            declared, path = self.compiled.prepare(qp)
+        return _solve_with_cvxpy(qp, declared, spec.cvxpy_name,
+                                 {"warm_start": False, **options}), path
+
+    def _native(self, qp: StepQP, spec: SolverSpec, options: dict[str, object],
+                warm: WarmStart | None) -> Answer:
+        assert spec.adapter is not None
+        if self.warm_starts is None:
+            options = {**options, "warm_start": False}
+        key = (spec.name, tuple(sorted(options.items())), structure_key(qp))
+        data = NativeData(qp)
+        adapter = self._adapters.get(key)
+        if adapter is not None:
+            self._adapters.move_to_end(key)
+            try:
+                answer = adapter.solve(data, warm)
+            except PatternChanged:
+                adapter = None
+            else:
+                self.native_updates += 1
+                return answer
+        adapter = adapter_for(spec.adapter).setup(data, options)
+        self._adapters[key] = adapter
+        if len(self._adapters) > self.capacity:
+            self._adapters.popitem(last=False)
+        self.native_setups += 1
+        return adapter.solve(data, warm)
+
+    def counts(self) -> dict[str, int]:
+        """What the path did so far, for a trajectory's settings."""
+        return {"compiled_structures": self.compiled.compiled,
+                "steps_reusing_a_compiled_structure": self.compiled.reused,
+                "canonicalised_qps": self.compiled.canonicalised,
+                "native_setups": self.native_setups, "native_updates": self.native_updates}
+
+
 def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "default",
-                  *, step: int = 0, cache: CompiledQPCache | None = None) -> StepSolution:
+                  *, step: int = 0, path: SolvePath | None = None) -> StepSolution:
     """Solve ``qp`` with ``solver`` at tolerance ``tol`` and verify the result.
 
     The solver sees ``qp`` in units that keep its data at most
     :data:`~wuerfel_cvx.scaling.SCALE_LIMIT` in magnitude and its largest weight at least
     :data:`~wuerfel_cvx.scaling.WEIGHT_FLOOR` (:mod:`wuerfel_cvx.scaling`; ``qp`` itself for
     ordinary data); the solution and multipliers are mapped back and checked on ``qp``.
-
-    With a ``cache``, a QP whose structure repeats is solved through its compiled,
-    parametrised problem (:mod:`wuerfel_cvx.compiled`) and one seen for the first time, by a
-    solver that can, from its own numbers (the cache's ``native_new``); without a cache, it
-    is declared afresh.
+    ``path`` (:class:`SolvePath`, kept across a run's steps) says how the QP reaches the
+    solver; without one, a fresh ``native`` path.
 
     Raises :class:`StepFailure` (with ``step``) if the QP's data is not finite (status
     ``invalid_data``, before any solver runs), if the solver raises, reports a status
@@ -164,14 +239,14 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     spec = get_solver(solver)
     eps = tolerance_value(tol)
     options = spec.options(eps)
+    path = SolvePath() if path is None else path
     scale, weight_scale = _checked_scales(qp, step, spec.name)
-    warm_starts = None if cache is None or not spec.takes_warm_start else cache.warm_starts
+    warm_starts = path.warm_starts if spec.takes_warm_start else None
     started = time.perf_counter()
     try:
-        # inside the try: applying a compiled structure's parameters can raise too
         seen = scaled_qp(qp, scale, weight_scale)
         warm = None if warm_starts is None else warm_starts.guess(spec.name, seen, scale)
-        answer = _solve_in_slots(seen, spec, options, cache, warm)
+        answer, taken = path.solve(seen, spec, options, warm)
     except cp.error.SolverError as exc:
         raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
     except Exception as exc:  # a solver library raising anything is a failed step
@@ -197,92 +272,12 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
                         verified=verified, solve_wall_time=wall,
                         solver_time=spec.timing.solver_time(answer.reported_time,
                                                             answer.native_time),
-                        iterations=int(answer.iterations),
-                        ineq_dual=ineq_dual,
-                        path=answer.path)
-
-
-def _solve(qp: StepQP, spec: SolverSpec, options: dict[str, object],
-           cache: CompiledQPCache | None, warm: WarmStart | None = None) -> _Answer:
-    """Solve on the direct path if the cache has one for ``qp``, else through cvxpy.
-
-    A solver with a native backend (:attr:`~wuerfel_cvx.solvers.SolverSpec.native`) is
-    always called on it, with or without a cache.  A structure the cache has not compiled
-    and will not compile yet goes, in a solver that
-    :attr:`~wuerfel_cvx.solvers.SolverSpec.solves_new_natively`, to its ``solve_new``.
-    ``warm`` (:mod:`wuerfel_cvx.warm_start`) goes to the native and direct backends that
-    take one; with a cache that keeps no warm starts, the direct path starts cold too.
-    """
-    if spec.native is not None:
-        return _Answer.of(native_backend(spec.native).solve(qp, options, warm), DIRECT)
-    if cache is None:
-        declared, path = qp.declared(), DECLARED
-    else:
-        key = structure_key(qp)  # once per solve: both look-ups below take it
-        direct = cache.direct_solver(qp, spec.name, options, key)
-        if direct is None and spec.solves_new_natively and cache.native_new \
-                and cache.one_off(key):
-            assert spec.backend is not None
-            try:
-                raw = new_structure_backend(spec.backend).solve_new(qp, options)
-            except Unavailable:  # these options have no native form: through cvxpy
-                pass
-            else:
-                cache.solve_natively(key)
-                return _Answer.of(raw, NATIVE)
-        if direct is None:
-            declared, path = cache.prepare(qp, key)
-            if path == COMPILED and cache.slots is not None:  # a slot structure repeats:
-                direct = cache.direct_solver(qp, spec.name, options, key)  # set up at once
-        if direct is not None:
-            cold = cache.warm_starts is None
-            raw = direct.solve(qp, {**options, "warm_start": False} if cold else options, warm)
-            return _Answer.of(raw, DIRECT)
-    return _solve_with_cvxpy(qp, declared, spec.cvxpy_name, {"warm_start": False, **options},
-                             path)
-
-
-def _solve_in_slots(qp: StepQP, spec: SolverSpec, options: dict[str, object],
-                    cache: CompiledQPCache | None, warm: WarmStart | None) -> _Answer:
-    """:func:`_solve` ``qp`` in the cache's slot structure if it has one that applies.
-
-    The answer's multipliers are the exact rows' (read at their slots).  A native backend
-    compiles nothing, so it takes the exact rows.
-    """
-    slots = None if cache is None or spec.native is not None else cache.slots
-    padded = None if slots is None else slots.pad(qp)
-    if padded is None:
-        return _solve(qp, spec, options, cache, warm)
-    slotted, rows = padded
-    answer = _solve(slotted, spec, options, cache,
-                    padded_warm_start(warm, rows, slotted.n_inequalities))
-    return dataclasses.replace(answer, ineq_dual=np.asarray(answer.ineq_dual)[rows])
-
-
-@dataclass(frozen=True)
-class _Answer:
-    """What a solve returned, before it is checked."""
-
-    status: str
-    x: FloatArray | None
-    eq_dual: FloatArray
-    ineq_dual: FloatArray
-    reported_time: float
-    """The solver's own report (s); NaN if none."""
-    iterations: int
-    path: str
-    native_time: float | None = None
-    """On the direct path, wall time (s) of the native update and solve calls."""
-
-    @classmethod
-    def of(cls, raw: DirectResult, path: str) -> _Answer:
-        """The answer of a backend's solve (:mod:`wuerfel_cvx.backends`) on ``path``."""
-        return cls(raw.status, raw.x, raw.eq_dual, raw.ineq_dual, raw.reported_time,
-                   raw.iterations, path, raw.native_time)
+                        iterations=int(answer.iterations), ineq_dual=ineq_dual, path=taken)
 
 
 def _solve_with_cvxpy(qp: StepQP, declared: DeclaredQP, solver: str,
-                      options: dict[str, object], path: str) -> _Answer:
+                      options: dict[str, object]) -> Answer:
+    """Solve a cvxpy ``declared`` problem holding ``qp`` with cvxpy's ``solver``."""
     with warnings.catch_warnings():
         # cvxpy reads its own sparse parameters densely while applying them
         warnings.filterwarnings("ignore", "Reading from a sparse CVXPY expression",
@@ -298,7 +293,7 @@ def _solve_with_cvxpy(qp: StepQP, declared: DeclaredQP, solver: str,
     if declared.upper_constraint is not None:  # z = z_lower - z_upper
         ineq_dual = ineq_dual.copy()
         ineq_dual[qp.upper_rows] -= _dual(declared.upper_constraint, qp.upper_rows.size)
-    return _Answer(
+    return Answer(
         status=str(declared.problem.status),
         x=None if value is None else np.asarray(value, dtype=np.float64),
         eq_dual=_dual(declared.eq_constraint, qp.n_equalities),
@@ -306,7 +301,6 @@ def _solve_with_cvxpy(qp: StepQP, declared: DeclaredQP, solver: str,
         reported_time=(stats.solve_time if stats is not None and stats.solve_time is not None
                        else np.nan),
         iterations=stats.num_iters if stats is not None and stats.num_iters is not None else -1,
-        path=path,
     )
 
 
@@ -369,7 +363,7 @@ def _inf(values: FloatArray) -> float:
 
 
 def solve_with_fallback(qp: StepQP, solvers: Sequence[str], tol: str | float, step: int,
-                        cache: CompiledQPCache | None) -> tuple[StepSolution, str]:
+                        path: SolvePath | None) -> tuple[StepSolution, str]:
     """Solve with ``solvers[0]``, on failure with the next; the solution and first status.
 
     The first status is that of ``solvers[0]`` (the solution's own when it succeeded).
@@ -379,7 +373,7 @@ def solve_with_fallback(qp: StepQP, solvers: Sequence[str], tol: str | float, st
     failures: list[StepFailure] = []
     for name in solvers:
         try:
-            solution = solve_step_qp(qp, name, tol, step=step, cache=cache)
+            solution = solve_step_qp(qp, name, tol, step=step, path=path)
         except StepFailure as failure:
             if failure.status == INVALID_DATA:  # the same data would fail every solver
                 raise

@@ -2,7 +2,7 @@
 
 Each :class:`SolverSpec` is everything the package knows about one solver: its name in
 cvxpy, its options, the distribution it comes from (and so its version), its colour and
-marker in plots, its timing quirks and its direct backend (:mod:`wuerfel_cvx.backends`).
+marker in plots, its timing quirks and its adapter (:mod:`wuerfel_cvx.backends`).
 
 A tolerance is a preset name (``low``, ``default``, ``high``) or a number ``eps``;
 :func:`solver_options` maps it to each solver's own option names.  ``high`` is the
@@ -50,9 +50,9 @@ class Timing:
     """How a solver's own time per solve (s) is read from what it reports."""
 
     capped_by_native_wall: bool = True
-    """On the direct path, take the smaller of the report and the wall time of the native
-    update and solve calls (one clock with the whole step's; Clarabel's own clock reads
-    above the wall time of the very call it times)."""
+    """On the native path, take the smaller of the report and the wall time of the
+    solver's own update and solve calls (one clock with the whole step's; Clarabel's own
+    clock reads above the wall time of the very call it times)."""
     zero_is_unknown: bool = True
     """A report of zero or less means "not measured" (cvxpy reports 0.0 for PROXQP)."""
     note: str = ""
@@ -61,8 +61,8 @@ class Timing:
     def solver_time(self, reported: float, native_wall: float | None = None) -> float:
         """The solver's own time (s); NaN when unknown.
 
-        From its ``reported`` time and, on the direct path, the ``native_wall`` time of its
-        native calls.
+        From its ``reported`` time and, on the native path, the ``native_wall`` time of its
+        own calls.
         """
         seconds = reported
         if native_wall is not None and self.capped_by_native_wall:
@@ -88,19 +88,16 @@ class SolverSpec:
     """The distribution that installs it (its version is the solver's)."""
     style: tuple[str, str]
     """Colour (hex) and matplotlib marker, the same in every plot."""
-    backend: str | None = None
-    """Module of :mod:`wuerfel_cvx.backends` with its direct path (``None``: none)."""
     timing: Timing = field(default_factory=Timing)
     """How its own time is read."""
-    native: str | None = None
-    """Module of :mod:`wuerfel_cvx.backends` whose ``solve(qp, options)`` solves every step
-    QP from its own numbers, on every path, without cvxpy (``None``: through cvxpy)."""
-    solves_new_natively: bool = False
-    """Whether its direct backend module has ``solve_new(qp, options)``, which solves a
-    structure the compiled cache has not seen before from the step QP's own numbers
-    (:mod:`wuerfel_cvx.backends._native`) instead of declaring it afresh in cvxpy."""
+    adapter: str | None = None
+    """Module of :mod:`wuerfel_cvx.backends` that hands it the step QP's own numbers (the
+    ``native`` path; ``None``: it is reached through cvxpy only)."""
+    native_only: bool = False
+    """Whether it takes its adapter on every path: cvxpy's interface to it does not pose
+    the same problem (it drops settings, or adds a regularisation)."""
     takes_warm_start: bool = False
-    """Whether its backend starts from a guess of the last step's solution
+    """Whether its adapter starts from a guess of the last step's solution
     (:mod:`wuerfel_cvx.warm_start`); for the others none is mapped or kept."""
 
     def version(self) -> str:
@@ -113,35 +110,35 @@ SOLVERS: dict[str, SolverSpec] = {
     for spec in (
         SolverSpec("CLARABEL", "CLARABEL", lambda eps: {
             "tol_gap_abs": eps, "tol_gap_rel": eps, "tol_feas": eps, "tol_ktratio": eps,
-            "max_iter": 200}, "interior-point", "clarabel", ("#1f77b4", "o"), "clarabel",
+            "max_iter": 200}, "interior-point", "clarabel", ("#1f77b4", "o"),
             Timing(note="its solve_time reads above the wall time of the call it times"),
-            solves_new_natively=True),
+            adapter="clarabel"),
         SolverSpec("OSQP", "OSQP", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, _osqp_polish_option(): True, "max_iter": 200_000},
-            "ADMM", "osqp", ("#ff7f0e", "s"), "osqp",
-            Timing(note="its run_time includes the data update on the direct path"),
-            solves_new_natively=True),
+            "ADMM", "osqp", ("#ff7f0e", "s"),
+            Timing(note="its run_time includes the data update on the native path"),
+            adapter="osqp"),
         SolverSpec("PIQP", "PIQP", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, "max_iter": 250, "compute_timings": True},
-            "proximal interior-point", "piqp", ("#2ca02c", "^"), "piqp",
-            Timing(note="its run_time includes the data update on the direct path"),
-            solves_new_natively=True),
-        # Called natively (backends/proxqp.py): cvxpy (1.9) drops the infeasibility
+            "proximal interior-point", "piqp", ("#2ca02c", "^"),
+            Timing(note="its run_time includes the data update on the native path"),
+            adapter="piqp"),
+        # Native on every path (backends/proxqp.py): cvxpy (1.9) drops the infeasibility
         # tolerances, whose default 1e-4 let PROXQP certify feasible QPs infeasible.
         SolverSpec("PROXQP", "PROXQP", lambda eps: {
             "eps_abs": eps, "eps_rel": 0.0, "max_iter": 10_000,
             "eps_primal_inf": CERTIFICATE_TOLERANCE, "eps_dual_inf": CERTIFICATE_TOLERANCE},
             "proximal augmented Lagrangian (dense backend)", "proxsuite", ("#d62728", "D"),
-            native="proxqp", takes_warm_start=True,
+            adapter="proxqp", native_only=True, takes_warm_start=True,
             timing=Timing(note="its run_time includes its setup (a fresh solver per QP)")),
         SolverSpec("SCS", "SCS", lambda eps: {
             "eps_abs": eps, "eps_rel": eps, "max_iters": 200_000}, "ADMM (conic)", "scs",
             ("#9467bd", "v")),
-        # Called natively (backends/daqp.py), on the step QP's own positive-definite
+        # Native on every path (backends/daqp.py), on the step QP's own positive-definite
         # Hessian: through cvxpy it sees auxiliary variables without cost and regularises.
         SolverSpec("DAQP", "DAQP", lambda eps: {"primal_tol": eps, "iter_limit": 10_000},
-                   "dual active-set (dense)", "daqp", ("#8c564b", "P"), native="daqp",
-                   takes_warm_start=True,
+                   "dual active-set (dense)", "daqp", ("#8c564b", "P"), adapter="daqp",
+                   native_only=True, takes_warm_start=True,
                    timing=Timing(note="its setup_time plus solve_time (dense form built before)")),
         # HiGHS drops matrix entries below small_matrix_value (default 1e-9) from the
         # model; 1e-12 is the floor of that option's range, so only round-off is dropped.

@@ -1,9 +1,6 @@
-"""The step QP's own data in the sparse forms OSQP, PIQP and Clarabel take.
+"""The step QP's own data in the forms the solver adapters take, and what they answer.
 
-A structure the compiled cache has not seen before (:mod:`wuerfel_cvx.compiled`) would
-otherwise be declared afresh in cvxpy and canonicalised, which costs several milliseconds
-on a rain of 50 squares, ten to twenty times the solver's own time.  Such a one-off QP is
-instead handed to the solver in its own numbers, as PROXQP's and DAQP's backends always do,
+The adapters (:mod:`wuerfel_cvx.backends`) hand a solver the step QP in its own numbers,
 in the unknowns' deviation ``d = x - t`` from the target::
 
     min  1/2 d' P d,   P = 2 W + 2 F' F,
@@ -22,7 +19,10 @@ is): the package's satisfy ``grad f + E' y - G' z = 0`` with ``z = z_lower - z_u
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -33,63 +33,123 @@ from ..geometry import FloatArray
 
 
 @dataclass(frozen=True)
+class Answer:
+    """A solver's answer in the package's terms, before it is checked."""
+
+    x: FloatArray | None
+    """The unknowns (``None``: the solver gave none)."""
+    eq_dual: FloatArray
+    """``y`` of ``E x = e``."""
+    ineq_dual: FloatArray
+    """``z = z_lower - z_upper`` (the sign convention of :mod:`wuerfel_cvx.formulations.qp`)."""
+    status: str
+    """The status name (``optimal``, ``optimal_inaccurate``, ``infeasible``, ``user_limit``,
+    ``solver_error``, ...), cvxpy's names for the solver's own statuses."""
+    reported_time: float
+    """The time the solver reports for itself (s); NaN if none."""
+    iterations: int
+    native_time: float | None = None
+    """Wall time (s) of the solver's own update and solve calls (``None``: not measured)."""
+
+
+class PatternChanged(Exception):
+    """A QP's matrices do not have the sparsity patterns its adapter was set up with.
+
+    A structure fixes the patterns of ``E``, ``G`` and ``F``; ``F' F`` can still lose an
+    entry that cancels to zero.  The caller then sets the solver up afresh.
+    """
+
+
+def check_patterns(*pairs: tuple[sp.csc_matrix, sp.csc_matrix]) -> None:
+    """Raise :class:`PatternChanged` unless each pair of CSC matrices has one pattern."""
+    for new, old in pairs:
+        if not (np.array_equal(new.indptr, old.indptr)
+                and np.array_equal(new.indices, old.indices)):
+            raise PatternChanged
+
+
+def status_name(table: Mapping[Any, str], native_status: object) -> str:
+    """The status name of a solver's ``native_status`` by its ``table`` (``solver_error``)."""
+    return table.get(native_status, "solver_error")
+
+
 class NativeData:
-    """A step QP's data in the deviation ``d = x - t`` (CSC matrices, as the solvers take them)."""
+    """A step QP's data in the deviation ``d = x - t``, each form built on first use.
 
-    hessian: sp.csc_matrix
-    """``P`` (full, symmetric)."""
-    target: FloatArray
-    """``t``: the unknowns are ``x = t + d``."""
-    eq_rhs: FloatArray
-    """``e - E t``."""
-    lower: FloatArray
-    """``h - G t``."""
-    upper: FloatArray
-    """``u - G t`` per row of ``G`` (``+inf`` where there is none)."""
-    rows: tuple[sp.csr_array, sp.csr_array]
-    """``E`` and ``G`` as the step QP holds them (canonical CSR)."""
+    ``qp`` is the step QP itself (the dense solvers take its rows as they are).
+    """
 
-    @classmethod
-    def of(cls, qp: StepQP) -> NativeData:
-        """``qp``'s data."""
+    def __init__(self, qp: StepQP):
+        self.qp = qp
+
+    @cached_property
+    def hessian(self) -> sp.csc_matrix:
+        """``P = 2 W + 2 F' F`` (full, symmetric)."""
+        qp = self.qp
         n = qp.n_variables
         diagonal = np.arange(n + 1, dtype=np.int32)
         hessian = canonical_csc(2.0 * qp.weights, diagonal[:n], diagonal, (n, n))
         if qp.cost_factor is not None and qp.n_cost_rows:
             factor = sp.csc_array(qp.cost_factor)
             hessian = sp.csc_matrix(hessian + 2.0 * (factor.T @ factor))
-        at_target = qp.ineq_matrix @ qp.target
+            hessian.sort_indices()
+        return hessian
+
+    @cached_property
+    def _at_target(self) -> FloatArray:
+        return np.asarray(self.qp.ineq_matrix @ self.qp.target, dtype=np.float64)
+
+    @property
+    def target(self) -> FloatArray:
+        """``t``: the unknowns are ``x = t + d``."""
+        return self.qp.target
+
+    @cached_property
+    def eq_rhs(self) -> FloatArray:
+        """``e - E t``."""
+        return np.asarray(self.qp.eq_rhs - self.qp.eq_matrix @ self.qp.target,
+                          dtype=np.float64)
+
+    @cached_property
+    def lower(self) -> FloatArray:
+        """``h - G t``."""
+        return np.asarray(self.qp.ineq_rhs - self._at_target, dtype=np.float64)
+
+    @cached_property
+    def upper(self) -> FloatArray:
+        """``u - G t`` per row of ``G`` (``+inf`` where there is none)."""
+        qp = self.qp
         upper = np.full(qp.n_inequalities, np.inf)
         if qp.upper_rows.size:
             assert qp.ineq_upper is not None
             bounded = qp.upper_rows
-            upper[bounded] = qp.ineq_upper[bounded] - at_target[bounded]
-        return cls(hessian=hessian, target=qp.target,
-                   eq_rhs=qp.eq_rhs - qp.eq_matrix @ qp.target, lower=qp.ineq_rhs - at_target,
-                   upper=upper, rows=(qp.eq_matrix, qp.ineq_matrix))
+            upper[bounded] = qp.ineq_upper[bounded] - self._at_target[bounded]
+        return upper
 
     @property
     def eq(self) -> sp.csc_matrix:
         """``E``."""
-        return csc_matrix_of(self.rows[0])
+        return csc_matrix_of(self.qp.eq_matrix)
 
     @property
     def ineq(self) -> sp.csc_matrix:
         """``G``."""
-        return csc_matrix_of(self.rows[1])
+        return csc_matrix_of(self.qp.ineq_matrix)
 
     @property
     def linear(self) -> FloatArray:
         """``q = 0``: the objective has no linear term in ``d``."""
-        return np.zeros(self.target.shape[0])
+        return np.zeros(self.qp.n_variables)
 
-    @property
+    @cached_property
     def upper_triangle(self) -> sp.csc_matrix:
         """``P``'s upper triangle (OSQP's and Clarabel's input): ``P`` itself if diagonal."""
         n = self.hessian.shape[0]
         if self.hessian.nnz == n and np.array_equal(self.hessian.indices, np.arange(n)):
             return self.hessian  # 2 W: each column's one entry on the diagonal
-        return sp.csc_matrix(sp.triu(self.hessian, format="csc"))
+        upper = sp.csc_matrix(sp.triu(self.hessian, format="csc"))
+        upper.sort_indices()
+        return upper
 
     def unknowns(self, deviation: FloatArray) -> FloatArray:
         """``x = t + d`` from a solver's ``d``."""

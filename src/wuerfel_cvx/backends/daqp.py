@@ -31,14 +31,17 @@ from .._sparse import dense_rows
 from ..formulations.qp import StepQP
 from ..geometry import FloatArray
 from ..warm_start import WarmStart
-from ._cvxpy import status_name
-from ._map import DirectResult
+from ._native import Answer, NativeData, status_name
 
 EQUALITY = 5
 """DAQP's ``sense`` of an equality row (active and immutable)."""
 
 INFINITE_BOUND = 1e30
 """DAQP's infinite bound (its default ``fval_bound``'s magnitude; ``inf`` is not taken)."""
+
+_STATUS = {1: "optimal", 2: "optimal", -2: "solver_error", -1: "infeasible", -3: "unbounded",
+           -4: "user_limit", -5: "solver_error", -6: "infeasible"}
+"""DAQP's statuses by name (cvxpy's table)."""
 
 
 def daqp_form(qp: StepQP) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
@@ -70,7 +73,7 @@ def daqp_form(qp: StepQP) -> tuple[FloatArray, FloatArray, FloatArray, FloatArra
             np.concatenate([qp.eq_rhs, qp.ineq_rhs]), sense)
 
 
-def solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) -> DirectResult:
+def _solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) -> Answer:
     """Solve ``qp`` with DAQP and ``options`` (DAQP settings), from ``warm`` if given."""
     import daqp  # type: ignore[import-not-found]  # an optional solver, no stubs
 
@@ -89,10 +92,26 @@ def solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) ->
     native_time = time.perf_counter() - started
     multipliers = np.array(info["lam"], dtype=np.float64)
     n_eq = qp.n_equalities
-    return DirectResult(
+    return Answer(
         x=np.array(x, dtype=np.float64), eq_dual=multipliers[:n_eq],
         ineq_dual=-multipliers[n_eq:n_eq + qp.n_inequalities],
-        status=status_name("DAQP", int(exitflag)),
+        status=status_name(_STATUS, int(exitflag)),
         reported_time=float(info["solve_time"]) + float(info["setup_time"]),
         native_time=native_time,
         iterations=int(info["iterations"]))
+
+
+class DAQPAdapter:
+    """DAQP on a structure's QPs: dense data, set up afresh for every QP."""
+
+    def __init__(self, options: dict[str, Any]):
+        self.options = dict(options)
+
+    def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
+        """Solve ``data`` from ``warm`` if given."""
+        return _solve(data.qp, self.options, warm)
+
+
+def setup(data: NativeData, options: dict[str, Any]) -> DAQPAdapter:
+    """DAQP for ``data``'s structure with ``options`` (DAQP settings)."""
+    return DAQPAdapter(options)

@@ -44,11 +44,14 @@ from .._sparse import dense_rows
 from ..formulations.qp import StepQP
 from ..geometry import FloatArray
 from ..warm_start import WarmStart
-from ._cvxpy import status_name
-from ._map import DirectResult
+from ._native import Answer, NativeData, status_name
 
 MICROSECOND = 1e-6
 """proxsuite reports its times in microseconds."""
+
+_STATUS = {"PROXQP_SOLVED": "optimal", "PROXQP_MAX_ITER_REACHED": "user_limit",
+           "PROXQP_PRIMAL_INFEASIBLE": "infeasible", "PROXQP_DUAL_INFEASIBLE": "unbounded"}
+"""PROXQP's statuses by name (cvxpy's table)."""
 
 
 def proxsuite_form(qp: StepQP) -> tuple[dict[str, Any], FloatArray]:
@@ -82,7 +85,7 @@ def proxsuite_form(qp: StepQP) -> tuple[dict[str, Any], FloatArray]:
     return form, sign
 
 
-def solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) -> DirectResult:
+def _solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) -> Answer:
     """Solve ``qp`` with proxsuite's dense backend and ``options`` (proxsuite settings).
 
     Every option is one of proxsuite's settings, set by name; an unknown name raises
@@ -108,10 +111,26 @@ def solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) ->
     native_time = time.perf_counter() - started
     results = solver.results
     info = results.info
-    return DirectResult(
+    return Answer(
         x=np.array(results.x, dtype=np.float64),
         eq_dual=np.array(results.y, dtype=np.float64),
         ineq_dual=sign * np.array(results.z, dtype=np.float64),
-        status=status_name("PROXQP", info.status.name),
+        status=status_name(_STATUS, info.status.name),
         reported_time=float(info.run_time) * MICROSECOND, native_time=native_time,
         iterations=int(info.iter))
+
+
+class PROXQPAdapter:
+    """PROXQP on a structure's QPs: dense data, set up afresh for every QP."""
+
+    def __init__(self, options: dict[str, Any]):
+        self.options = dict(options)
+
+    def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
+        """Solve ``data`` from ``warm`` if given."""
+        return _solve(data.qp, self.options, warm)
+
+
+def setup(data: NativeData, options: dict[str, Any]) -> PROXQPAdapter:
+    """PROXQP for ``data``'s structure with ``options`` (PROXQP settings)."""
+    return PROXQPAdapter(options)

@@ -14,7 +14,6 @@ from .motion import rigid_step
 from .qp import StepQP, declare_qp
 from .rigid import RigidFormulation
 from .seed import SeedFormulation
-from .slotted import RigidSlotsFormulation, VelocitySlotsFormulation
 from .velocity import VelocityFormulation
 
 SEED_BAUMGARTE_RATE = 20.0
@@ -29,8 +28,6 @@ FORMULATIONS: dict[str, Callable[[], Formulation]] = {
     "rigid": RigidFormulation,
     "seed-baumgarte": partial(SeedFormulation, name="seed-baumgarte",
                               baumgarte_rate=SEED_BAUMGARTE_RATE),
-    "rigid-slots": RigidSlotsFormulation,
-    "velocity-slots": VelocitySlotsFormulation,
 }
 """Registry of formulation names (the first is the default) and their factories."""
 
@@ -60,21 +57,21 @@ def with_friction_model(formulation: Formulation, friction_model: str | None,
     ``"ccp"`` only for a scene without friction (where every model is the frictionless one).
     """
     if friction_model is None:
-        if hasattr(formulation, "friction_model"):
+        if formulation.friction is not None:
             return formulation
         friction_model = FRICTION_MODELS[0]
     key = str(friction_model).strip().lower()
     if key not in FRICTION_MODELS:
         raise InputError(f"unknown friction model '{friction_model}' (available: "
                          f"{', '.join(FRICTION_MODELS)})", field="friction_model")
-    if not hasattr(formulation, "friction_model"):
+    if formulation.friction is None:
         if has_friction or key != FRICTION_MODELS[0]:
             raise InputError(f"the '{formulation.name}' formulation has no friction; "
                              f"friction_model '{key}' needs 'velocity' or 'rigid'"
                              + (" (the scene has friction)" if has_friction else ""),
                              field="friction_model")
         return formulation
-    if formulation.friction_model == key:
+    if formulation.friction.friction_model == key:
         return formulation
     replaced: Formulation = dataclasses.replace(formulation, friction_model=key)  # type: ignore[type-var]
     return replaced

@@ -28,6 +28,16 @@ class Formulation(Protocol):
         """The formulation's registry name."""
         ...
 
+    @property
+    def friction(self) -> FrictionSettings | None:
+        """Its friction settings; ``None`` for a formulation without friction (``seed``)."""
+        ...
+
+    @property
+    def heavy_tables(self) -> bool:
+        """Whether it takes the seed's heavy tables (``table_mass``), else fixed ones only."""
+        ...
+
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
         """Search margin (m) per body ``(n_bodies,)`` for the contacts :meth:`build` takes."""
         ...
@@ -81,6 +91,11 @@ class FrictionSettings:
     QPs' normal impulses differ by at most this fraction of the largest (1).  Ten times the
     residual check's ``VERIFY_FACTOR * eps`` at the default tolerance, so solver noise does
     not hold it back, and far below the 1 % of the friction it may leave unsettled."""
+    @property
+    def friction(self) -> FrictionSettings:
+        """These settings (a formulation with friction is its own friction settings)."""
+        return self
+
     coulomb_warm_start: bool = True
     """``friction_model="coulomb"``: start each step's fixed point from the friction impulses
     its contacts had at the end of the step before (a contact is the same when its point and

@@ -8,8 +8,9 @@ unknowns a formulation adds)::
     subject to  E x == e                 (rods, and held table corners)
                 h <= G x <= u            (sides: point versus edge; u = +inf by default)
 
-declared as a :class:`cvxpy.Problem`.  The numeric data are kept beside it so that a
-solution can be checked independently of the solver (:func:`wuerfel_cvx.solve.kkt_residuals`).
+held as numbers: :mod:`wuerfel_cvx.compiled` declares it in cvxpy, the adapters of
+:mod:`wuerfel_cvx.backends` hand it to the solvers, and a solution is checked against these
+numbers independently of the solver (:func:`wuerfel_cvx.solve.kkt_residuals`).
 
 The coupling cost is given by a sparse factor ``F`` rather than by ``P`` itself: the term
 ``|F (x - t)|^2`` is positive semidefinite by construction, keeps the objective's constant
@@ -30,10 +31,9 @@ parameters, and where in a :class:`StepQP` each comes from.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
@@ -46,22 +46,9 @@ if TYPE_CHECKING:
     from .cone import ConeRows
 
 
-@dataclass(frozen=True)
-class DeclaredQP:
-    """A step QP declared in cvxpy: the problem and the handles to read a solution."""
-
-    problem: cp.Problem
-    variable: cp.Variable
-    eq_constraint: cp.Constraint | None
-    ineq_constraint: cp.Constraint | None
-    """``G x >= h`` (every inequality row)."""
-    upper_constraint: cp.Constraint | None = None
-    """``(G x)[r] <= u[r]`` for the rows ``r`` with a finite upper bound."""
-
-
 @dataclass
 class StepQP:
-    """A step's QP: its numeric data, declared in cvxpy on first use."""
+    """A step's QP: its numbers, nothing else (see the module docstring)."""
 
     weights: FloatArray
     """Objective weights w (kg), one per unknown."""
@@ -75,7 +62,6 @@ class StepQP:
     contacts: Contacts
     """The contacts whose side constraints are the rows of ``G`` (one row each, or, for the
     closest-approach rows of ``velocity``, two: all rate rows, then all approach rows)."""
-    _declared: DeclaredQP | None = field(default=None, repr=False)
     ineq_upper: FloatArray | None = None
     """Upper bounds u of ``G x`` (``+inf`` for a one-sided row); ``None``: all ``+inf``."""
     cost_factor: sp.csr_array | None = None
@@ -85,32 +71,6 @@ class StepQP:
     them in further passes (``None``: not recorded)."""
     cones: ConeRows | None = None
     """Where the contacts' friction cones are among the rows (``None``: no friction)."""
-
-    def declared(self) -> DeclaredQP:
-        """The QP as its own cvxpy problem (declared once, on first call)."""
-        if self._declared is None:
-            self._declared = _declare(self)
-        return self._declared
-
-    @property
-    def problem(self) -> cp.Problem:
-        """The cvxpy problem of :meth:`declared`."""
-        return self.declared().problem
-
-    @property
-    def variable(self) -> cp.Variable:
-        """The unknowns ``x`` of :meth:`declared`."""
-        return self.declared().variable
-
-    @property
-    def eq_constraint(self) -> cp.Constraint | None:
-        """``E x == e`` of :meth:`declared` (``None`` without equalities)."""
-        return self.declared().eq_constraint
-
-    @property
-    def ineq_constraint(self) -> cp.Constraint | None:
-        """``G x >= h`` of :meth:`declared` (``None`` without inequalities)."""
-        return self.declared().ineq_constraint
 
     @property
     def n_variables(self) -> int:
@@ -185,7 +145,8 @@ class ParameterSlot:
     """For a right-hand side: the multiplier block of its rows (``eq``, ``lower``, ``upper``)."""
 
 
-def _upper_bounds(qp: StepQP) -> FloatArray:
+def upper_bounds(qp: StepQP) -> FloatArray:
+    """The finite upper bounds ``u[r]`` of the rows ``r`` that have one."""
     assert qp.ineq_upper is not None
     return np.asarray(qp.ineq_upper[qp.upper_rows], dtype=np.float64)
 
@@ -202,7 +163,7 @@ PARAMETER_SLOTS: dict[str, ParameterSlot] = {
     "ineq_values": ParameterSlot(lambda qp: qp.ineq_matrix.data,
                                  matrix=lambda qp: qp.ineq_matrix),
     "ineq_rhs": ParameterSlot(lambda qp: qp.ineq_rhs, multiplier="lower"),
-    "ineq_upper": ParameterSlot(_upper_bounds, multiplier="upper"),
+    "ineq_upper": ParameterSlot(upper_bounds, multiplier="upper"),
     "cost_values": ParameterSlot(lambda qp: _factor(qp).data, matrix=_factor),
     "cost_target": ParameterSlot(lambda qp: _factor(qp) @ qp.target),
 }
@@ -230,7 +191,7 @@ def declare_qp(
     ``ineq_rhs`` is ``h``; ``ineq_upper`` (``u``, ``+inf`` entries for one-sided rows) and
     ``cost_factor`` (``F``) are optional, as is ``linearised_about`` (the unknowns the rows
     were linearised about, for further passes) and ``cones`` (where the friction cones' rows
-    are).  It is declared in cvxpy lazily.  ``E``, ``G`` and
+    are).  ``E``, ``G`` and
     ``F`` are stored in canonical CSR form (sorted indices, no duplicates), so equal
     sparsity patterns have equal index arrays.  Raises ``ValueError`` if ``ineq_upper`` does
     not have one entry per row of ``G`` or ``F`` not one column per unknown.
@@ -257,27 +218,6 @@ def _canonical(matrix: sp.csr_array) -> sp.csr_array:
     canonical.sum_duplicates()
     canonical.sort_indices()
     return canonical
-
-
-def _declare(qp: StepQP) -> DeclaredQP:
-    x = cp.Variable(qp.n_variables, name="x")
-    cost = cp.sum_squares(cp.multiply(np.sqrt(qp.weights), x - qp.target))
-    if qp.cost_factor is not None and qp.n_cost_rows:
-        cost = cost + cp.sum_squares(qp.cost_factor @ x - qp.cost_factor @ qp.target)
-    constraints: list[cp.Constraint] = []
-    eq_constraint = ineq_constraint = upper_constraint = None
-    if qp.n_equalities:
-        eq_constraint = qp.eq_matrix @ x == qp.eq_rhs
-        constraints.append(eq_constraint)
-    if qp.n_inequalities:
-        ineq_constraint = qp.ineq_matrix @ x >= qp.ineq_rhs
-        constraints.append(ineq_constraint)
-    rows = qp.upper_rows
-    if rows.size:
-        upper_constraint = qp.ineq_matrix[rows] @ x <= _upper_bounds(qp)
-        constraints.append(upper_constraint)
-    return DeclaredQP(cp.Problem(cp.Minimize(cost), constraints), x, eq_constraint,
-                      ineq_constraint, upper_constraint)
 
 
 def point_rows(

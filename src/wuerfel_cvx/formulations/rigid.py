@@ -58,6 +58,11 @@ class RigidFormulation(SinglePass, FrictionSettings):
         """Contact reach (m) per body, as in the velocity formulation."""
         return self._velocity.body_reach(model, state, dt)
 
+    @property
+    def heavy_tables(self) -> bool:
+        """False: three unknowns per body, so tables are fixed."""
+        return False
+
     def build(self, model: Model, state: State, contacts: Contacts, dt: float) -> StepQP:
         """The step QP in the boxes' new centre and angular velocities.
 

@@ -59,6 +59,16 @@ class SeedFormulation(SinglePass):
     """Baumgarte feedback rate alpha (1/s) on rods and sides; 0 is the paper's model."""
 
     @property
+    def friction(self) -> None:
+        """None: the seed's model has no friction."""
+        return None
+
+    @property
+    def heavy_tables(self) -> bool:
+        """True: the seed's heavy tables are its own model."""
+        return True
+
+    @property
     def touching_distance(self) -> float:
         """Largest signed distance (m) at which a point's side constraint applies."""
         return TIE_TOLERANCE if self.baumgarte_rate else 0.0

@@ -88,6 +88,11 @@ class VelocityFormulation(FrictionSettings):
     ramp by more than this (m) along the pass's motion."""
     name: str = "velocity"
 
+    @property
+    def heavy_tables(self) -> bool:
+        """True: a heavy table's corners are unknowns held by equalities."""
+        return True
+
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
         """How far (m) each body may travel towards another within one step, plus margin."""
         if _numba.enabled:  # the same numbers, by a compiled loop

@@ -24,9 +24,10 @@ from ..errors import StepFailure
 from ..geometry import FloatArray, rectangle_corners, rot90
 from ..metrics import deepest_penetration
 from ..model import Model, State
-from ..recorder import TrajectoryRecorder, physical_metrics, run_info
+from ..recorder import TrajectoryRecorder, info_of, physical_metrics
 from ..scene import Scene
-from ..simulation import checked_dt, checked_steps
+from ..settings import checked_dt
+from ..simulation import checked_steps
 from ..trajectory import Trajectory
 from ..versions import package_version as package_version  # re-exported by peers
 
@@ -124,8 +125,10 @@ def run_peer(engine: str, package: str, scene: Scene, world: PeerWorld, dt: floa
 
     """
     model = Model.from_scene(scene)
-    info = run_info(scene, formulation="peer", solver=engine, tol="native", dt=dt,
-                    steps=steps, packages={package: package})
+    info = info_of(scene, {"formulation": "peer", "solver": engine, "tol": "native",
+                           "dt": float(dt), "steps": int(steps), "table_mass": None,
+                           "extra_rod": False, "fallback": [], "friction_model": None},
+                   {package: package})
     recorder = TrajectoryRecorder.start(model, info, State.initial(scene), _METRIC_DTYPES)
     for step in tqdm(range(1, int(steps) + 1), disable=not progress, unit="step",
                      desc=f"{scene.name} ({engine})"):

@@ -84,19 +84,24 @@ def solver_options_from_call(solver: str, from_call: int,
 
 @contextmanager
 def clarabel_raises() -> Iterator[None]:
-    """Within the block, CLARABEL's direct path (step 3 on) raises ``RuntimeError``."""
-    from ..backends.clarabel import DirectClarabel
+    """Within the block, CLARABEL's adapter raises ``RuntimeError`` on a structure's second
+    and later QPs (its in-place updates).
+    """
+    from ..backends import NativeData
+    from ..backends.clarabel import ClarabelAdapter
 
-    original = DirectClarabel.solve
+    original = ClarabelAdapter.solve
 
-    def explode(self: DirectClarabel, *args: Any, **kwargs: Any) -> Any:
-        raise RuntimeError("injected: solver exploded")
+    def explode(self: ClarabelAdapter, data: NativeData, warm: Any = None) -> Any:
+        if data is not self._pending:
+            raise RuntimeError("injected: solver exploded")
+        return original(self, data, warm)
 
-    DirectClarabel.solve = explode  # type: ignore[method-assign]
+    ClarabelAdapter.solve = explode  # type: ignore[method-assign]
     try:
         yield
     finally:
-        DirectClarabel.solve = original  # type: ignore[method-assign]
+        ClarabelAdapter.solve = original  # type: ignore[method-assign]
 
 
 @contextmanager
