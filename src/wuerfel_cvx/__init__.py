@@ -20,5 +20,5 @@ from .trajectory import Trajectory
 
 __version__ = "0.1.0"
 
-__all__ = ["Box", "InputError", "Interrupted", "Scene", "Settings", "Simulation", "Square", "StepFailure",
-           "Table", "Trajectory", "WuerfelError", "available_solvers", "simulate"]
+__all__ = ["Box", "InputError", "Interrupted", "Scene", "Settings", "Simulation", "Square",
+           "StepFailure", "Table", "Trajectory", "WuerfelError", "available_solvers", "simulate"]

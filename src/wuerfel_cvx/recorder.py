@@ -44,9 +44,9 @@ The row's own diagnostics (rod drift, penetration, energies) are measured outsid
 ``step_time_s``.  ``solver`` and ``status`` are those of the solver that produced the
 step; ``primary_status`` is the run's own solver's status on it, which differs only when
 that solver failed and a ``fallback`` solver took over.  ``path`` is how the step's QPs
-reached the solver: ``native``, ``compiled`` or ``declared`` (:class:`~wuerfel_cvx.solve.SolvePath`;
-joined by ``+`` when a step's QPs went different ways; ``none`` when no QP was solved, ``peer`` for a
-peer engine).  ``passes`` is the number of QPs solved one after another for the step (the
+reached the solver: ``native``, ``compiled`` or ``declared``
+(:class:`~wuerfel_cvx.solve.SolvePath`; joined by ``+`` when a step's QPs went different
+ways; ``none`` when no QP was solved, ``peer`` for a peer engine).  ``passes`` is the number of QPs solved one after another for the step (the
 most of any island): 1 for a single-pass formulation, up to ``max_passes`` for the
 closest-approach Gauss-Newton passes of ``velocity``, 0 for a step that solved none; its
 times and ``iterations`` are those passes' sums.  The last four are the physical criteria

@@ -47,6 +47,6 @@ class AdapterModule(Protocol):
 
 
 def adapter_for(module: str) -> AdapterModule:
-    """The adapter module ``module`` (a solver's :attr:`~wuerfel_cvx.solvers.SolverSpec.adapter`)."""
+    """The adapter module named ``module`` (:attr:`~wuerfel_cvx.solvers.SolverSpec.adapter`)."""
     adapter: AdapterModule = importlib.import_module(f".{module}", __name__)
     return adapter

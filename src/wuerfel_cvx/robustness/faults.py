@@ -84,8 +84,9 @@ def solver_options_from_call(solver: str, from_call: int,
 
 @contextmanager
 def clarabel_raises() -> Iterator[None]:
-    """Within the block, CLARABEL's adapter raises ``RuntimeError`` on a structure's second
-    and later QPs (its in-place updates).
+    """Within the block, CLARABEL's adapter raises ``RuntimeError`` on in-place updates.
+
+    A structure's first QP is solved; its second and later ones raise.
     """
     from ..backends import NativeData
     from ..backends.clarabel import ClarabelAdapter
