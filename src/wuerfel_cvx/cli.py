@@ -17,11 +17,14 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from .compiled import NATIVE
 from .errors import InputError, Interrupted, StepFailure
 from .formulations import FORMULATIONS, FRICTION_MODELS
 from .library import ENTRIES
+from .settings import Settings
 from .simulate import simulate
 from .sleep import SleepSettings
+from .solve import SOLVE_PATHS
 from .solvers import SOLVERS, TOLERANCE_PRESETS, available_solvers
 from .trajectory import Trajectory
 
@@ -47,6 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
                           f"; default {FRICTION_MODELS[0]})")
     run.add_argument("--tol", default="default",
                      help=f"tolerance preset ({', '.join(TOLERANCE_PRESETS)}) or a number")
+    run.add_argument("--solve-path", default=NATIVE, choices=SOLVE_PATHS,
+                     help="how the QPs reach the solver: its own API (native, default), a "
+                          "cvxpy problem compiled per structure, or one declared per step")
     run.add_argument("--table-mass", type=float, default=None,
                      help="seed variant: table corners as variables of this mass (kg)")
     run.add_argument("--fallback", action="append", default=[], metavar="NAME",
@@ -169,12 +175,13 @@ def _simulate(args: argparse.Namespace) -> int:
     progress = sys.stderr.isatty() if args.progress is None else args.progress
     _check_outputs(args)  # a bad --out, --animate or --fps is reported before the run
     try:
-        trajectory = simulate(args.scene, dt=args.dt, steps=args.steps, solver=args.solver,
-                              formulation=args.formulation, tol=args.tol,
-                              table_mass=args.table_mass, progress=progress,
-                              sleep=SleepSettings() if args.sleep else None,
-                              islands=args.islands, fallback=args.fallback,
-                              friction_model=args.friction_model)
+        settings = Settings(dt=args.dt, solver=args.solver, formulation=args.formulation,
+                            tol=args.tol, solve_path=args.solve_path,
+                            friction_model=args.friction_model, table_mass=args.table_mass,
+                            sleep=SleepSettings() if args.sleep else None,
+                            islands=args.islands, fallback=tuple(args.fallback))
+        trajectory = simulate(args.scene, steps=args.steps, progress=progress,
+                              settings=settings)
     except StepFailure as failure:
         print(f"{PROG}: {failure}", file=sys.stderr)
         _keep_partial(failure.trajectory, args, progress, "before it")

@@ -171,7 +171,7 @@ class CompiledQPCache:
     _sightings: dict[StructureKey, int] = field(default_factory=dict, repr=False)
 
     def prepare(self, qp: StepQP) -> tuple[DeclaredQP, str]:
-        """A cvxpy problem holding ``qp``'s numbers, and how (:data:`COMPILED`, :data:`DECLARED`)."""
+        """A cvxpy problem holding ``qp``'s numbers, and its path (compiled or declared)."""
         key = structure_key(qp)
         compiled = self._problems.get(key)
         if compiled is not None:

@@ -27,7 +27,6 @@ from ..model import State
 from ..peers import peer_version, simulate_peer
 from ..scene import Scene
 from ..simulate import ASLEEP, resolve_scene, simulate
-from ..sleep import SleepSettings
 from ..solve import StepSolution, solve_step_qp
 from ..solvers import SOLVERS
 from ..trajectory import Trajectory
@@ -207,13 +206,8 @@ def _simulate(point: GridPoint,
         if point.engine != "wuerfel_cvx":
             trajectory = simulate_peer(point.solver, scene, point.dt, point.steps)
         else:
-            trajectory = simulate(scene, dt=point.dt, steps=point.steps,
-                                  solver=point.solver, formulation=point.formulation,
-                                  tol=point.tol, table_mass=point.table_mass,
-                                  extra_rod=point.extra_rod, observer=compare,
-                                  sleep=SleepSettings() if point.sleep else None,
-                                  islands=point.islands,
-                                  friction_model=point.friction_model or DEFAULT_FRICTION_MODEL)
+            trajectory = simulate(scene, steps=point.steps, observer=compare,
+                                  settings=point.settings())
     except StepFailure as failure:
         if failure.trajectory is None:
             raise
@@ -228,6 +222,7 @@ def _configuration(point: GridPoint) -> dict[str, Any]:
         "tol": point.tol, "dt": point.dt, "duration": point.duration, "steps": point.steps,
         "table_mass": point.table_mass, "extra_rod": point.extra_rod, "sleep": point.sleep,
         "islands": point.islands, "friction_model": point.friction_model,
+        "solve_path": point.solve_path,
         "solver_version": _solver_version(point.solver), **machine(),
         "finished_at": dt_module.datetime.now(dt_module.UTC).isoformat(timespec="seconds"),
         "reference_kind": point.reference,

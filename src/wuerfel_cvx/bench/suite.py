@@ -18,6 +18,7 @@ Cartesian product of its lists::
     sleeps = [false]                    # true: islands at rest sleep
     islands = [false]                   # true: one QP per island instead of one joint QP
     friction_models = ["ccp"]           # "ccp" and/or "coulomb" (scenes with friction)
+    solve_paths = ["native"]            # "native", "compiled", "declared" (wuerfel_cvx.solve)
     peers = []                          # peer engines; names unknown here are left out
     reference = "dt/8"                  # "dt/8", "rest" or "none"
     compare_every = 1                   # steps between re-solves by the reference solver
@@ -44,9 +45,13 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from ..compiled import NATIVE
 from ..errors import InputError
 from ..formulations import FRICTION_MODELS
 from ..peers import PEER_ENGINES
+from ..settings import Settings
+from ..sleep import SleepSettings
+from ..solve import SOLVE_PATHS
 
 REFERENCE_KINDS = ("dt/8", "rest", "none")
 """``dt/8``: the same scene and formulation at dt/8 with CLARABEL at ``high`` tolerance;
@@ -68,13 +73,15 @@ REFERENCE_TOL = "high"
 
 _LIST_KEYS = {"scenes": str, "formulations": str, "solvers": str, "tols": str,
               "dts": float, "table_masses": (str, float), "extra_rods": bool,
-              "sleeps": bool, "islands": bool, "friction_models": str, "peers": str}
+              "sleeps": bool, "islands": bool, "friction_models": str, "peers": str,
+              "solve_paths": str}
 _SCALAR_KEYS = {"duration": float, "reference": str, "compare_every": int,
                 "time_limit": float}
 _DEFAULTS: dict[str, Any] = {
     "formulations": ["velocity"], "solvers": ["CLARABEL"], "tols": ["default"],
     "dts": [0.01], "table_masses": ["fixed"], "extra_rods": [False], "sleeps": [False],
     "islands": [False], "friction_models": [DEFAULT_FRICTION_MODEL], "peers": [],
+    "solve_paths": [NATIVE],
     "reference": "dt/8",
     "compare_every": 1, "time_limit": 600.0,
 }
@@ -110,6 +117,17 @@ class GridPoint:
     """One QP per island instead of one joint QP (``simulate(..., islands=True)``)."""
     friction_model: str | None = DEFAULT_FRICTION_MODEL
     """``simulate(..., friction_model=...)``: ``ccp`` or ``coulomb``; ``None`` for a peer."""
+    solve_path: str = NATIVE
+    """How the QPs reach the solver (:class:`~wuerfel_cvx.solve.SolvePath`); ``native``
+    for a peer."""
+
+    def settings(self) -> Settings:
+        """The run's :class:`~wuerfel_cvx.settings.Settings` (not for a peer point)."""
+        return Settings(dt=self.dt, solver=self.solver, formulation=self.formulation,
+                        tol=self.tol, solve_path=self.solve_path,
+                        friction_model=self.friction_model or DEFAULT_FRICTION_MODEL,
+                        table_mass=self.table_mass, extra_rod=self.extra_rod,
+                        sleep=SleepSettings() if self.sleep else None, islands=self.islands)
 
     @property
     def engine(self) -> str:
@@ -136,6 +154,8 @@ class GridPoint:
             parts.append("islands")
         if self.friction_model not in (None, DEFAULT_FRICTION_MODEL):
             parts.append(f"friction={self.friction_model}")
+        if self.solve_path != NATIVE:
+            parts.append(f"path={self.solve_path}")
         return "|".join(parts)
 
     @property
@@ -297,22 +317,26 @@ def _expand(suite: str, s: dict[str, Any], source: str, where: str) -> list[Grid
     masses = [_table_mass(m, source, f"{where}.table_masses") for m in s["table_masses"]]
     models = [_friction_model(m, source, f"{where}.friction_models")
               for m in s["friction_models"]]
-    points = []
-    for (scene, formulation, solver, tol, dt, mass, rod, sleep, islands,
-         model) in itertools.product(s["scenes"], s["formulations"], s["solvers"], s["tols"],
-                                     s["dts"], masses, s["extra_rods"], s["sleeps"],
-                                     s["islands"], models):
+    for path in s["solve_paths"]:
+        if path not in SOLVE_PATHS:
+            raise InputError(f"unknown solve path {path!r} (known: {', '.join(SOLVE_PATHS)})",
+                             source=source, field=f"{where}.solve_paths")
+    points: dict[str, GridPoint] = {}  # a peer's point once, whatever our settings
+    for (scene, formulation, solver, tol, dt, mass, rod, sleep, islands, model,
+         path) in itertools.product(s["scenes"], s["formulations"], s["solvers"], s["tols"],
+                                    s["dts"], masses, s["extra_rods"], s["sleeps"],
+                                    s["islands"], models, s["solve_paths"]):
         solver = solver.upper()
         friction_model: str | None = model
         if solver in PEER_ENGINES:
-            formulation, tol, mass, rod, sleep, islands, friction_model = (
-                "peer", "native", None, False, False, False, None)
-        points.append(GridPoint(suite, scene, formulation, solver, str(tol), float(dt),
-                                float(duration), mass, bool(rod), bool(sleep),
-                                s["reference"], s["compare_every"],
-                                float(s["time_limit"]), islands=bool(islands),
-                                friction_model=friction_model))
-    return points
+            formulation, tol, mass, rod, sleep, islands, friction_model, path = (
+                "peer", "native", None, False, False, False, None, NATIVE)
+        point = GridPoint(suite, scene, formulation, solver, str(tol), float(dt),
+                          float(duration), mass, bool(rod), bool(sleep), s["reference"],
+                          s["compare_every"], float(s["time_limit"]), islands=bool(islands),
+                          friction_model=friction_model, solve_path=path)
+        points.setdefault(point.point_id, point)
+    return list(points.values())
 
 
 def _friction_model(value: str, source: str, field: str) -> str:
