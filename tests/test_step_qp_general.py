@@ -13,15 +13,19 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from wuerfel_cvx import solve as solve_module
-from wuerfel_cvx.compiled import CompiledQPCache
 from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations.qp import PARAMETER_SLOTS, StepQP, declare_qp
-from wuerfel_cvx.solve import SOLVE_PATHS, VERIFY_FACTOR, kkt_residuals, solve_step_qp
+from wuerfel_cvx.solve import (
+    SOLVE_PATHS,
+    VERIFY_FACTOR,
+    SolvePath,
+    kkt_residuals,
+    solve_step_qp,
+)
 from wuerfel_cvx.solvers import SOLVERS, TOLERANCE_PRESETS, available_solvers
 
 HIGH = TOLERANCE_PRESETS["high"]
-DIRECT_SOLVERS = [name for name, spec in SOLVERS.items() if spec.backend is not None]
+ADAPTED = [name for name in available_solvers() if SOLVERS[name].adapter is not None]
 pytestmark = [pytest.mark.integration, pytest.mark.filterwarnings(  # cvxpy reading its own
     "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")]  # sparse parameters
 
@@ -137,46 +141,45 @@ def test_the_coupling_cost_enters_the_gradient(exact: Exact) -> None:
     assert kkt_residuals(without, exact.x, exact.y, exact.z).dual > 1e-2
 
 
+@pytest.mark.parametrize("path_name", SOLVE_PATHS)
 @pytest.mark.parametrize("solver", available_solvers())
-def test_every_solver_declared_afresh_finds_the_exact_solution(solver: str,
-                                                                exact: Exact) -> None:
+def test_every_solver_on_every_path_finds_the_exact_solution(solver: str, path_name: str,
+                                                             exact: Exact) -> None:
+    # three solves of one structure on one path: a cvxpy declaration, then a compiled
+    # problem (compile_after=2); or a native solver set up, then updated in place
+    path = SolvePath(path_name)
+    solutions = [solve_step_qp(wide_qp(), solver, "high", path=path) for _ in range(3)]
+    spec = SOLVERS[solver]
+    native = spec.adapter is not None and (path_name == "native" or spec.native_only)
+    expected = (["native"] * 3 if native else ["declared"] * 3 if path_name == "declared"
+                else ["declared", "compiled", "compiled"])
+    assert [solution.path for solution in solutions] == expected
+    if native:
+        assert (path.native_setups, path.native_updates) == (1, 2)
     qp = wide_qp()
-    solution = solve_step_qp(qp, solver, "high")
-    declared = "declared" if SOLVERS[solver].native is None else "direct"  # PROXQP: native
-    assert solution.path == declared and solution.verified, solution.residuals
-    assert np.max(np.abs(solution.x - exact.x)) <= agreement(qp, exact)
-    np.testing.assert_allclose(solution.ineq_dual, exact.z, rtol=0,
-                               atol=agreement(qp, exact) * (1 + np.abs(exact.z).max()))
-
-
-@pytest.mark.parametrize("solver", DIRECT_SOLVERS + ["SCS"])
-def test_compiled_and_direct_paths_find_the_exact_solution(solver: str,
-                                                            exact: Exact) -> None:
-    cache = CompiledQPCache(compile_after=1)
-    first = solve_step_qp(wide_qp(), solver, "high", cache=cache)
-    second = solve_step_qp(wide_qp(), solver, "high", cache=cache)
-    expected = "direct" if SOLVERS[solver].backend is not None else "compiled"
-    assert (first.path, second.path) == ("compiled", expected)
-    qp = wide_qp()
-    for solution in (first, second):
+    for solution in solutions:
         assert solution.verified, (solution.path, solution.residuals)
         assert np.max(np.abs(solution.x - exact.x)) <= agreement(qp, exact)
         np.testing.assert_allclose(solution.ineq_dual, exact.z, rtol=0,
                                    atol=agreement(qp, exact) * (1 + np.abs(exact.z).max()))
 
 
-def test_new_numbers_in_the_same_structure_are_solved_anew() -> None:
-    cache = CompiledQPCache(compile_after=1)
-    solve_step_qp(wide_qp(), "OSQP", "high", cache=cache)
+@pytest.mark.parametrize("solver", ADAPTED)
+def test_new_numbers_in_the_same_structure_are_solved_anew(solver: str) -> None:
+    path = SolvePath("native")
+    solve_step_qp(wide_qp(), solver, "high", path=path)
     moved = wide_qp()
     assert moved.ineq_upper is not None
     moved.ineq_upper[0] = 1.5  # another upper bound, same rows bounded: same structure
+    moved.target[1] = -0.25
     assert moved.structure() == wide_qp().structure()
-    direct = solve_step_qp(moved, "OSQP", "high", cache=cache)
-    fresh = solve_step_qp(dataclasses.replace(moved), "CLARABEL", "high")
-    assert direct.path == "direct" and direct.verified
-    assert np.max(np.abs(direct.x - fresh.x)) <= 2 * agreement(moved, exact_of(moved))
-    assert (moved.ineq_matrix @ direct.x)[0] <= 1.5 + 1e-6
+    updated = solve_step_qp(moved, solver, "high", path=path)
+    fresh = solve_step_qp(dataclasses.replace(moved), "CLARABEL", "high",
+                          path=SolvePath("declared"))
+    assert updated.path == "native" and updated.verified
+    assert path.native_setups == 1 or SOLVERS[solver].adapter in ("daqp", "proxqp")
+    assert np.max(np.abs(updated.x - fresh.x)) <= 2 * agreement(moved, exact_of(moved))
+    assert (moved.ineq_matrix @ updated.x)[0] <= 1.5 + 1e-6
 
 
 def exact_of(qp: StepQP) -> Exact:
@@ -215,39 +218,6 @@ def test_non_finite_upper_bounds_are_invalid_data() -> None:
         assert caught.value.status == "invalid_data" and "ineq_upper" in caught.value.detail
 
 
-NATIVE_NEW = [name for name, spec in SOLVERS.items() if spec.solves_new_natively]
-
-
-@pytest.mark.parametrize("solver", NATIVE_NEW)
-def test_a_new_structure_solved_natively_finds_the_exact_solution(solver: str,
-                                                                  exact: Exact) -> None:
-    # a coupling cost, an equality and rows at their lower and at their upper bounds
-    cache = CompiledQPCache()
-    solution = solve_step_qp(wide_qp(), solver, "high", cache=cache)
-    assert solution.path == "native" and solution.verified, solution.residuals
-    assert cache.solved_natively == 1 and cache.canonicalised == 0
-    qp = wide_qp()
-    assert np.max(np.abs(solution.x - exact.x)) <= agreement(qp, exact)
-    np.testing.assert_allclose(solution.ineq_dual, exact.z, rtol=0,
-                               atol=agreement(qp, exact) * (1 + np.abs(exact.z).max()))
-
-
-def test_paths_on_a_repeated_structure() -> None:
-    # compile_after=2: a structure seen once is solved natively (OSQP) or declared (SCS, or
-    # with native_new off), the second sighting compiles it and the third is solved on the
-    # direct path (SCS has no direct backend).
-    for solver, first, third, native_new in (("OSQP", "native", "direct", True),
-                                             ("OSQP", "declared", "direct", False),
-                                             ("SCS", "declared", "compiled", True)):
-        cache = CompiledQPCache(native_new=native_new)
-        paths = [solve_step_qp(wide_qp(), solver, "high", cache=cache).path
-                 for _ in range(3)]
-        assert paths == [first, "compiled", third]
-        assert cache.compiled == 1
-    assert set(SOLVE_PATHS) == {"declared", "compiled", "direct", "native"}
-    assert solve_step_qp(wide_qp(), "OSQP", "high").path == "declared"  # no cache
-
-
 def test_mismatched_shapes_are_rejected() -> None:
     qp = wide_qp()
     with pytest.raises(ValueError, match="ineq_upper"):
@@ -264,8 +234,8 @@ def test_a_native_solve_with_no_active_row_prints_nothing(
     apart = declare_qp(np.array([1.0, 1.0]), np.array([0.5, 0.5]), sp.csr_array((0, 2)),
                        np.zeros(0), sp.csr_array(np.array([[1.0, 0.0], [0.0, 1.0]])),
                        np.array([-1.0, -1.0]), Contacts.empty())
-    for solver in NATIVE_NEW:
-        solution = solve_step_qp(apart, solver, "high", cache=CompiledQPCache())
+    for solver in ADAPTED:
+        solution = solve_step_qp(apart, solver, "high", path=SolvePath("native"))
         assert solution.path == "native" and solution.verified
         np.testing.assert_allclose(solution.x, [0.5, 0.5], rtol=0, atol=1e-7)
     assert capsys.readouterr().out == ""
@@ -276,24 +246,19 @@ def test_a_new_structure_without_rows_is_solved_natively() -> None:
     free = declare_qp(np.array([1.0, 1.0, 0.5]), np.array([0.25, -0.5, 2.0]),
                       sp.csr_array((0, 3)), np.zeros(0), sp.csr_array((0, 3)), np.zeros(0),
                       Contacts.empty())
-    for solver in NATIVE_NEW:
-        solution = solve_step_qp(free, solver, "high", cache=CompiledQPCache())
+    for solver in ADAPTED:
+        solution = solve_step_qp(free, solver, "high", path=SolvePath("native"))
         assert solution.path == "native" and solution.verified
         np.testing.assert_allclose(solution.x, free.target, rtol=0, atol=1e-9)
 
 
-def test_options_without_a_native_form_go_through_cvxpy() -> None:
-    # PIQP's native form is its sparse backend: the dense one is solved through cvxpy
-    from wuerfel_cvx.backends._native import NativeData
-
-    cache = CompiledQPCache()
-    dense = {**SOLVERS["PIQP"].options(HIGH), "backend": "dense"}
-    answer = solve_module._solve(wide_qp(), SOLVERS["PIQP"], dense, cache)
-    assert answer.path == "declared" and cache.solved_natively == 0
+def test_a_coupled_hessian_is_not_taken_as_diagonal() -> None:
     # a Hessian with one entry per column, off the diagonal in two: not taken as diagonal
+    from wuerfel_cvx.backends import NativeData
+
     coupled = dataclasses.replace(wide_qp(), weights=np.zeros(4),
                                   cost_factor=sp.csr_array(np.array([[1.0, 1.0, 0.0, 0.0],
                                                                      [0.0, 1.0, 0.0, 0.0]])))
-    assert NativeData.of(coupled).hessian.nnz == 4  # 2 F' F: four entries in four columns
-    triangle = NativeData.of(coupled).upper_triangle
-    assert np.array_equal(triangle.toarray(), np.triu(NativeData.of(coupled).hessian.toarray()))
+    assert NativeData(coupled).hessian.nnz == 4  # 2 F' F: four entries in four columns
+    triangle = NativeData(coupled).upper_triangle
+    assert np.array_equal(triangle.toarray(), np.triu(NativeData(coupled).hessian.toarray()))

@@ -46,10 +46,10 @@ DECLARED, COMPILED, NATIVE = "declared", "compiled", "native"
 """The solve paths: a cvxpy problem per step, a cvxpy DPP problem per structure, or the
 solver's own API on the step QP's numbers (:mod:`wuerfel_cvx.backends`)."""
 
-DENSE_ENTRY_LIMIT = 1 << 24
+DENSE_ENTRY_LIMIT = 1 << 20
 """Most dense entries (rows x columns) of a matrix parameter of a compiled structure: cvxpy
-allocates a parameter's dense shape when it reads its value (16.8 million float64 entries
-are 134 MB).  A larger structure is declared afresh instead."""
+allocates a parameter's dense shape each time it reads its value (a million float64
+entries are 8 MiB, read on every solve).  A larger structure is declared afresh instead."""
 
 
 @dataclass(frozen=True)

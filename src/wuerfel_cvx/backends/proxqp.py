@@ -124,7 +124,8 @@ class PROXQPAdapter:
     """PROXQP on a structure's QPs: dense data, set up afresh for every QP."""
 
     def __init__(self, options: dict[str, Any]):
-        self.options = dict(options)
+        # the last step's start comes as ``warm`` (the mapped guess), not as a setting
+        self.options = {key: value for key, value in options.items() if key != "warm_start"}
 
     def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
         """Solve ``data`` from ``warm`` if given."""
