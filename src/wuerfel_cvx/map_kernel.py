@@ -7,10 +7,11 @@ right-hand sides out of the conic data's nonzeros (:class:`~wuerfel_cvx.backends
 fancy index, a sign, a negation), whose per-call overhead outweighs their work on a small
 scene.  The loops here do the same operations entry by entry (a product by a sign or a
 coefficient rounds as NumPy's does), so they return the NumPy paths' numbers bit for bit
-(``tests/test_map_kernel.py``), which stay the reference and run without numba.
+(``tests/test_map_kernel.py``), which stay the reference.
 
-:func:`dense_rows` writes DAQP's dense constraint rows
-(:func:`wuerfel_cvx.backends.daqp.daqp_form`) and :func:`row_ids` the warm starts' row ids
+:func:`add_rows` writes DAQP's and PROXQP's dense constraint rows
+(:func:`wuerfel_cvx._sparse.dense_rows`, bit for bit scipy's ``toarray``,
+``tests/test_dense_forms.py``) and :func:`row_ids` the warm starts' row ids
 (:func:`wuerfel_cvx.warm_start.row_ids`) in one loop each, for the same reason.
 """
 
@@ -18,11 +19,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._numba import AVAILABLE, compiled
+from ._numba import compiled
 from .geometry import FloatArray
 from .model import IntArray
 
-__all__ = ["AVAILABLE", "add_rows", "gather", "right_hand_sides", "row_ids", "scaled_take"]
+__all__ = ["add_rows", "gather", "right_hand_sides", "row_ids", "scaled_take"]
 
 
 @compiled
