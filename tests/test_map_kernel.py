@@ -1,6 +1,6 @@
 """The direct path's compiled gathers (numba) equal its NumPy gathers bit for bit.
 
-On the QP forms of compiled structures (OSQP's and PIQP's) from short runs,
+On the QP forms of compiled structures (OSQP's and PIQP's) from short runs, the loops of
 :mod:`wuerfel_cvx.map_kernel` with ``_numba.enabled`` true and the NumPy path with it false
 give the same matrices' nonzeros, right-hand sides and multipliers, at the runs' own numbers
 and at random multipliers (negative zeros included); likewise the signed takes of
@@ -15,13 +15,12 @@ import numpy as np
 import pytest
 
 from kernel_paths import both
-from wuerfel_cvx import Scene, Simulation, map_kernel
+from wuerfel_cvx import Scene, Simulation
 from wuerfel_cvx.backends._map import scaled
 from wuerfel_cvx.compiled import structure_key
 from wuerfel_cvx.formulations.qp import StepQP
 
-pytestmark = [pytest.mark.integration,
-              pytest.mark.skipif(not map_kernel.AVAILABLE, reason="numba is not installed")]
+pytestmark = pytest.mark.integration
 
 
 def direct_paths(scene: str, formulation: str, solver: str) -> list[tuple[Any, StepQP]]:
