@@ -1,4 +1,9 @@
-"""Running a computation on the NumPy reference path and on the compiled kernels."""
+"""Running a computation on the NumPy path and on the compiled loops, where a module has both.
+
+Only :mod:`wuerfel_cvx.backends._map` and :mod:`wuerfel_cvx.warm_start` still choose by
+``_numba.enabled``; the rest of the step path runs its kernels only (their NumPy references
+are in ``tests/reference_kernels.py``).
+"""
 
 from __future__ import annotations
 

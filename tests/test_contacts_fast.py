@@ -1,11 +1,12 @@
-"""The batched contact search and row assembly equal the per-pair versions they replaced.
+"""The contact search and row assembly equal the per-pair versions of before vectorisation.
 
 The old implementations are kept below verbatim as oracles (from ``contacts.py``,
 ``formulations/rows.py`` and ``formulations/qp.py`` before vectorisation), except that the
 contact search's oracle applies the current per-pair manifold rule one pair at a time and
-takes the broad phase's pairs by index, as the search now does.  The new
-ones must return the same contacts in the same order with bit-identical distances,
-and the same sparse matrices, so that trajectories stay bit-for-bit comparable.
+takes the broad phase's pairs by index, as the search now does.  The product's search and
+rows (compiled loops since; their batched NumPy versions are ``tests/reference_kernels.py``)
+must return the same contacts in the same order with bit-identical distances, and the same
+sparse matrices, so that trajectories stay bit-for-bit comparable.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from manifold_oracle import manifold_rows
+from reference_kernels import rod_blocks
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx import contacts as new_contacts
 from wuerfel_cvx import formulations as formulations_package
@@ -32,7 +34,6 @@ from wuerfel_cvx.formulations import velocity as velocity_module
 from wuerfel_cvx.formulations.rows import (
     held_table_blocks,
     n_unknown_points,
-    rod_blocks,
     seed_side_blocks,
     unknown_index,
 )
@@ -226,15 +227,6 @@ def assert_same_matrix(new: sp.csr_array, old: sp.csr_array) -> None:
     assert np.array_equal(new.data, old.data)
 
 
-def assert_same_blocks(new: list[tuple[IntArray, FloatArray]],
-                       old: list[tuple[IntArray, FloatArray]]) -> None:
-    assert len(new) == len(old)
-    for (index_new, grad_new), (index_old, grad_old) in zip(new, old, strict=True):
-        assert np.array_equal(index_new, index_old)
-        assert grad_new.shape == grad_old.shape
-        assert np.array_equal(grad_new, grad_old)
-
-
 def margins(model: Model, state: State, rng: np.random.Generator) -> list[FloatArray | float]:
     """Scalar margins, the velocity formulation's per-body reach, random per-body values."""
     reach = VelocityFormulation().body_reach(model, state, 0.01)
@@ -254,16 +246,14 @@ def check_everything(model: Model, state: State, rng: np.random.Generator) -> in
     contacts = find_contacts(model, state.points, margins(model, state, rng)[5])
     all_points = model.all_points(state.points)
     n_unknown = n_unknown_points(model)
-    new_blocks = new_rows.side_blocks(all_points, contacts, model)
-    old_blocks = side_blocks(all_points, contacts, model)
-    assert_same_blocks(new_blocks, old_blocks)
-    assert_same_matrix(new_qp.point_rows(len(contacts), n_unknown, new_blocks),
-                       point_rows(len(contacts), n_unknown, old_blocks))
+    assert_same_matrix(new_rows.side_rows(all_points, contacts, model),
+                       point_rows(len(contacts), n_unknown, side_blocks(all_points, contacts,
+                                                                         model)))
     seed_blocks = seed_side_blocks(all_points, contacts, model)
     assert_same_matrix(new_qp.point_rows(len(contacts), n_unknown, seed_blocks),
                        point_rows(len(contacts), n_unknown, seed_blocks))
     rods, _ = rod_blocks(model, state.points)
-    assert_same_matrix(new_qp.point_rows(len(model.rods), n_unknown, rods),
+    assert_same_matrix(new_rows.rod_rows(model, state.points)[0],
                        point_rows(len(model.rods), n_unknown, rods))
     held = held_table_blocks(model)
     if held:

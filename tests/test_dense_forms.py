@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from wuerfel_cvx import Scene, Simulation, _numba
+from wuerfel_cvx import Scene, Simulation
 from wuerfel_cvx.backends.daqp import EQUALITY, INFINITE_BOUND, daqp_form
 from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations.qp import StepQP, declare_qp
@@ -56,12 +56,7 @@ def step_qps(scene: str, formulation: str, steps: int) -> list[StepQP]:
 
 @pytest.mark.parametrize("source", ["wide", "stack-10 rigid", "card-house velocity",
                                     "tilted-drop velocity"])
-@pytest.mark.parametrize("compiled", [False, True])
-def test_the_dense_form_is_scipys_bit_for_bit(source: str, compiled: bool,
-                                              monkeypatch: pytest.MonkeyPatch) -> None:
-    if compiled and not _numba.AVAILABLE:
-        pytest.skip("numba is not installed")
-    monkeypatch.setattr(_numba, "enabled", compiled)  # the NumPy path, then the kernel
+def test_the_dense_form_is_scipys_bit_for_bit(source: str) -> None:
     if source == "wide":
         qps = [wide_qp()]  # a coupling cost, two-sided rows and an equality
     else:

@@ -115,8 +115,7 @@ def test_no_module_reads_a_private_cvxpy_attribute() -> None:
 
 
 def _mentions_cvxpy(node: ast.expr) -> bool:
-    """Whether ``node`` is ``cp``/``cvxpy`` or an attribute chain starting there, or a
-    name that holds a cvxpy problem, parameter or constraint here."""
+    """Whether ``node`` names cvxpy, or a cvxpy problem, parameter or constraint here."""
     while isinstance(node, ast.Attribute):
         node = node.value
     return isinstance(node, ast.Name) and node.id in {

@@ -9,7 +9,7 @@ import pytest
 
 from kernel_paths import both
 from qp_bank import AGREEMENT
-from wuerfel_cvx import Scene, Simulation, _numba, simulate
+from wuerfel_cvx import Scene, Simulation, simulate
 from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations import StepQP, get_formulation, step_qp
 from wuerfel_cvx.model import Model, State
@@ -104,7 +104,6 @@ def test_warm_starts_save_iterations_on_a_resting_stack(solver: str) -> None:
     assert totals[1] < totals[0]
 
 
-@pytest.mark.skipif(not _numba.AVAILABLE, reason="numba is not installed")
 @pytest.mark.parametrize("formulation", ["rigid", "velocity"])
 def test_compiled_row_ids_are_the_numpy_ids(monkeypatch: pytest.MonkeyPatch,
                                             formulation: str) -> None:

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from . import _numba, map_kernel
+from . import map_kernel
 from .geometry import FloatArray
 
 _LAYOUT = frozenset({"_shape", "maxprint", "data", "indices", "indptr"})
@@ -121,23 +121,14 @@ def dense_rows(rows: sp.csr_array, row_factor: FloatArray | None = None,
 
     As ``toarray()`` of ``rows`` (of ``diags(row_factor) @ rows``): each stored entry, after
     its exact sign flip, is added to 0.0, so a stored ``-0.0`` becomes ``0.0``.  Written
-    into ``out`` (zeros, the rows' shape) if given.  With numba by a compiled loop
-    (:func:`wuerfel_cvx.map_kernel.add_rows`), with the same numbers.
+    into ``out`` (zeros, the rows' shape) if given.  By a compiled loop
+    (:func:`wuerfel_cvx.map_kernel.add_rows`).
     """
     out = np.zeros(rows.shape) if out is None else out
     if not rows.nnz:
         return out
-    counts = np.diff(rows.indptr)
-    row_of_entry = None
     values = rows.data
     if row_factor is not None:
-        row_of_entry = np.repeat(np.arange(rows.shape[0]), counts)
-        values = row_factor[row_of_entry] * rows.data
-    if _numba.enabled:
-        map_kernel.add_rows(np.asarray(values, dtype=np.float64), rows.indices, rows.indptr,
-                            out)
-        return out
-    if row_of_entry is None:
-        row_of_entry = np.repeat(np.arange(rows.shape[0]), counts)
-    out[row_of_entry, rows.indices] += values
+        values = row_factor[np.repeat(np.arange(rows.shape[0]), np.diff(rows.indptr))] * values
+    map_kernel.add_rows(np.asarray(values, dtype=np.float64), rows.indices, rows.indptr, out)
     return out

@@ -1,25 +1,22 @@
-"""The contact search as compiled loops (numba), when numba is installed.
+"""The contact search as compiled loops (numba).
 
-:func:`wuerfel_cvx.contacts.narrow_phase` is a batch of some sixty NumPy operations on
-``(4 corners, 4 edges, pairs)`` arrays.  On the scenes of a few dozen bodies each of them
-costs more in NumPy's per-call overhead than in arithmetic, so the search is dominated by
-overhead.  :func:`narrow_phase` here runs the same manifold rule over the same pairs as
-one loop compiled by numba: per ordered pair the sixteen signed distances, the best face,
-then, once both orders of a pair are known, the reference side, the incident face and the
-held corners.  The broad phase's candidate pairs (:func:`candidate_pairs`) are listed in
-index order, which the contacts' order follows: up to :data:`ALL_PAIRS_LIMIT` squares by a
-compiled loop over all pairs, beyond by a tree query (:class:`scipy.spatial.cKDTree`)
-sorted (:func:`tree_pairs`, which the NumPy path always takes), so that the order depends
-neither on the path nor on the tree's traversal; :func:`bounds` and :func:`pairs_within`
-compute the bounding circles and filter the candidates around it.
+Batched in NumPy over ``(4 corners, 4 edges, pairs)`` arrays, the manifold rule of
+:mod:`wuerfel_cvx.contacts` takes some sixty operations whose per-call overhead outweighs
+their arithmetic on scenes of a few dozen bodies.  :func:`narrow_phase` here runs
+it over the pairs as one loop compiled by numba: per ordered pair the sixteen signed
+distances, the best face, then, once both orders of a pair are known, the reference side,
+the incident face and the held corners.  The broad phase's candidate pairs
+(:func:`candidate_pairs`) are listed in index order, which the contacts' order follows: up
+to :data:`ALL_PAIRS_LIMIT` squares by a compiled loop over all pairs, beyond by a tree query
+(:class:`scipy.spatial.cKDTree`) sorted (:func:`tree_pairs`), so that the order does not
+depend on the tree's traversal; :func:`bounds` and :func:`pairs_within` compute the bounding
+circles and filter the candidates around it.
 
-It is the same arithmetic in the same order as the NumPy path (each distance
-``(e_x o_y - e_y o_x) / |e|``, each projection ``(o_x a_x + o_y a_y) / |a|``, ``hypot`` from
-the C library as NumPy's), with numba's default strict IEEE semantics (no fast-math, no
-fused multiply-add), so for finite corners it returns the same pairs and contacts in the
-same order with the same distances, bit for bit; ``tests/test_contact_kernel.py`` checks
-this against the NumPy path, which stays the reference.  Without numba (an optional
-dependency, the ``fast`` extra) :data:`AVAILABLE` is false and the NumPy path runs.
+Each distance is ``(e_x o_y - e_y o_x) / |e|``, each projection ``(o_x a_x + o_y a_y) /
+|a|``, ``hypot`` the C library's, with numba's default strict IEEE semantics (no fast-math,
+no fused multiply-add): for finite corners the same pairs and contacts in the same order
+with the same distances, bit for bit, as the batched NumPy search it replaced
+(``tests/reference_kernels.py``, checked by ``tests/test_kernels.py``).
 """
 
 from __future__ import annotations
@@ -29,7 +26,6 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from . import _numba
 from ._numba import compiled
 from .geometry import FloatArray
 from .model import IntArray
@@ -37,9 +33,6 @@ from .model import IntArray
 #: Lengths closer than this (m) count as equal in the manifold rule (see
 #: :data:`wuerfel_cvx.contacts.TIE_TOLERANCE`, which is this number); the kernel compiles it in.
 TIE_TOLERANCE = 1e-9
-
-AVAILABLE = _numba.AVAILABLE
-"""Whether the compiled narrow phase can run (numba is importable)."""
 
 ALL_PAIRS_LIMIT = 64
 """Up to this many squares the broad phase checks every pair (a compiled loop) rather than
@@ -256,7 +249,7 @@ def candidate_pairs(centers: FloatArray, radius: float) -> IntArray:
     """:func:`tree_pairs`: the same pairs in the same order.
 
     Up to :data:`ALL_PAIRS_LIMIT` centres a compiled loop over all pairs lists them
-    (``tests/test_contact_kernel.py`` checks it against the tree); beyond, the tree.
+    (``tests/test_kernels.py`` checks it against the tree); beyond, the tree.
     """
     if centers.shape[0] <= ALL_PAIRS_LIMIT:
         return _all_pairs(np.ascontiguousarray(centers, dtype=np.float64), float(radius))
@@ -266,8 +259,7 @@ def candidate_pairs(centers: FloatArray, radius: float) -> IntArray:
 def bounds(corners: FloatArray, reach: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Body centres ``(n_bodies, 2)`` (m) and bounds ``(n_bodies,)`` (m) of the broad phase.
 
-    As :func:`wuerfel_cvx.contacts.body_pairs` computes them: the corner mean, and the
-    largest corner distance from it plus ``reach``.
+    The corner mean, and the largest corner distance from it plus ``reach``.
     """
     return _bounds(np.ascontiguousarray(corners, dtype=np.float64),
                    np.ascontiguousarray(reach, dtype=np.float64))
@@ -277,8 +269,9 @@ def pairs_within(centers: FloatArray, bound: FloatArray, candidates: IntArray,
                  n_boxes: int) -> IntArray:
     """The ordered pairs of :func:`wuerfel_cvx.contacts.body_pairs` from the tree's candidates.
 
-    ``candidates`` ``(C, 2)``: square pairs from the tree query; squares are bodies
-    ``0 .. n_boxes - 1``, tables the rest.  Kept in the order of the NumPy path.
+    ``candidates`` ``(C, 2)``: square pairs from :func:`candidate_pairs`; squares are bodies
+    ``0 .. n_boxes - 1``, tables the rest.  Kept in the candidates' order, then the
+    square-table pairs by square, then table; then all of them reversed.
     """
     return _pairs(centers, bound, np.ascontiguousarray(candidates, dtype=np.int64),
                   int(n_boxes))
@@ -292,11 +285,8 @@ def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
     ``corners`` ``(n_bodies, 4, 2)`` (m, counter-clockwise), ``edge_body`` and
     ``point_body`` ``(P,)`` the ordered pairs of :func:`~wuerfel_cvx.contacts.body_pairs`
     (the second half the first reversed), ``reach`` ``(n_bodies,)`` (m).  The rule and the
-    order are those of :func:`wuerfel_cvx.contacts.narrow_phase`.  Raises
-    ``RuntimeError`` when numba is not installed (check :data:`AVAILABLE`).
+    order are those of the module docstring of :mod:`wuerfel_cvx.contacts`.
     """
-    if not AVAILABLE:
-        raise RuntimeError("numba is not installed: the compiled narrow phase is unavailable")
     return _narrow_phase(np.ascontiguousarray(corners, dtype=np.float64),
                          np.ascontiguousarray(edge_body, dtype=np.int64),
                          np.ascontiguousarray(point_body, dtype=np.int64),

@@ -1,11 +1,11 @@
 """Finding point-versus-edge contacts: a broad phase and a per-pair contact manifold.
 
 Broad phase
-    Square pairs whose bounding circles come within the margin, by their indices: from a
+    Square pairs whose bounding circles come within the margin, by their indices: up to
+    64 squares from a compiled loop over all pairs, beyond from a
     :class:`scipy.spatial.cKDTree` on square centres, sorted (the tree's own order depends
-    on its traversal), or with numba and up to 64 squares from a compiled loop over all
-    pairs (:mod:`wuerfel_cvx.contact_kernel`); squares against tables are checked directly
-    (there are few tables).  Only those pairs are examined further.
+    on its traversal); squares against tables are checked directly (there are few
+    tables).  Only those pairs are examined further.
 
 Manifold rule (one contact normal per body pair, as Box2D's polygon manifolds)
     For each unordered pair of bodies {A, B} (squares and tables) the *reference face*
@@ -44,12 +44,11 @@ Manifold rule (one contact normal per body pair, as Box2D's polygon manifolds)
     measured along the pair's normal, which can be deeper than the distance to the
     nearest face of the other body.
 
-Batching
-    There is no loop over pairs in Python: the broad phase yields an array of
-    ordered (edge body, point body) pairs (each unordered pair twice, the second half
-    reversed), and one array ``(4 corners, 4 edges, pairs)`` of signed distances carries
-    the manifold rule and the margin test for all of them at once.  Contacts come out
-    ordered by ordered pair, then by corner.
+Compiled loops
+    The broad phase yields an array of ordered (edge body, point body) pairs (each
+    unordered pair twice, the second half reversed), and one compiled loop over them
+    (:mod:`wuerfel_cvx.contact_kernel`) applies the manifold rule and the margin test.
+    Contacts come out ordered by ordered pair, then by corner.
 """
 
 from __future__ import annotations
@@ -59,8 +58,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from . import _numba, contact_kernel
-from .geometry import FloatArray, corner_mean
+from . import contact_kernel
+from .geometry import FloatArray
 from .model import IntArray, Model
 
 #: Lengths closer than this (m) count as equal: two faces' separations (a tie between the
@@ -184,31 +183,16 @@ def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntAr
     """Ordered (edge body, point body) pairs that may touch, ``(P, 2)``.
 
     ``reach`` ``(n_bodies,)`` (m) is how far beyond its circumcircle each body must be
-    looked for.  Table-table pairs are never returned.  Order: the square pairs kept
-    from the tree query (by first, then second index), then the square-table pairs, then
-    all of them reversed.
+    looked for.  Table-table pairs are never returned.  Order: the square pairs within
+    reach (by first, then second index), then the square-table pairs, then all of them
+    reversed.  Compiled loops (:mod:`wuerfel_cvx.contact_kernel`) over the candidate
+    square pairs of :func:`~wuerfel_cvx.contact_kernel.candidate_pairs`.
     """
-    n, t = model.n_boxes, model.n_tables
-    corners = all_points.reshape(-1, 4, 2)
-    if _numba.enabled:  # the same pairs in the same order, by compiled loops
-        centers, bound = contact_kernel.bounds(corners, reach)
-        candidates = (contact_kernel.candidate_pairs(centers[:n], 2.0 * float(bound[:n].max()))
-                      if n > 1 else np.zeros((0, 2), dtype=np.int64))
-        return contact_kernel.pairs_within(centers, bound, candidates, n)
-    centers = corner_mean(corners)
-    radii = _lengths(corners - centers[:, None, :]).max(axis=1)
-    bound = radii + reach
-    found = [np.zeros((0, 2), dtype=np.int64)]
-    if n > 1:
-        candidates = contact_kernel.tree_pairs(centers[:n], 2.0 * float(bound[:n].max()))
-        dist = _lengths(centers[candidates[:, 0]] - centers[candidates[:, 1]])
-        found.append(candidates[dist <= bound[candidates[:, 0]] + bound[candidates[:, 1]]])
-    if t:
-        dist = _lengths(centers[:n, None, :] - centers[None, n:, :])
-        close = np.argwhere(dist <= bound[:n, None] + bound[None, n:])
-        found.append(close + np.array([0, n]))
-    pairs = np.concatenate(found).astype(np.int64, copy=False)
-    return np.concatenate([pairs, pairs[:, ::-1]])
+    n = model.n_boxes
+    centers, bound = contact_kernel.bounds(all_points.reshape(-1, 4, 2), reach)
+    candidates = (contact_kernel.candidate_pairs(centers[:n], 2.0 * float(bound[:n].max()))
+                  if n > 1 else np.zeros((0, 2), dtype=np.int64))
+    return contact_kernel.pairs_within(centers, bound, candidates, n)
 
 
 def pair_distances(corners: FloatArray, edge_body: IntArray, point_body: IntArray) -> FloatArray:
@@ -238,82 +222,6 @@ def pair_distances(corners: FloatArray, edge_body: IntArray, point_body: IntArra
     return np.asarray(area / of_edges(length), dtype=np.float64)
 
 
-def face_normals(corners: FloatArray) -> FloatArray:
-    """Unit outward normals ``(n_bodies, 4, 2)`` of faces ``e`` (corner ``e`` to ``e + 1``).
-
-    ``corners`` ``(n_bodies, 4, 2)`` (m), counter-clockwise; the normal of a
-    counter-clockwise edge ``d`` is ``(d_y, -d_x) / |d|``.
-    """
-    edge = np.roll(corners, -1, axis=1) - corners
-    normal = np.stack([edge[..., 1], -edge[..., 0]], axis=-1)
-    return np.asarray(normal / _lengths(edge)[..., None], dtype=np.float64)
-
-
-def reference_sides(distances: FloatArray, face_length: FloatArray
-                    ) -> tuple[IntArray, NDArray[np.bool_]]:
-    """Each ordered pair's best face and whether its edge body holds the reference face.
-
-    ``distances`` ``(4 corners, 4 edges, P)`` (m) as from :func:`pair_distances`, for the
-    pairs of :func:`body_pairs` (the second half the first half reversed);
-    ``face_length`` ``(4 edges, P)`` (m) the edge body's face lengths.  Returns
-    ``best_face`` ``(P,)``, the edge body's face with the largest separation from the
-    point body, and ``is_reference`` ``(P,)``, true for exactly one of each pair's two
-    orders: the one with the larger separation, or, within :data:`TIE_TOLERANCE`, the one
-    with the longer best face (the first half's on equal lengths).
-    """
-    separation = distances.min(axis=0)  # (4 edges, P): the pair's separation along each normal
-    best_face = np.asarray(np.argmax(separation, axis=0), dtype=np.int64)
-    best = separation.max(axis=0)
-    length = np.take_along_axis(face_length, best_face[None, :], axis=0)[0]
-    half = best.shape[0] // 2
-    tie = np.abs(best[:half] - best[half:]) <= TIE_TOLERANCE
-    first_holds = np.where(tie, length[:half] >= length[half:], best[:half] > best[half:])
-    return best_face, np.concatenate([first_holds, ~first_holds])
-
-
-def choose_edges(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
-                 distances: FloatArray, pair_margin: FloatArray
-                 ) -> tuple[IntArray, NDArray[np.bool_], FloatArray]:
-    """Edge index, whether it holds, and how far (m) it projects past the face's end.
-
-    Each is ``(4, P)``, per corner of each pair; the last is < 0 within the face.
-
-    ``corners`` ``(n_bodies, 4, 2)`` (m); ``edge_body``, ``point_body`` ``(P,)`` and
-    ``distances`` ``(4 corners, 4 edges, P)`` as for :func:`reference_sides`;
-    ``pair_margin`` ``(P,)`` (m) the pairs' search margins.  In an order whose edge body
-    holds the reference face, every corner of the point body is offered that face; in
-    the other order, only the reference face's two corners are, to the edge body's
-    incident face.  An offered corner is held if it is within the margin and within the
-    face's extent (module docstring).
-    """
-    n_pairs = edge_body.shape[0]
-    half = n_pairs // 2
-    lengths = _lengths(np.roll(corners, -1, axis=1) - corners)  # (n_bodies, 4) face lengths
-    best_face, is_reference = reference_sides(distances, lengths.T.take(edge_body, axis=1))
-    partner = np.concatenate([np.arange(half, n_pairs), np.arange(half)])
-    reference_face = best_face[partner]  # the point body's face, where it is the reference
-    normals = face_normals(corners)
-    reference_normal = normals[point_body, reference_face]  # (P, 2)
-    facing = np.einsum("pfi,pi->fp", normals[edge_body], reference_normal)  # (4 faces, P)
-    incident = np.asarray(np.argmin(facing, axis=0), dtype=np.int64)
-    face = np.where(is_reference, best_face, incident)  # (P,)
-    corner = np.arange(4)[:, None]
-    offered = is_reference[None, :] | (corner == reference_face[None, :]) | (
-        corner == (reference_face[None, :] + 1) % 4)
-    start = corners[edge_body, face]  # (P, 2)
-    along = corners[edge_body, (face + 1) % 4] - start
-    length = _lengths(along)
-    offset = corners[point_body].transpose(1, 0, 2) - start[None, :, :]  # (4, P, 2)
-    place = (offset[..., 0] * along[:, 0] + offset[..., 1] * along[:, 1]) / length  # (4, P)
-    edge = np.broadcast_to(face, (4, n_pairs)).copy()
-    distance = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]
-    beyond = np.maximum(-place, place - length)  # (4, P) m past the nearer end; < 0 within
-    within = beyond <= TIE_TOLERANCE
-    near_end = ((distance > 0.0) & (beyond <= length)
-                & (np.hypot(beyond, distance) <= pair_margin[None, :]))
-    return edge, offered & (within | near_end) & (distance <= pair_margin[None, :]), beyond
-
-
 def find_contacts(
     model: Model, points: FloatArray, margin: FloatArray | float
 ) -> Contacts:
@@ -329,46 +237,14 @@ def find_contacts(
     return _search(model, points, reach)
 
 
-def clearances(beyond: FloatArray, distance: FloatArray) -> FloatArray:
-    """:attr:`Contacts.clearance` (m) of rows ``beyond`` (m) past their faces' ends.
-
-    ``distance`` (m): the rows' line distances.  0 within :data:`TIE_TOLERANCE` of the face.
-    """
-    return np.where(beyond > TIE_TOLERANCE,
-                    np.sqrt(beyond * beyond + distance * distance) - distance, 0.0)
-
-
-def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
-                 reach: FloatArray
-                 ) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
-    """Held contacts of the ordered pairs: pair index, corner, edge, distance, clearance (m).
-
-    ``corners`` ``(n_bodies, 4, 2)`` (m), ``edge_body`` and ``point_body`` ``(P,)`` as
-    from :func:`body_pairs`, ``reach`` ``(n_bodies,)`` (m).  The manifold rule of the
-    module docstring, batched in NumPy (the reference of
-    :func:`wuerfel_cvx.contact_kernel.narrow_phase`); rows in pair-major order.
-    """
-    distances = pair_distances(corners, edge_body, point_body)
-    pair_margin = reach[edge_body] + reach[point_body]
-    edge, keep, beyond = choose_edges(corners, edge_body, point_body, distances, pair_margin)
-    chosen = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]  # (4 corners, P)
-    pair_index, corner = np.nonzero(keep.T)  # pair-major order
-    distance = chosen[corner, pair_index]
-    return (pair_index, corner, edge[corner, pair_index], distance,
-            clearances(beyond[corner, pair_index], distance))
-
-
 def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
     all_points = model.all_points(points)
     pairs = body_pairs(model, all_points, reach)
     if len(pairs) == 0:
         return Contacts.empty()
     edge_body, point_body = pairs[:, 0], pairs[:, 1]
-    corners = all_points.reshape(-1, 4, 2)
-    # the compiled narrow phase where numba is installed; the same contacts, bit for bit
-    narrow = contact_kernel.narrow_phase if _numba.enabled else narrow_phase
-    pair_index, corner, edge_index, distance, clearance = narrow(corners, edge_body,
-                                                                 point_body, reach)
+    pair_index, corner, edge_index, distance, clearance = contact_kernel.narrow_phase(
+        all_points.reshape(-1, 4, 2), edge_body, point_body, reach)
     w = edge_body[pair_index]
     return Contacts(
         point=4 * point_body[pair_index] + corner,

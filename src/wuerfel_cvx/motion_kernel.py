@@ -1,4 +1,4 @@
-"""The rigid motion's arithmetic as compiled loops (numba), when numba is installed.
+"""The rigid motion's arithmetic as compiled loops (numba).
 
 :func:`wuerfel_cvx.formulations.motion.rigid_step` fits each box's corners and moves it
 rigidly in some forty NumPy operations on arrays of a few boxes, whose per-call overhead
@@ -12,19 +12,19 @@ and a sum over its four corners one after the other (NumPy's reduction over a sh
 a sum over its eight coordinates pairwise (:func:`_pairwise8`, NumPy's unrolled pairwise
 sum of eight contiguous numbers).  The rigid formulation's objective (:func:`rigid_objective`)
 and the offsets its rows turn (:func:`turned_offsets`), and the contact reach of the
-corners' speeds (:func:`body_reach`), are computed likewise.  So they return
-the NumPy path's numbers bit for bit (``tests/test_motion_kernel.py``), which stays the
-reference and runs without numba.
+corners' speeds (:func:`body_reach`), are computed likewise.  So they return the numbers
+of the NumPy code they replaced bit for bit (``tests/reference_kernels.py``, checked by
+``tests/test_kernels.py``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ._numba import AVAILABLE, compiled
+from ._numba import compiled
 from .geometry import FloatArray
 
-__all__ = ["AVAILABLE", "body_reach", "corner_velocities", "fit_motion", "fit_sums", "moved",
+__all__ = ["body_reach", "corner_velocities", "fit_motion", "fit_sums", "moved",
            "rigid_objective", "turned_offsets"]
 
 

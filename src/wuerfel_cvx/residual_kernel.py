@@ -1,4 +1,4 @@
-"""The KKT check's residuals as one compiled loop (numba), when numba is installed.
+"""The KKT check's residuals as one compiled loop (numba).
 
 :func:`wuerfel_cvx.solve.kkt_residuals` recomputes every step's primal, dual and
 complementarity residuals in some forty NumPy operations.  :func:`residuals` here computes
@@ -7,8 +7,8 @@ over the CSR arrays, with the NumPy path's arithmetic in its order: the objectiv
 gradient ``(2 w) (x - t)``, the transposed products summed from 0.0 in entry order (as
 ``np.bincount`` sums), the products summed from 0.0 in each row's order (as scipy's CSR
 product), the largest magnitudes propagating NaN (as ``np.max``) and combined as Python's
-``max`` combines them.  So it returns the NumPy path's numbers bit for bit
-(``tests/test_residual_kernel.py``); other QPs, and runs without numba, take the NumPy path.
+``max`` combines them.  So it returns the numbers of the general NumPy check bit for bit
+(``tests/test_kernels.py``); other QPs take the general NumPy check.
 :func:`data_summary` checks the same QPs' numbers before the solve (finite, and the
 magnitudes their scaling is chosen by) in one pass.
 """
@@ -19,10 +19,10 @@ import math
 
 import numpy as np
 
-from ._numba import AVAILABLE, compiled
+from ._numba import compiled
 from .geometry import FloatArray
 
-__all__ = ["AVAILABLE", "csr_product", "data_summary", "residuals"]
+__all__ = ["csr_product", "data_summary", "residuals"]
 
 
 @compiled

@@ -1,25 +1,25 @@
-"""Row assembly as compiled loops (numba), when numba is installed.
+"""Row assembly as compiled loops (numba).
 
 :func:`wuerfel_cvx.formulations.qp.point_rows` (gradient blocks to a canonical CSR matrix),
 :func:`wuerfel_cvx.formulations.rigid.body_rows` (corner rows times the rigid corner map)
 and the rod and side rows' gradient blocks (:mod:`wuerfel_cvx.formulations.rows`) are
-batches of NumPy operations (stack, repeat, a stable argsort, cumulative sums) whose
-per-call overhead outweighs their arithmetic on the rows of a small scene.  The kernels here
-write the same arrays row by row: entries sorted by column with a stable insertion sort (a
-row has a handful of entries), a cell's entries summed from 0.0 in the order the NumPy path
-sums them.  So they return the very arrays of the NumPy paths, bit for bit
-(``tests/test_row_kernel.py``), which stay the reference and the fallback without numba.
+written here row by row, where batches of NumPy operations (stack, repeat, a stable
+argsort, cumulative sums) cost more in per-call overhead than in arithmetic on the rows of a
+small scene: entries sorted by column with a stable insertion sort (a row has a handful of
+entries), a cell's entries summed from 0.0 in the order the batched NumPy code summed
+them.  So they return the very arrays of the NumPy code they replaced, bit for bit
+(``tests/reference_kernels.py``, checked by ``tests/test_kernels.py``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ._numba import AVAILABLE, compiled
+from ._numba import compiled
 from .geometry import FloatArray
 from .model import IntArray
 
-__all__ = ["AVAILABLE", "body_rows", "point_rows", "rod_blocks", "side_blocks"]
+__all__ = ["body_rows", "point_rows", "rod_blocks", "side_blocks"]
 
 
 @compiled
@@ -110,12 +110,12 @@ def body_rows(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, turned:
 @compiled
 def side_blocks(all_points: FloatArray, point: IntArray, edge_i: IntArray, edge_j: IntArray,
                 n_moving: int) -> tuple[IntArray, FloatArray]:
-    """The blocks of :func:`wuerfel_cvx.formulations.rows.side_blocks`, stacked.
+    """The gradient blocks of :func:`wuerfel_cvx.formulations.rows.side_rows`, stacked.
 
     ``index`` ``(R, 3)`` (edge start, edge end, point; ``-1`` for a point at or beyond
     ``n_moving``, a fixed table corner, when ``n_moving >= 0``) and ``gradient``
-    ``(R, 3, 2)``: the side's gradients divided by the edge length, as the NumPy path
-    computes them (its ``rot90`` differences, the norm's squares summed from 0.0).
+    ``(R, 3, 2)``: the side's gradients divided by the edge length (``rot90``
+    differences, the norm's squares summed from 0.0, as ``np.linalg.norm`` sums them).
     """
     rows = point.shape[0]
     index = np.empty((rows, 3), dtype=np.int64)
@@ -145,11 +145,11 @@ def side_blocks(all_points: FloatArray, point: IntArray, edge_i: IntArray, edge_
 @compiled
 def rod_blocks(points: FloatArray, rods: IntArray, lengths: FloatArray,
                ) -> tuple[IntArray, FloatArray, FloatArray]:
-    """The blocks of :func:`wuerfel_cvx.formulations.rows.rod_blocks`, stacked, and ``C/l``.
+    """The gradient blocks of :func:`wuerfel_cvx.formulations.rows.rod_rows`, stacked, and ``C/l``.
 
     ``index`` ``(R, 2)`` (the rod's two points), ``gradient`` ``(R, 2, 2)`` (``d/l`` and
     ``-d/l``, ``d = p_i - p_j``) and the rods' errors ``(|d|^2 - l^2) / (2 l)``, in the
-    NumPy path's operations (``|d|^2`` summed from 0.0).
+    order of NumPy's operations (``|d|^2`` summed from 0.0).
     """
     count = rods.shape[0]
     index = np.empty((count, 2), dtype=np.int64)

@@ -28,7 +28,7 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
-from . import _numba, residual_kernel
+from . import residual_kernel
 from .backends import Adapter, Answer, NativeData, adapter_for
 from .backends._native import PatternChanged
 from .compiled import (
@@ -108,10 +108,10 @@ def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
                   ineq_dual: FloatArray) -> Residuals:
     """Relative primal, dual and complementarity residuals of ``(x, y, z)``.
 
-    With numba, a QP without a coupling cost and without upper bounds is checked by the
-    compiled loop of :mod:`wuerfel_cvx.residual_kernel`, with the same numbers bit for bit.
+    A QP without a coupling cost and without upper bounds (the common one) is checked by the
+    compiled loop of :mod:`wuerfel_cvx.residual_kernel`, others by the general NumPy code.
     """
-    if _numba.enabled and qp.cost_factor is None and qp.ineq_upper is None:
+    if qp.cost_factor is None and qp.ineq_upper is None:
         eq, ineq = qp.eq_matrix, qp.ineq_matrix
         return Residuals(*residual_kernel.residuals(
             qp.weights, qp.target, x, eq.data, eq.indices, eq.indptr, qp.eq_rhs,
@@ -324,11 +324,11 @@ def _checked_scales(qp: StepQP, step: int, solver: str) -> tuple[float, float]:
     """``qp``'s unknowns and weights scales (:mod:`wuerfel_cvx.scaling`): 1 for ordinary data.
 
     Raises :class:`StepFailure` (status ``invalid_data``) if its data are not all finite: no
-    solver is handed NaN or inf (some would panic or return garbage).  With numba, a QP
-    without upper bounds or coupling cost is checked in one compiled pass
-    (:func:`wuerfel_cvx.residual_kernel.data_summary`), to the same scales.
+    solver is handed NaN or inf (some would panic or return garbage).  A QP without upper
+    bounds or coupling cost is checked in one compiled pass
+    (:func:`wuerfel_cvx.residual_kernel.data_summary`), others by the general NumPy code.
     """
-    if _numba.enabled and qp.ineq_upper is None and qp.cost_factor is None:
+    if qp.ineq_upper is None and qp.cost_factor is None:
         finite, magnitude, largest = residual_kernel.data_summary(
             qp.weights, qp.target, qp.eq_matrix.data, qp.eq_rhs, qp.ineq_matrix.data,
             qp.ineq_rhs)

@@ -21,8 +21,8 @@ from functools import cached_property
 
 import numpy as np
 
-from .. import _numba, motion_kernel
-from ..geometry import FloatArray, corner_mean, rot90
+from .. import motion_kernel
+from ..geometry import FloatArray, corner_mean
 from ..model import IntArray, Model, State
 
 
@@ -91,24 +91,17 @@ def rigid_step(reference: FloatArray, points: FloatArray, velocities: FloatArray
 
     ``reference`` ``(n, 4, 2)``: corners at angle 0 about the origin (m).  The motion is
     that of the module docstring at ``tau = dt`` (s).  Returns corners and their rigid
-    velocities at the new positions.  With numba, the arithmetic runs in the compiled loops
-    of :mod:`wuerfel_cvx.motion_kernel`, with the same numbers bit for bit.
+    velocities at the new positions.  The arithmetic runs in the compiled loops of
+    :mod:`wuerfel_cvx.motion_kernel`; the trigonometry between them stays NumPy's.
     """
-    if _numba.enabled:  # the same numbers; the trigonometry stays NumPy's
-        center, cross_sum, dot_sum = motion_kernel.fit_sums(reference, points)
-        angle = np.arctan2(cross_sum, dot_sum)
-        center_velocity, omega, turned = motion_kernel.fit_motion(
-            reference, np.cos(angle), np.sin(angle), velocities, angle, dt)
-        new_points, new_velocities = np.empty(points.shape), np.empty(points.shape)
-        motion_kernel.moved(reference, np.cos(turned), np.sin(turned), center,
-                            center_velocity, omega, dt, new_points, new_velocities)
-        return State(new_points, new_velocities)
-    center, angle, center_velocity, omega = _fit(reference, points, velocities)
-    new_offsets = _rotated(angle + omega * dt, reference)
-    new_center = center + dt * center_velocity
-    new_points = new_center[:, None, :] + new_offsets
-    new_velocities = center_velocity[:, None, :] + omega[:, None, None] * rot90(new_offsets)
-    return State(new_points.reshape(-1, 2), new_velocities.reshape(-1, 2))
+    center, cross_sum, dot_sum = motion_kernel.fit_sums(reference, points)
+    angle = np.arctan2(cross_sum, dot_sum)
+    center_velocity, omega, turned = motion_kernel.fit_motion(
+        reference, np.cos(angle), np.sin(angle), velocities, angle, dt)
+    new_points, new_velocities = np.empty(points.shape), np.empty(points.shape)
+    motion_kernel.moved(reference, np.cos(turned), np.sin(turned), center, center_velocity,
+                        omega, dt, new_points, new_velocities)
+    return State(new_points, new_velocities)
 
 
 def _fit(reference: FloatArray, points: FloatArray, velocities: FloatArray,

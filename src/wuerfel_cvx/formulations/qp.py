@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
-from .. import _numba, row_kernel
+from .. import row_kernel
 from .._sparse import canonical_csr
 from ..contacts import Contacts
 from ..geometry import FloatArray
@@ -243,28 +243,16 @@ def point_rows(
 
 
 def stacked_point_rows(index: np.ndarray, grad: FloatArray, n_points: int) -> sp.csr_array:
-    """:func:`point_rows` of the blocks stacked: ``index`` ``(R, B)``, ``grad`` ``(R, B, 2)``."""
-    n_rows = index.shape[0]
-    shape = (n_rows, 2 * n_points)
-    if _numba.enabled:  # the same arrays, written by a compiled loop
-        data, indices, indptr, canonical = row_kernel.point_rows(
-            index.astype(np.int64, copy=False), grad.astype(np.float64, copy=False))
-        if canonical:
-            return canonical_csr(data, indices, indptr, shape)
-    moving = index >= 0
-    keep = np.repeat(moving.ravel(), 2)  # entries in (row, block, axis) order
-    cols = (2 * index[:, :, None] + np.arange(2)).reshape(-1)[keep]
-    values = grad.reshape(-1)[keep]
-    per_row = 2 * moving.sum(axis=1, dtype=np.int64)
-    indptr = np.zeros(n_rows + 1, dtype=np.int64)
-    np.cumsum(per_row, out=indptr[1:])
-    key = np.repeat(np.arange(n_rows, dtype=np.int64), per_row) * shape[1] + cols
-    order = np.argsort(key, kind="stable")
-    sorted_key = key[order]
-    if np.any(sorted_key[1:] == sorted_key[:-1]):  # a point twice in a row: let scipy sum
-        matrix = sp.csr_array((values, cols, indptr), shape=shape)
-        matrix.sum_duplicates()
-        return matrix
-    matrix = sp.csr_array((values[order], cols[order], indptr), shape=shape)
-    matrix.has_canonical_format = True  # sorted above, no duplicates
+    """:func:`point_rows` of the blocks stacked: ``index`` ``(R, B)``, ``grad`` ``(R, B, 2)``.
+
+    Written by a compiled loop (:func:`wuerfel_cvx.row_kernel.point_rows`), each row's
+    entries sorted by column, stably; a row holding a point twice is then summed by scipy.
+    """
+    shape = (index.shape[0], 2 * n_points)
+    data, indices, indptr, canonical = row_kernel.point_rows(
+        index.astype(np.int64, copy=False), grad.astype(np.float64, copy=False))
+    if canonical:
+        return canonical_csr(data, indices, indptr, shape)
+    matrix = sp.csr_array((data, indices, indptr), shape=shape)
+    matrix.sum_duplicates()  # a cell's entries in their blocks' order
     return matrix

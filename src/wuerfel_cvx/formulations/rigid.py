@@ -25,11 +25,11 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from .. import _numba, motion_kernel, row_kernel
+from .. import motion_kernel, row_kernel
 from .._sparse import canonical_csr, empty_rows
 from ..contacts import Contacts
 from ..errors import InputError
-from ..geometry import FloatArray, corner_mean, cross, rot90
+from ..geometry import FloatArray, corner_mean, cross
 from ..model import Model, State
 from .base import FrictionSettings, SinglePass
 from .cone import contact_cones
@@ -83,14 +83,12 @@ class RigidFormulation(SinglePass, FrictionSettings):
                           body_rows(corner_rows, points), rhs, contacts, cones=cones)
 
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
-        """The corner velocities ``(4 n, 2)`` (m/s) of the new body velocities."""
-        body = solution.reshape(-1, 3)
-        if _numba.enabled:  # the same numbers, by a compiled loop
-            return motion_kernel.corner_velocities(state.points, body)
-        turned = rot90(_offsets(state.points))  # (n, 4, 2)
-        # u + omega rot90(r), summed as the sparse corner map (8 n x 3 n) times solution would be
-        corners = (0.0 + body[:, None, :2]) + turned * body[:, None, 2:]
-        return np.asarray(corners.reshape(-1, 2), dtype=np.float64)
+        """The corner velocities ``(4 n, 2)`` (m/s) of the new body velocities.
+
+        ``u + omega rot90(r)`` per corner, ``r`` its offset from its box's centroid, by a
+        compiled loop (:func:`wuerfel_cvx.motion_kernel.corner_velocities`).
+        """
+        return motion_kernel.corner_velocities(state.points, solution.reshape(-1, 3))
 
     def advance(self, model: Model, state: State, solution: FloatArray, dt: float) -> State:
         """Move each square rigidly with its new centre and angular velocity."""
@@ -102,18 +100,12 @@ def rigid_objective(model: Model, state: State, dt: float) -> tuple[FloatArray, 
     """Weights ``(M, M, I)`` and target ``(u0 + dt g, omega0)`` per box, flat ``(3 n,)``.
 
     ``I`` from the exact squares, not the current corners: constant weights keep the
-    compiled-problem cache's key constant.  With numba, a compiled loop
-    (:func:`wuerfel_cvx.motion_kernel.rigid_objective`) gives the same numbers bit for bit.
+    compiled-problem cache's key constant.  ``u0`` and ``omega0`` as :func:`body_velocities`
+    gives them; by a compiled loop (:func:`wuerfel_cvx.motion_kernel.rigid_objective`).
     """
-    masses = model.point_masses.reshape(-1, 4)
-    if _numba.enabled:
-        return motion_kernel.rigid_objective(state.points, state.velocities, masses,
-                                             model.reference_corners, dt * model.gravity)
-    inertia = np.sum(masses * np.sum(model.reference_corners**2, axis=2), axis=1)
-    centre_velocity, spin = body_velocities(state.points, state.velocities, masses)
-    weights = np.column_stack([masses.sum(axis=1), masses.sum(axis=1), inertia]).ravel()
-    target = np.column_stack([centre_velocity + dt * model.gravity, spin]).ravel()
-    return weights, target
+    return motion_kernel.rigid_objective(state.points, state.velocities,
+                                         model.point_masses.reshape(-1, 4),
+                                         model.reference_corners, dt * model.gravity)
 
 
 def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
@@ -127,44 +119,15 @@ def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
     for bit those of the sparse product with the ``(8 n, 3 n)`` corner map.  Unlike that
     product, no entry that cancels to 0.0 is dropped (a contact normal through a square's
     centre has no torque): the sparsity pattern, and with it the compiled-problem cache's
-    key, stays the same from step to step.
+    key, stays the same from step to step.  Written by compiled loops
+    (:func:`wuerfel_cvx.row_kernel.body_rows`).
     """
     n_rows = corner_rows.shape[0]
     n_cols = 3 * (corner_rows.shape[1] // 8)
-    if _numba.enabled:  # the same arrays, written by compiled loops
-        return canonical_csr(*row_kernel.body_rows(corner_rows.data, corner_rows.indices,
-                                                   corner_rows.indptr,
-                                                   motion_kernel.turned_offsets(points)),
-                             shape=(n_rows, n_cols))
-    turned = rot90(_offsets(points)).reshape(-1)  # per corner coordinate (4 n * 2,)
-    row = np.repeat(np.arange(n_rows, dtype=np.int64), np.diff(corner_rows.indptr))
-    col = corner_rows.indices.astype(np.int64)
-    value = corner_rows.data
-    body, axis = col // 8, col % 2
-    out_row = np.concatenate([row, row])
-    out_col = np.concatenate([3 * body + axis, 3 * body + 2])
-    out_value = np.concatenate([value * 1.0, value * turned[col]])
-    # by (row, column); the sort is stable, so a cell's entries stay in corner-column order
-    # (each half of the concatenation is in the row-major order of corner_rows)
-    unsorted_key = out_row * n_cols + out_col
-    order = np.argsort(unsorted_key, kind="stable")
-    key = unsorted_key[order]
-    first = np.ones(key.size, dtype=bool)
-    first[1:] = key[1:] != key[:-1]
-    cell = np.cumsum(first) - 1
-    start = np.flatnonzero(first)
-    position = np.arange(key.size) - start[cell]
-    sums = np.zeros(start.size)
-    ordered = out_value[order]
-    for k in range(int(position.max(initial=-1)) + 1):
-        at = position == k
-        sums[cell[at]] += ordered[at]
-    indptr = np.zeros(n_rows + 1, dtype=np.int32)
-    np.cumsum(np.bincount(key[start] // n_cols, minlength=n_rows), out=indptr[1:])
-    columns = (key[start] % n_cols).astype(np.int32)
-    matrix = sp.csr_array((sums, columns, indptr), shape=(n_rows, n_cols))
-    matrix.has_canonical_format = True  # sorted by column, one entry per cell
-    return matrix
+    return canonical_csr(*row_kernel.body_rows(corner_rows.data, corner_rows.indices,
+                                               corner_rows.indptr,
+                                               motion_kernel.turned_offsets(points)),
+                         shape=(n_rows, n_cols))
 
 
 def body_velocities(points: FloatArray, velocities: FloatArray,

@@ -1,7 +1,9 @@
 """Constraint rows shared by the formulations: rods, sides and held table corners.
 
-Each function returns gradient blocks for :func:`~.qp.point_rows`; a point's column
-index is its row in the all-points array, or ``-1`` if it is a fixed constant.
+The rod and side rows come as sparse matrices, their gradient blocks computed by compiled
+loops (:mod:`wuerfel_cvx.row_kernel`); the seed's side rows and the held table corners as
+gradient blocks for :func:`~.qp.point_rows`, where a point's column index is its row in
+the all-points array, or ``-1`` if it is a fixed constant.
 Rows are scaled to be dimensionally uniform: rod rows are divided by the rod length
 and side rows by the edge length, so an equality residual is a velocity (m/s) in
 the velocity form and an acceleration (m/s^2) in the acceleration form.
@@ -12,11 +14,11 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .. import _numba, row_kernel
+from .. import row_kernel
 from ..contacts import Contacts
-from ..geometry import FloatArray, edge_parameter, rot90, side_gradients
+from ..geometry import FloatArray, edge_parameter, rot90
 from ..model import IntArray, Model
-from .qp import point_rows, stacked_point_rows
+from .qp import stacked_point_rows
 
 
 def unknown_index(model: Model, index: IntArray) -> IntArray:
@@ -39,61 +41,28 @@ def unknown_masses(model: Model) -> FloatArray:
     return np.repeat(masses, 2)
 
 
-def rod_blocks(model: Model, points: FloatArray) -> tuple[list[tuple[IntArray, FloatArray]],
-                                                          FloatArray]:
-    """Rod gradient blocks ``(d/l, -d/l)`` with ``d = p_i - p_j``, and ``C/l`` per rod.
-
-    ``C = (|p_i - p_j|^2 - l^2) / 2`` (m^2) is the rod's position error; ``dC/dp_i = d``.
-    """
-    i, j = model.rods[:, 0], model.rods[:, 1]
-    d = points[i] - points[j]
-    length = model.rod_lengths[:, None]
-    error = 0.5 * (np.sum(d * d, axis=1) - model.rod_lengths**2) / model.rod_lengths
-    return [(i, d / length), (j, -d / length)], error
-
-
 def rod_rows(model: Model, points: FloatArray) -> tuple[sp.csr_array, FloatArray]:
-    """The rows of :func:`rod_blocks` (one per rod) in the unknown points' columns, and ``C/l``.
+    """Rod rows ``(d/l, -d/l)``, ``d = p_i - p_j``, in the unknown points' columns, and ``C/l``.
 
-    With numba the blocks are computed by a compiled loop
-    (:func:`wuerfel_cvx.row_kernel.rod_blocks`), with the same numbers bit for bit.
+    One row per rod; ``C = (|p_i - p_j|^2 - l^2) / 2`` (m^2) is the rod's position error,
+    ``dC/dp_i = d``.  The blocks by a compiled loop (:func:`wuerfel_cvx.row_kernel.rod_blocks`).
     """
-    n_unknown = n_unknown_points(model)
-    if not _numba.enabled:
-        blocks, error = rod_blocks(model, points)
-        return point_rows(len(error), n_unknown, blocks), error
     index, gradient, error = row_kernel.rod_blocks(points, model.rods, model.rod_lengths)
-    return stacked_point_rows(index, gradient, n_unknown), error
-
-
-def side_blocks(all_points: FloatArray, contacts: Contacts,
-                model: Model) -> list[tuple[IntArray, FloatArray]]:
-    """Exact gradient of ``A / |p_j - p_i|`` blocks for each contact (edge length fixed).
-
-    dA/dp_i = rot90(p_k - p_j), dA/dp_j = rot90(p_i - p_k), dA/dp_k = rot90(p_j - p_i).
-    """
-    p_i, p_j, p_k = (all_points.take(index, axis=0)
-                     for index in (contacts.edge_i, contacts.edge_j, contacts.point))
-    g_i, g_j, g_k = side_gradients(p_i, p_j, p_k)
-    scale = 1.0 / np.linalg.norm(g_k, axis=1)[:, None]  # |g_k| = |p_j - p_i| (m)
-    return [(unknown_index(model, contacts.edge_i), g_i * scale),
-            (unknown_index(model, contacts.edge_j), g_j * scale),
-            (unknown_index(model, contacts.point), g_k * scale)]
+    return stacked_point_rows(index, gradient, n_unknown_points(model)), error
 
 
 def side_rows(all_points: FloatArray, contacts: Contacts, model: Model) -> sp.csr_array:
-    """The rows of :func:`side_blocks` (one per contact) in the unknown points' columns.
+    """Side rows, one per contact, in the unknown points' columns.
 
-    With numba the blocks are computed by a compiled loop
-    (:func:`wuerfel_cvx.row_kernel.side_blocks`), with the same numbers bit for bit.
+    The exact gradient of ``A / |p_j - p_i|`` (edge length fixed): ``dA/dp_i = rot90(p_k -
+    p_j)``, ``dA/dp_j = rot90(p_i - p_k)``, ``dA/dp_k = rot90(p_j - p_i)``; fixed table
+    corners have no column.  The blocks by a compiled loop
+    (:func:`wuerfel_cvx.row_kernel.side_blocks`).
     """
-    n_unknown = n_unknown_points(model)
-    if not _numba.enabled:
-        return point_rows(len(contacts), n_unknown, side_blocks(all_points, contacts, model))
     n_moving = model.n_points if model.table_mass is None else -1
     index, gradient = row_kernel.side_blocks(all_points, contacts.point, contacts.edge_i,
                                              contacts.edge_j, n_moving)
-    return stacked_point_rows(index, gradient, n_unknown)
+    return stacked_point_rows(index, gradient, n_unknown_points(model))
 
 
 def seed_side_blocks(all_points: FloatArray, contacts: Contacts,

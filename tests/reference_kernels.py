@@ -1,0 +1,317 @@
+"""The step path's NumPy versions, kept as references for its compiled kernels.
+
+Each function here is the batched NumPy code a stage ran before the compiled kernel
+replaced it (``src/wuerfel_cvx/*_kernel.py``); the product runs the kernels only, and
+``tests/test_kernels.py`` checks them against these, bit for bit.  The KKT check keeps its
+general NumPy code in the product (QPs with a coupling cost or upper bounds):
+:func:`general_route` hands it a QP the kernel would check.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from wuerfel_cvx import contact_kernel
+from wuerfel_cvx.contacts import TIE_TOLERANCE, Contacts, pair_distances
+from wuerfel_cvx.formulations.motion import _fit, _rotated
+from wuerfel_cvx.formulations.qp import StepQP
+from wuerfel_cvx.formulations.rigid import body_velocities
+from wuerfel_cvx.formulations.rows import n_unknown_points, unknown_index
+from wuerfel_cvx.geometry import FloatArray, corner_mean, rot90, side_gradients
+from wuerfel_cvx.model import IntArray, Model, State
+
+# --------------------------------------------------------------------------------------
+# Contact search (wuerfel_cvx.contacts; compiled: wuerfel_cvx.contact_kernel)
+# --------------------------------------------------------------------------------------
+
+
+def _lengths(vectors: FloatArray) -> FloatArray:
+    """Euclidean lengths (m) over the last axis, as ``np.linalg.norm`` computes them."""
+    x, y = vectors[..., 0], vectors[..., 1]
+    return np.asarray(np.sqrt(x * x + y * y), dtype=np.float64)
+
+
+def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntArray:
+    """Ordered (edge body, point body) pairs that may touch, ``(P, 2)``.
+
+    The candidate square pairs from the tree query, sorted (:func:`tree_pairs`), kept
+    within reach, then the square-table pairs, then all of them reversed.
+    """
+    n, t = model.n_boxes, model.n_tables
+    corners = all_points.reshape(-1, 4, 2)
+    centers = corner_mean(corners)
+    radii = _lengths(corners - centers[:, None, :]).max(axis=1)
+    bound = radii + reach
+    found = [np.zeros((0, 2), dtype=np.int64)]
+    if n > 1:
+        candidates = contact_kernel.tree_pairs(centers[:n], 2.0 * float(bound[:n].max()))
+        dist = _lengths(centers[candidates[:, 0]] - centers[candidates[:, 1]])
+        found.append(candidates[dist <= bound[candidates[:, 0]] + bound[candidates[:, 1]]])
+    if t:
+        dist = _lengths(centers[:n, None, :] - centers[None, n:, :])
+        close = np.argwhere(dist <= bound[:n, None] + bound[None, n:])
+        found.append(close + np.array([0, n]))
+    pairs = np.concatenate(found).astype(np.int64, copy=False)
+    return np.concatenate([pairs, pairs[:, ::-1]])
+
+
+def face_normals(corners: FloatArray) -> FloatArray:
+    """Unit outward normals ``(n_bodies, 4, 2)`` of faces ``e`` (corner ``e`` to ``e + 1``)."""
+    edge = np.roll(corners, -1, axis=1) - corners
+    normal = np.stack([edge[..., 1], -edge[..., 0]], axis=-1)
+    return np.asarray(normal / _lengths(edge)[..., None], dtype=np.float64)
+
+
+def reference_sides(distances: FloatArray, face_length: FloatArray
+                    ) -> tuple[IntArray, NDArray[np.bool_]]:
+    """Each ordered pair's best face and whether its edge body holds the reference face.
+
+    ``distances`` ``(4 corners, 4 edges, P)`` (m) from ``pair_distances``; ``face_length``
+    ``(4 edges, P)`` (m) the edge body's face lengths.  The reference order has the larger
+    separation, or, within ``TIE_TOLERANCE``, the longer best face (the first half's on
+    equal lengths).
+    """
+    separation = distances.min(axis=0)  # (4 edges, P): the pair's separation along each normal
+    best_face = np.asarray(np.argmax(separation, axis=0), dtype=np.int64)
+    best = separation.max(axis=0)
+    length = np.take_along_axis(face_length, best_face[None, :], axis=0)[0]
+    half = best.shape[0] // 2
+    tie = np.abs(best[:half] - best[half:]) <= TIE_TOLERANCE
+    first_holds = np.where(tie, length[:half] >= length[half:], best[:half] > best[half:])
+    return best_face, np.concatenate([first_holds, ~first_holds])
+
+
+def choose_edges(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
+                 distances: FloatArray, pair_margin: FloatArray
+                 ) -> tuple[IntArray, NDArray[np.bool_], FloatArray]:
+    """Edge index, whether it holds, and how far (m) it projects past the face's end.
+
+    Each ``(4, P)``, per corner of each pair; the manifold rule of ``wuerfel_cvx.contacts``.
+    """
+    n_pairs = edge_body.shape[0]
+    half = n_pairs // 2
+    lengths = _lengths(np.roll(corners, -1, axis=1) - corners)  # (n_bodies, 4) face lengths
+    best_face, is_reference = reference_sides(distances, lengths.T.take(edge_body, axis=1))
+    partner = np.concatenate([np.arange(half, n_pairs), np.arange(half)])
+    reference_face = best_face[partner]  # the point body's face, where it is the reference
+    normals = face_normals(corners)
+    reference_normal = normals[point_body, reference_face]  # (P, 2)
+    facing = np.einsum("pfi,pi->fp", normals[edge_body], reference_normal)  # (4 faces, P)
+    incident = np.asarray(np.argmin(facing, axis=0), dtype=np.int64)
+    face = np.where(is_reference, best_face, incident)  # (P,)
+    corner = np.arange(4)[:, None]
+    offered = is_reference[None, :] | (corner == reference_face[None, :]) | (
+        corner == (reference_face[None, :] + 1) % 4)
+    start = corners[edge_body, face]  # (P, 2)
+    along = corners[edge_body, (face + 1) % 4] - start
+    length = _lengths(along)
+    offset = corners[point_body].transpose(1, 0, 2) - start[None, :, :]  # (4, P, 2)
+    place = (offset[..., 0] * along[:, 0] + offset[..., 1] * along[:, 1]) / length  # (4, P)
+    edge = np.broadcast_to(face, (4, n_pairs)).copy()
+    distance = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]
+    beyond = np.maximum(-place, place - length)  # (4, P) m past the nearer end; < 0 within
+    within = beyond <= TIE_TOLERANCE
+    near_end = ((distance > 0.0) & (beyond <= length)
+                & (np.hypot(beyond, distance) <= pair_margin[None, :]))
+    return edge, offered & (within | near_end) & (distance <= pair_margin[None, :]), beyond
+
+
+def clearances(beyond: FloatArray, distance: FloatArray) -> FloatArray:
+    """``Contacts.clearance`` (m) of rows ``beyond`` (m) past their faces' ends."""
+    return np.where(beyond > TIE_TOLERANCE,
+                    np.sqrt(beyond * beyond + distance * distance) - distance, 0.0)
+
+
+def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
+                 reach: FloatArray
+                 ) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
+    """Held contacts of the ordered pairs: pair index, corner, edge, distance, clearance (m).
+
+    Rows in pair-major order, as ``contact_kernel.narrow_phase`` returns them.
+    """
+    distances = pair_distances(corners, edge_body, point_body)
+    pair_margin = reach[edge_body] + reach[point_body]
+    edge, keep, beyond = choose_edges(corners, edge_body, point_body, distances, pair_margin)
+    chosen = np.take_along_axis(distances, edge[:, None, :], axis=1)[:, 0, :]  # (4 corners, P)
+    pair_index, corner = np.nonzero(keep.T)  # pair-major order
+    distance = chosen[corner, pair_index]
+    return (pair_index, corner, edge[corner, pair_index], distance,
+            clearances(beyond[corner, pair_index], distance))
+
+
+# --------------------------------------------------------------------------------------
+# Rows (wuerfel_cvx.formulations.qp, .rows, .rigid; compiled: wuerfel_cvx.row_kernel)
+# --------------------------------------------------------------------------------------
+
+
+def stacked_point_rows(index: np.ndarray, grad: FloatArray, n_points: int) -> sp.csr_array:
+    """``qp.stacked_point_rows``: ``index`` ``(R, B)``, ``grad`` ``(R, B, 2)`` to CSR rows.
+
+    Each row's entries sorted by column with a stable argsort; a point twice in a row:
+    summed by scipy.
+    """
+    n_rows = index.shape[0]
+    shape = (n_rows, 2 * n_points)
+    moving = index >= 0
+    keep = np.repeat(moving.ravel(), 2)  # entries in (row, block, axis) order
+    cols = (2 * index[:, :, None] + np.arange(2)).reshape(-1)[keep]
+    values = grad.reshape(-1)[keep]
+    per_row = 2 * moving.sum(axis=1, dtype=np.int64)
+    indptr = np.zeros(n_rows + 1, dtype=np.int64)
+    np.cumsum(per_row, out=indptr[1:])
+    key = np.repeat(np.arange(n_rows, dtype=np.int64), per_row) * shape[1] + cols
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    if np.any(sorted_key[1:] == sorted_key[:-1]):  # a point twice in a row: let scipy sum
+        matrix = sp.csr_array((values, cols, indptr), shape=shape)
+        matrix.sum_duplicates()
+        return matrix
+    matrix = sp.csr_array((values[order], cols[order], indptr), shape=shape)
+    matrix.has_canonical_format = True  # sorted above, no duplicates
+    return matrix
+
+
+def point_rows(n_rows: int, n_points: int,
+               blocks: list[tuple[np.ndarray, FloatArray]]) -> sp.csr_array:
+    """``qp.point_rows`` of per-point gradient blocks, by :func:`stacked_point_rows`."""
+    if not blocks:
+        return sp.csr_array((n_rows, 2 * n_points))
+    index = np.stack([np.asarray(point) for point, _ in blocks], axis=1)  # (R, B)
+    grad = np.stack([gradient for _, gradient in blocks], axis=1)  # (R, B, 2)
+    return stacked_point_rows(index, grad, n_points)
+
+
+def rod_blocks(model: Model, points: FloatArray) -> tuple[list[tuple[IntArray, FloatArray]],
+                                                          FloatArray]:
+    """Rod gradient blocks ``(d/l, -d/l)`` with ``d = p_i - p_j``, and ``C/l`` per rod."""
+    i, j = model.rods[:, 0], model.rods[:, 1]
+    d = points[i] - points[j]
+    length = model.rod_lengths[:, None]
+    error = 0.5 * (np.sum(d * d, axis=1) - model.rod_lengths**2) / model.rod_lengths
+    return [(i, d / length), (j, -d / length)], error
+
+
+def rod_rows(model: Model, points: FloatArray) -> tuple[sp.csr_array, FloatArray]:
+    """``rows.rod_rows``: the rows of :func:`rod_blocks`, and ``C/l``."""
+    blocks, error = rod_blocks(model, points)
+    return point_rows(len(error), n_unknown_points(model), blocks), error
+
+
+def side_blocks(all_points: FloatArray, contacts: Contacts,
+                model: Model) -> list[tuple[IntArray, FloatArray]]:
+    """Exact gradient of ``A / |p_j - p_i|`` blocks for each contact (edge length fixed)."""
+    p_i, p_j, p_k = (all_points.take(index, axis=0)
+                     for index in (contacts.edge_i, contacts.edge_j, contacts.point))
+    g_i, g_j, g_k = side_gradients(p_i, p_j, p_k)
+    scale = 1.0 / np.linalg.norm(g_k, axis=1)[:, None]  # |g_k| = |p_j - p_i| (m)
+    return [(unknown_index(model, contacts.edge_i), g_i * scale),
+            (unknown_index(model, contacts.edge_j), g_j * scale),
+            (unknown_index(model, contacts.point), g_k * scale)]
+
+
+def side_rows(all_points: FloatArray, contacts: Contacts, model: Model) -> sp.csr_array:
+    """``rows.side_rows``: the rows of :func:`side_blocks`."""
+    return point_rows(len(contacts), n_unknown_points(model),
+                      side_blocks(all_points, contacts, model))
+
+
+def _offsets(points: FloatArray) -> FloatArray:
+    corners = points.reshape(-1, 4, 2)
+    return np.asarray(corners - corner_mean(corners)[:, None], dtype=np.float64)
+
+
+def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
+    """``rigid.body_rows``: canonical corner rows times the corner map, cells summed in order."""
+    n_rows = corner_rows.shape[0]
+    n_cols = 3 * (corner_rows.shape[1] // 8)
+    turned = rot90(_offsets(points)).reshape(-1)  # per corner coordinate (4 n * 2,)
+    row = np.repeat(np.arange(n_rows, dtype=np.int64), np.diff(corner_rows.indptr))
+    col = corner_rows.indices.astype(np.int64)
+    value = corner_rows.data
+    body, axis = col // 8, col % 2
+    out_row = np.concatenate([row, row])
+    out_col = np.concatenate([3 * body + axis, 3 * body + 2])
+    out_value = np.concatenate([value * 1.0, value * turned[col]])
+    # by (row, column); the sort is stable, so a cell's entries stay in corner-column order
+    # (each half of the concatenation is in the row-major order of corner_rows)
+    unsorted_key = out_row * n_cols + out_col
+    order = np.argsort(unsorted_key, kind="stable")
+    key = unsorted_key[order]
+    first = np.ones(key.size, dtype=bool)
+    first[1:] = key[1:] != key[:-1]
+    cell = np.cumsum(first) - 1
+    start = np.flatnonzero(first)
+    position = np.arange(key.size) - start[cell]
+    sums = np.zeros(start.size)
+    ordered = out_value[order]
+    for k in range(int(position.max(initial=-1)) + 1):
+        at = position == k
+        sums[cell[at]] += ordered[at]
+    indptr = np.zeros(n_rows + 1, dtype=np.int32)
+    np.cumsum(np.bincount(key[start] // n_cols, minlength=n_rows), out=indptr[1:])
+    columns = (key[start] % n_cols).astype(np.int32)
+    matrix = sp.csr_array((sums, columns, indptr), shape=(n_rows, n_cols))
+    matrix.has_canonical_format = True  # sorted by column, one entry per cell
+    return matrix
+
+
+# --------------------------------------------------------------------------------------
+# Rigid motion (wuerfel_cvx.formulations.motion, .rigid, .velocity;
+# compiled: wuerfel_cvx.motion_kernel)
+# --------------------------------------------------------------------------------------
+
+
+def rigid_step(reference: FloatArray, points: FloatArray, velocities: FloatArray,
+               dt: float) -> State:
+    """``motion.rigid_step``: each box moved rigidly by its fitted motion over ``dt`` (s)."""
+    center, angle, center_velocity, omega = _fit(reference, points, velocities)
+    new_offsets = _rotated(angle + omega * dt, reference)
+    new_center = center + dt * center_velocity
+    new_points = new_center[:, None, :] + new_offsets
+    new_velocities = center_velocity[:, None, :] + omega[:, None, None] * rot90(new_offsets)
+    return State(new_points.reshape(-1, 2), new_velocities.reshape(-1, 2))
+
+
+def corner_velocities(state: State, solution: FloatArray) -> FloatArray:
+    """``RigidFormulation.new_velocities``: ``u + omega rot90(r)`` per corner ``(4 n, 2)``."""
+    body = solution.reshape(-1, 3)
+    turned = rot90(_offsets(state.points))  # (n, 4, 2)
+    # u + omega rot90(r), summed as the sparse corner map (8 n x 3 n) times solution would be
+    corners = (0.0 + body[:, None, :2]) + turned * body[:, None, 2:]
+    return np.asarray(corners.reshape(-1, 2), dtype=np.float64)
+
+
+def rigid_objective(model: Model, state: State, dt: float) -> tuple[FloatArray, FloatArray]:
+    """``rigid.rigid_objective``: weights ``(M, M, I)`` and target ``(u0 + dt g, omega0)``."""
+    masses = model.point_masses.reshape(-1, 4)
+    inertia = np.sum(masses * np.sum(model.reference_corners**2, axis=2), axis=1)
+    centre_velocity, spin = body_velocities(state.points, state.velocities, masses)
+    weights = np.column_stack([masses.sum(axis=1), masses.sum(axis=1), inertia]).ravel()
+    target = np.column_stack([centre_velocity + dt * model.gravity, spin]).ravel()
+    return weights, target
+
+
+def body_reach(model: Model, state: State, dt: float, contact_margin: float) -> FloatArray:
+    """``VelocityFormulation.body_reach``: half the margin plus ``dt`` (fastest corner + dt g)."""
+    speeds = np.linalg.norm(state.velocities, axis=1).reshape(-1, 4).max(axis=1)
+    reach_squares = 0.5 * contact_margin + dt * (speeds + dt * np.linalg.norm(model.gravity))
+    return np.concatenate([reach_squares, np.full(model.n_tables, 0.5 * contact_margin)])
+
+
+# --------------------------------------------------------------------------------------
+# KKT check (wuerfel_cvx.solve; compiled: wuerfel_cvx.residual_kernel)
+# --------------------------------------------------------------------------------------
+
+
+def general_route(qp: StepQP) -> StepQP:
+    """``qp`` with every upper bound ``+inf``: the same QP, checked by the general NumPy code.
+
+    ``solve.kkt_residuals`` and ``solve._checked_scales`` give a QP with ``ineq_upper``
+    (even one without a finite entry) to their general NumPy code, and one without to the
+    compiled loop.
+    """
+    return dataclasses.replace(qp, ineq_upper=np.full(qp.n_inequalities, np.inf))

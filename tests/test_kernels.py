@@ -1,0 +1,346 @@
+"""The compiled kernels give their NumPy references' results bit for bit, stage by stage.
+
+The product runs the compiled kernels only (``src/wuerfel_cvx/*_kernel.py``); the batched
+NumPy code they replaced is kept in ``tests/reference_kernels.py``.  One test per stage
+compares the two on the same inputs: the states of ``tests/test_contacts_fast.py``
+(library scenes, random overlapping squares of random size and angle against random
+tables, exactly aligned grids with corner-on-corner ties), random boxes of every size and
+angle, and the step QPs of short runs.  The golden digests (``tests/test_determinism.py``)
+pin whole runs.  The warm starts' row ids are compared in ``tests/test_warm_start.py``;
+the dense rows against scipy in ``tests/test_dense_forms.py``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import reference_kernels as reference
+from test_contacts_fast import (
+    LIBRARY,
+    grid_points,
+    library_states,
+    margins,
+    random_model,
+    random_points,
+)
+from wuerfel_cvx import contact_kernel, contacts, residual_kernel, simulate
+from wuerfel_cvx.contacts import find_contacts
+from wuerfel_cvx.errors import StepFailure
+from wuerfel_cvx.formulations.motion import rigid_step
+from wuerfel_cvx.formulations.qp import StepQP, point_rows
+from wuerfel_cvx.formulations.rigid import RigidFormulation, body_rows, rigid_objective
+from wuerfel_cvx.formulations.rows import (
+    held_table_blocks,
+    n_unknown_points,
+    rod_rows,
+    seed_side_blocks,
+    side_rows,
+)
+from wuerfel_cvx.formulations.velocity import VelocityFormulation
+from wuerfel_cvx.geometry import FloatArray, rectangle_corners
+from wuerfel_cvx.model import Model, State
+from wuerfel_cvx.scaling import data_magnitude
+from wuerfel_cvx.solve import Residuals, StepSolution, _checked_scales, kkt_residuals
+
+pytestmark = pytest.mark.integration
+
+DT = 0.01
+
+
+def assert_same_bits(compiled: np.ndarray, expected: np.ndarray) -> None:
+    compiled, expected = np.asarray(compiled), np.asarray(expected)
+    assert compiled.shape == expected.shape and compiled.dtype == expected.dtype
+    assert compiled.tobytes() == expected.tobytes()  # signed zeros included
+
+
+def assert_same_matrix(compiled: sp.csr_array, expected: sp.csr_array) -> None:
+    """The same canonical CSR matrix: shape, index arrays and their dtypes, values."""
+    assert compiled.shape == expected.shape
+    assert compiled.has_canonical_format and expected.has_canonical_format
+    for name in ("indptr", "indices", "data"):
+        assert_same_bits(getattr(compiled, name), getattr(expected, name))
+
+
+# --------------------------------------------------------------------------------------
+# Contact search
+# --------------------------------------------------------------------------------------
+
+
+def contact_states(kind: str, key: str | int
+                   ) -> tuple[Model, tuple[State, ...], np.random.Generator]:
+    if kind == "library":
+        model, states = library_states(str(key))
+        return model, states, np.random.default_rng(5)
+    seed = int(key)
+    if kind == "random":  # overlapping squares of random size and angle, random tables
+        rng = np.random.default_rng(1000 + seed)
+        n_squares = int(rng.integers(2, 60))
+        model = random_model(n_squares, rng, n_tables=seed % 4)
+        points = random_points(n_squares, rng, float(rng.choice([1.0, 3.0, 8.0])))
+        return model, (State(points, rng.normal(size=points.shape)),), rng
+    rng = np.random.default_rng(2000 + seed)  # exactly aligned
+    n_squares = int(rng.integers(2, 30))
+    model = random_model(n_squares, rng, n_tables=0)
+    points = grid_points(n_squares, rng)
+    return model, (State(points, np.zeros_like(points)),), rng
+
+
+def same_contact_search(model: Model, state: State, rng: np.random.Generator) -> int:
+    """Both phases on ``state`` for every margin of ``margins``; the contacts found."""
+    found = 0
+    all_points = model.all_points(state.points)
+    corners = all_points.reshape(-1, 4, 2)
+    for margin in margins(model, state, rng):
+        reach = np.broadcast_to(np.asarray(margin, dtype=np.float64), (model.n_bodies,))
+        pairs = contacts.body_pairs(model, all_points, reach)
+        assert_same_bits(pairs, reference.body_pairs(model, all_points, reach))
+        if len(pairs) == 0:
+            continue
+        expected = reference.narrow_phase(corners, pairs[:, 0], pairs[:, 1], reach)
+        compiled = contact_kernel.narrow_phase(corners, pairs[:, 0], pairs[:, 1], reach)
+        for ours, theirs in zip(compiled, expected, strict=True):
+            assert_same_bits(ours, theirs)  # same rows, same order, same bits
+        found += len(expected[0])
+    return found
+
+
+CONTACT_CASES = ([("library", name) for name in sorted(LIBRARY)]
+                 + [("random", seed) for seed in range(40)]
+                 + [("aligned", seed) for seed in range(12)])
+
+
+@pytest.mark.parametrize(("kind", "key"), CONTACT_CASES)
+def test_the_contact_search_is_the_references(kind: str, key: str | int) -> None:
+    model, states, rng = contact_states(kind, key)
+    assert sum(same_contact_search(model, state, rng) for state in states) > 0
+
+
+def test_the_all_pairs_loop_lists_the_sorted_trees_pairs() -> None:
+    """Up to ``ALL_PAIRS_LIMIT`` centres the compiled loop lists the tree's pairs, sorted.
+
+    Random clouds at many scales and radii (from none to all pairs within reach), on both
+    sides of the limit, and integer grids whose distances tie the radius exactly (the tree
+    counts ``d == r`` in).
+    """
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(7)
+    limit = contact_kernel.ALL_PAIRS_LIMIT
+    clouds = [rng.normal(size=(int(rng.integers(2, limit + 20)), 2)) * rng.uniform(0.01, 10.0)
+              for _ in range(300)]
+    grid = np.array([[x, y] for x in range(8) for y in range(8)], dtype=np.float64)
+    clouds += [grid, grid[:5], grid * 0.5]
+    for centers in clouds:
+        for radius in (0.0, 0.5, 1.0, 2.0, float(rng.uniform(0.0, 8.0)), 1e3):
+            tree = cKDTree(centers).query_pairs(r=radius, output_type="set")
+            expected = contact_kernel.tree_pairs(centers, radius)
+            assert {tuple(pair) for pair in expected.tolist()} == tree  # the tree's pairs
+            assert np.array_equal(expected, np.array(sorted(tree), dtype=np.int64
+                                                     ).reshape(-1, 2))  # sorted
+            assert_same_bits(contact_kernel.candidate_pairs(centers, radius), expected)
+
+
+# --------------------------------------------------------------------------------------
+# Rows
+# --------------------------------------------------------------------------------------
+
+
+def same_rows(model: Model, state: State) -> int:
+    """Every block kind's rows, the rod and side rows and the rigid body rows; the contacts."""
+    contacts_found = find_contacts(model, state.points,
+                                   VelocityFormulation().body_reach(model, state, DT))
+    all_points = model.all_points(state.points)
+    n_unknown = n_unknown_points(model)
+    block_sets = [reference.side_blocks(all_points, contacts_found, model),
+                  seed_side_blocks(all_points, contacts_found, model),
+                  reference.rod_blocks(model, state.points)[0], held_table_blocks(model)]
+    for blocks in block_sets:
+        rows = len(blocks[0][0]) if blocks else 0
+        assert_same_matrix(point_rows(rows, n_unknown, blocks),
+                           reference.point_rows(rows, n_unknown, blocks))
+    assert_same_matrix(side_rows(all_points, contacts_found, model),
+                       reference.side_rows(all_points, contacts_found, model))
+    (rods, error), (expected_rods, expected_error) = (
+        rod_rows(model, state.points), reference.rod_rows(model, state.points))
+    assert_same_matrix(rods, expected_rods)
+    assert_same_bits(error, expected_error)
+    if model.table_mass is None:
+        corner_rows = point_rows(len(contacts_found), n_unknown, block_sets[0])
+        assert_same_matrix(body_rows(corner_rows, state.points),
+                           reference.body_rows(corner_rows, state.points))
+    return len(contacts_found)
+
+
+def row_states(kind: str, key: str | int) -> list[tuple[Model, State]]:
+    if kind == "library":
+        model, states = library_states(str(key))
+        heavy = Model.from_scene(model.scene, table_mass=1e3)  # tables become unknowns
+        return [(which, state) for state in states for which in (model, heavy)]
+    seed = int(key)
+    rng = np.random.default_rng(3000 + seed)
+    n_squares = int(rng.integers(2, 50))
+    model = random_model(n_squares, rng, table_mass=1e3 if seed % 4 == 0 else None,
+                         n_tables=seed % 3)
+    points = random_points(n_squares, rng, float(rng.choice([1.0, 3.0])))
+    return [(model, State(points, rng.normal(size=points.shape)))]
+
+
+def same_duplicate_rows() -> int:
+    """Rows holding a point twice: summed by scipy, as the reference sums them."""
+    rng = np.random.default_rng(7)
+    index = rng.integers(-1, 4, size=(30, 3))
+    index[:5, 1] = index[:5, 0] = 2
+    blocks = [(index[:, b], rng.normal(size=(30, 2))) for b in range(3)]
+    compiled = point_rows(30, 4, blocks)
+    assert isinstance(compiled, sp.csr_array)
+    assert_same_matrix(compiled, reference.point_rows(30, 4, blocks))
+    return 30
+
+
+ROW_CASES = ([("library", name) for name in sorted(LIBRARY)]
+             + [("random", seed) for seed in range(16)] + [("duplicates", 0)])
+
+
+@pytest.mark.parametrize(("kind", "key"), ROW_CASES)
+def test_the_rows_are_the_references(kind: str, key: str | int) -> None:
+    if kind == "duplicates":
+        assert same_duplicate_rows() > 0
+        return
+    assert sum(same_rows(model, state) for model, state in row_states(kind, key)) > 0
+
+
+# --------------------------------------------------------------------------------------
+# Rigid motion
+# --------------------------------------------------------------------------------------
+
+
+def same_update(corners: FloatArray, state: State, solution: FloatArray) -> None:
+    """The rigid step from corner velocities, and the corner velocities of body velocities."""
+    stepped = rigid_step(corners, state.points, state.velocities, DT)
+    expected = reference.rigid_step(corners, state.points, state.velocities, DT)
+    assert_same_bits(stepped.points, expected.points)
+    assert_same_bits(stepped.velocities, expected.velocities)
+    assert_same_bits(RigidFormulation().new_velocities(state, solution, DT),
+                     reference.corner_velocities(state, solution))
+
+
+def same_objective(model: Model, state: State) -> None:
+    """The rigid formulation's weights and target, and the contact reach."""
+    for ours, theirs in zip(rigid_objective(model, state, DT),
+                            reference.rigid_objective(model, state, DT), strict=True):
+        assert_same_bits(ours, theirs)
+    velocity = VelocityFormulation()
+    assert_same_bits(velocity.body_reach(model, state, DT),
+                     reference.body_reach(model, state, DT, velocity.contact_margin))
+
+
+def same_library_motion(name: str) -> None:
+    """Resting stacks (zero and negative-zero velocities) and random velocities."""
+    model, states = library_states(name)
+    rng = np.random.default_rng(11)
+    for state in states:
+        same_objective(model, state)
+        same_objective(model, State(state.points,
+                                    rng.normal(scale=5.0, size=state.velocities.shape)))
+        same_update(model.reference_corners, state, rng.normal(size=3 * model.n_boxes))
+        resting = State(state.points, -np.zeros_like(state.velocities))  # negative zeros
+        same_update(model.reference_corners, resting, np.zeros(3 * model.n_boxes))
+
+
+def same_random_motion(seed: int) -> None:
+    """Boxes of every size and angle, not exactly rigid, some corners at rest."""
+    rng = np.random.default_rng(5000 + seed)
+    count = int(rng.integers(1, 60))
+    sizes = rng.uniform(0.01, 5.0, size=(count, 2)) * 10.0 ** rng.integers(-2, 3, size=(count, 1))
+    corners = np.stack([rectangle_corners((0.0, 0.0), w, h, 0.0) for w, h in sizes])
+    angles = rng.uniform(-4.0, 4.0, size=count)
+    centres = rng.uniform(-50.0, 50.0, size=(count, 2))
+    points = np.concatenate([rectangle_corners(c, w, h, a)
+                             for c, (w, h), a in zip(centres, sizes, angles, strict=True)])
+    points += rng.normal(scale=1e-9, size=points.shape)  # not exactly rigid
+    velocities = rng.normal(scale=float(rng.choice([1e-3, 1.0, 30.0])), size=points.shape)
+    velocities[rng.random(points.shape) < 0.2] = 0.0
+    same_update(corners, State(points, velocities), rng.normal(size=3 * count))
+
+
+MOTION_CASES = ([("library", name) for name in sorted(LIBRARY)]
+                + [("random", seed) for seed in range(12)])
+
+
+@pytest.mark.parametrize(("kind", "key"), MOTION_CASES)
+def test_the_rigid_motion_is_the_references(kind: str, key: str | int) -> None:
+    if kind == "library":
+        same_library_motion(str(key))
+    else:
+        same_random_motion(int(key))
+
+
+# --------------------------------------------------------------------------------------
+# KKT check
+# --------------------------------------------------------------------------------------
+
+
+def step_qps(scene: str, formulation: str, steps: int) -> list[tuple[StepQP, StepSolution]]:
+    """The QPs and solutions of a short run."""
+    seen: list[tuple[StepQP, StepSolution]] = []
+    simulate(scene, dt=DT, steps=steps, solver="OSQP", formulation=formulation,
+             observer=lambda step, qp, solution: seen.append((qp, solution)))
+    return seen
+
+
+def assert_same_residuals(qp: StepQP, x: FloatArray, y: FloatArray, z: FloatArray) -> None:
+    compiled: Residuals = kkt_residuals(qp, x, y, z)
+    expected: Residuals = kkt_residuals(reference.general_route(qp), x, y, z)
+    for name in ("primal", "dual", "complementarity"):
+        ours, theirs = getattr(compiled, name), getattr(expected, name)
+        assert (ours == theirs and np.signbit(ours) == np.signbit(theirs)) or (
+            np.isnan(ours) and np.isnan(theirs)), name
+
+
+def same_data_check(qp: StepQP, rng: np.random.Generator) -> None:
+    """The data check's scales (ordinary and scaled data) and its failures."""
+    for target, weights in ((qp.target, qp.weights), (qp.target * 3e4, qp.weights * 1e-3)):
+        varied = dataclasses.replace(qp, target=target, weights=weights)
+        assert _checked_scales(varied, 0, "OSQP") == _checked_scales(
+            reference.general_route(varied), 0, "OSQP")
+    finite, magnitude, largest = residual_kernel.data_summary(
+        qp.weights, qp.target, qp.eq_matrix.data, qp.eq_rhs, qp.ineq_matrix.data, qp.ineq_rhs)
+    assert finite and magnitude == data_magnitude(qp) and largest == qp.weights.max()
+    field = str(rng.choice(["weights", "target", "eq_rhs", "ineq_rhs"]))
+    values = np.array(getattr(qp, field), dtype=np.float64)
+    if values.size:
+        values[rng.integers(values.size)] = rng.choice([np.nan, np.inf, -np.inf])
+        broken = dataclasses.replace(qp, **{field: values})
+        for route in (broken, reference.general_route(broken)):
+            with pytest.raises(StepFailure, match=f"non-finite {field}"):
+                _checked_scales(route, 0, "OSQP")
+
+
+KKT_CASES = [("stack-5", "velocity", 30), ("stack-5", "rigid", 30),
+             ("rain-10", "velocity-baumgarte", 30), ("two-corner-landing", "seed", 30),
+             ("pyramid-4", "rigid", 30),
+             ("spinning-flight", "rigid", 1)]  # the last: a QP without rows
+
+
+@pytest.mark.parametrize(("scene", "formulation", "steps"), KKT_CASES)
+def test_the_kkt_check_is_the_references(scene: str, formulation: str, steps: int) -> None:
+    """At the solvers' answers, perturbed, with NaN multipliers (no duals returned)."""
+    rng = np.random.default_rng(4)
+    checked = 0
+    for qp, solution in step_qps(scene, formulation, steps):
+        if qp.cost_factor is not None or qp.ineq_upper is not None:
+            continue  # the general NumPy check is the product's own for these
+        y = rng.normal(size=qp.n_equalities)  # the solution does not carry y: any will do
+        z = solution.ineq_dual
+        assert_same_residuals(qp, solution.x, y, z)
+        assert_same_residuals(qp, solution.x + rng.normal(scale=1e-3, size=solution.x.shape),
+                              y, z + rng.normal(size=z.shape))
+        if z.size:
+            assert_same_residuals(qp, solution.x, y, np.full(z.shape, np.nan))
+        same_data_check(qp, rng)
+        checked += 1
+    assert checked > 0
