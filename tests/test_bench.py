@@ -140,7 +140,7 @@ def test_islands_expand_and_reach_simulate_and_the_row(
     asked: list[bool] = []
 
     def recording(*args: Any, **kwargs: Any) -> Any:
-        asked.append(kwargs["islands"])
+        asked.append(kwargs["settings"].islands)
         return simulate(*args, **kwargs)
 
     monkeypatch.setattr(runner, "simulate", recording)
@@ -325,7 +325,7 @@ def test_a_failed_reference_is_named_in_the_row_and_the_report(
     real_simulate = runner.simulate
 
     def fine_runs_fail(scene: Any, **kwargs: Any) -> Any:
-        if kwargs["dt"] < 0.01:  # only the dt/8 reference
+        if "dt" in kwargs and kwargs["dt"] < 0.01:  # only the dt/8 reference
             failure = StepFailure(4, "CLARABEL", "solver_error", "injected")
             failure.trajectory = real_simulate(scene, dt=kwargs["dt"], steps=3)
             raise failure

@@ -226,7 +226,7 @@ def test_islands_flag_reaches_simulate(flags: list[str], islands: bool,
 
     monkeypatch.setattr(cli, "simulate", recording)
     assert main(["simulate", "stack-3", "--steps", "3", *flags]) == 0
-    assert seen["islands"] is islands
+    assert seen["settings"].islands is islands  # type: ignore[attr-defined]
     assert "verified steps       3/3" in capsys.readouterr().out
 
 

@@ -20,12 +20,18 @@ import scipy.sparse as sp
 from scipy.optimize import linprog
 
 from wuerfel_cvx import simulate
-from wuerfel_cvx.compiled import CompiledQPCache
 from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations import StepQP, declare_qp
 from wuerfel_cvx.geometry import FloatArray
 from wuerfel_cvx.scaling import unknowns_scale
-from wuerfel_cvx.solve import VERIFY_FACTOR, StepSolution, kkt_residuals, solve_step_qp
+from wuerfel_cvx.solve import (
+    SOLVE_PATHS,
+    VERIFY_FACTOR,
+    SolvePath,
+    StepSolution,
+    kkt_residuals,
+    solve_step_qp,
+)
 from wuerfel_cvx.solvers import TOLERANCE_PRESETS, available_solvers
 
 pytestmark = [pytest.mark.integration, pytest.mark.filterwarnings(  # cvxpy reading its own
@@ -143,10 +149,13 @@ def test_proxqp_solves_the_stack_qp_with_a_primal_infeasibility_tolerance_of_1e_
 
 
 def on_every_path(name: str, solver: str) -> list[StepSolution]:
-    """``name`` solved afresh, then twice through one cache (compiled, then direct)."""
-    cache = CompiledQPCache(compile_after=1)
-    return [solve_step_qp(saved_qp(name), solver, "default"),
-            *(solve_step_qp(saved_qp(name), solver, "default", cache=cache)
+    """``name`` declared, compiled (twice: compiled, then reused), native (twice: set up,
+    then updated in place)."""
+    compiled, native = SolvePath("compiled", compile_after=1), SolvePath("native")
+    return [solve_step_qp(saved_qp(name), solver, "default", path=SolvePath("declared")),
+            *(solve_step_qp(saved_qp(name), solver, "default", path=compiled)
+              for _ in range(2)),
+            *(solve_step_qp(saved_qp(name), solver, "default", path=native)
               for _ in range(2))]
 
 
@@ -155,7 +164,8 @@ def test_clarabel_solves_the_extreme_cases_in_scaled_units(name: str) -> None:
     """The data reach 1e6 m/s; solved in units of 512 or 1024 m/s, verified on the original."""
     assert unknowns_scale(saved_qp(name)) in (512.0, 1024.0)
     solutions = on_every_path(name, "CLARABEL")
-    assert [solution.path for solution in solutions] == ["declared", "compiled", "direct"]
+    assert [solution.path for solution in solutions] == ["declared", "compiled", "compiled",
+                                                         "native", "native"]
     for solution in solutions:
         assert solution.status == "optimal" and solution.verified, solution.path
         assert solution.residuals.worst() <= VERIFY_FACTOR * EPS
@@ -167,24 +177,24 @@ def test_proxqp_solves_the_saved_qps_natively_on_every_path(name: str) -> None:
     """With its certificates held to round-off (and the near case too), verified."""
     assert unknowns_scale(saved_qp(name)) == 1.0  # ordinary data
     for solution in on_every_path(name, "PROXQP"):
-        assert solution.path == "direct"
+        assert solution.path == "native"
         assert solution.status == "optimal" and solution.verified
         assert solution.residuals.worst() <= VERIFY_FACTOR * EPS
 
 
 @needs_proxqp
 def test_proxqp_runs_never_call_cvxpy(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Neither the first QP of a structure nor a run with ``compiled=False`` goes to cvxpy."""
+    """On no solve path does a PROXQP run go to cvxpy."""
 
     def refuse(*args: object, **kwargs: object) -> None:
         raise AssertionError("cvxpy was called")
 
     monkeypatch.setattr(cp.Problem, "solve", refuse)
     monkeypatch.setattr(cp.Problem, "get_problem_data", refuse)
-    runs = [simulate("stack-3", dt=0.02, steps=6, solver="PROXQP", compiled=compiled)
-            for compiled in (True, False)]
+    runs = [simulate("stack-3", dt=0.02, steps=6, solver="PROXQP", solve_path=path)
+            for path in SOLVE_PATHS]
     for run in runs:
         assert run.n_steps == 6 and run.metrics["verified"].all()
-        assert set(run.metrics["path"]) == {"direct"}
+        assert set(run.metrics["path"]) == {"native"}
         # at rest, to the tolerance: eps (m/s) times 6 steps of 0.02 s, with round-off
         np.testing.assert_allclose(run.points[-1], run.points[0], rtol=0, atol=1e-8)

@@ -23,6 +23,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from wuerfel_cvx import Scene, simulate
+from wuerfel_cvx.compiled import declare
 from wuerfel_cvx.formulations import StepQP, VelocityFormulation, step_qp
 from wuerfel_cvx.geometry import rotation, square_corners
 from wuerfel_cvx.metrics import kinetic_energy, potential_energy
@@ -193,7 +194,7 @@ def energy_identity_terms(scene: Scene, trajectory: Trajectory,
     scheme = VelocityFormulation()
     state = State(trajectory.points[step - 1], trajectory.velocities[step - 1])
     qp = step_qp(scheme, model, state, DT)
-    declared = qp.declared()
+    declared = declare(qp)
     declared.problem.solve(solver="CLARABEL", tol_gap_abs=1e-12, tol_gap_rel=1e-12,
                            tol_feas=1e-12)
     x = np.asarray(declared.variable.value)

@@ -136,9 +136,12 @@ def test_body_rows_keep_a_cancelled_torque() -> None:
     assert ours.nnz == product.nnz == 2 and ours.data[-1] == 0.0
 
 
-def test_a_resting_scene_compiles_once_in_rigid_coordinates() -> None:
+def test_a_resting_scene_keeps_one_structure_in_rigid_coordinates() -> None:
     # Constant weights (inertia from the exact squares) and a cancellation-proof pattern
-    # keep the structure key constant while nothing moves.
+    # keep the structure key constant while nothing moves: one native solver, set up once
+    # and updated in place, and on the compiled path one compiled problem.
     traj = simulate("pyramid-4", steps=30, formulation="rigid")
-    assert traj.info["compiled_structures"] == 1
-    assert traj.info["steps_reusing_a_compiled_structure"] == 28
+    assert (traj.info["native_setups"], traj.info["native_updates"]) == (1, 29)
+    compiled = simulate("pyramid-4", steps=30, formulation="rigid", solve_path="compiled")
+    assert compiled.info["compiled_structures"] == 1
+    assert compiled.info["steps_reusing_a_compiled_structure"] == 28

@@ -13,10 +13,9 @@ import numpy as np
 import pytest
 
 from test_step_qp_general import agreement, exact_solution, wide_qp
-from wuerfel_cvx.compiled import CompiledQPCache
 from wuerfel_cvx.formulations.qp import StepQP
 from wuerfel_cvx.scaling import SCALE_LIMIT, data_magnitude, scaled_qp, unknowns_scale
-from wuerfel_cvx.solve import solve_step_qp
+from wuerfel_cvx.solve import SolvePath, solve_step_qp
 from wuerfel_cvx.solvers import SOLVERS, available_solvers
 
 pytestmark = [pytest.mark.integration, pytest.mark.filterwarnings(
@@ -80,12 +79,15 @@ def test_large_data_are_solved_on_every_path_to_the_exact_solution(solver: str) 
                            np.flatnonzero(np.abs(lhs - wide_qp().ineq_upper) < 1e-6))
     tolerance = agreement(qp, exact)
     assert tolerance < 1e-3 * LARGE  # a test of the answer, not of its order of magnitude
-    cache = CompiledQPCache(compile_after=1)
-    solutions = [solve_step_qp(large_qp(), solver, "high")]  # declared (or native)
-    solutions += [solve_step_qp(large_qp(), solver, "high", cache=cache) for _ in range(2)]
-    expected = (["direct"] * 3 if SOLVERS[solver].native is not None else
-                ["declared", "compiled",
-                 "direct" if SOLVERS[solver].backend is not None else "compiled"])
+    compiled = SolvePath("compiled", compile_after=1)
+    solutions = [solve_step_qp(large_qp(), solver, "high", path=SolvePath("declared"))]
+    solutions += [solve_step_qp(large_qp(), solver, "high", path=compiled) for _ in range(2)]
+    native = SolvePath("native")
+    solutions += [solve_step_qp(large_qp(), solver, "high", path=native) for _ in range(2)]
+    adapted, only = SOLVERS[solver].adapter is not None, SOLVERS[solver].native_only
+    expected = (["native"] * 5 if only else
+                ["declared", "compiled", "compiled"] + (["native"] * 2 if adapted
+                                                        else ["declared", "compiled"]))
     assert [solution.path for solution in solutions] == expected
     for solution in solutions:
         assert solution.verified, (solution.path, solution.residuals)

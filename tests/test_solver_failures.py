@@ -24,7 +24,8 @@ from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations import StepQP, declare_qp
 from wuerfel_cvx.simulate import METRIC_COLUMNS
-from wuerfel_cvx.solve import kkt_residuals, solve_step_qp
+from wuerfel_cvx.compiled import declare
+from wuerfel_cvx.solve import SolvePath, kkt_residuals, solve_step_qp
 from wuerfel_cvx.solvers import _osqp_polish_option
 from wuerfel_cvx.trajectory import Trajectory
 
@@ -136,9 +137,9 @@ def raise_on_call(monkeypatch: pytest.MonkeyPatch, bad_call: int,
 def test_solver_raising_becomes_a_step_failure(monkeypatch: pytest.MonkeyPatch) -> None:
     calls = raise_on_call(monkeypatch, 3, lambda: RuntimeError("solver exploded"))
     with pytest.raises(StepFailure) as caught:
-        # compiled=False: every step goes through Problem.solve (a compiled structure is
-        # solved on the direct path instead; its own failure test is below)
-        simulate(SCENE, dt=0.01, steps=5, compiled=False)
+        # the declared path: every step goes through Problem.solve (the native path's own
+        # failure test is below)
+        simulate(SCENE, dt=0.01, steps=5, solve_path="declared")
     failure = caught.value
     assert calls["n"] == 3  # nothing was solved after the failure
     assert failure.step == 3
@@ -150,42 +151,34 @@ def test_solver_raising_becomes_a_step_failure(monkeypatch: pytest.MonkeyPatch) 
     check_partial(failure.trajectory, 2)
 
 
-def test_direct_path_raising_becomes_a_step_failure(monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.backends.clarabel import DirectClarabel
+@pytest.mark.parametrize("failing_call", [1, 3])
+def test_native_solve_raising_becomes_a_step_failure(monkeypatch: pytest.MonkeyPatch,
+                                                      failing_call: int) -> None:
+    # call 1 sets a structure's solver up; call 3 updates it in place (the scene at rest
+    # keeps one structure)
+    from wuerfel_cvx.backends.clarabel import ClarabelAdapter
 
-    def explode(self: DirectClarabel, *args: Any, **kwargs: Any) -> Any:
-        raise RuntimeError("direct solver exploded")
+    original, calls = ClarabelAdapter.solve, [0]
 
-    monkeypatch.setattr(DirectClarabel, "solve", explode)
+    def explode(self: ClarabelAdapter, *args: Any, **kwargs: Any) -> Any:
+        calls[0] += 1
+        if calls[0] == failing_call:
+            raise RuntimeError("native solve exploded")
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(ClarabelAdapter, "solve", explode)
     with pytest.raises(StepFailure) as caught:
         simulate(SCENE, dt=0.01, steps=5)
     failure = caught.value
-    # Step 1 is solved natively (a structure seen once), step 2 compiles the structure,
-    # step 3 is the first on the direct path.
-    assert failure.step == 3 and failure.status == "exception"
-    assert "direct solver exploded" in failure.detail
-    check_partial(failure.trajectory, 2)
-
-
-def test_native_solve_raising_becomes_a_step_failure(monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.backends import clarabel
-
-    def explode(*args: Any, **kwargs: Any) -> Any:
-        raise RuntimeError("native solve exploded")
-
-    monkeypatch.setattr(clarabel, "solve_new", explode)
-    with pytest.raises(StepFailure) as caught:
-        simulate(SCENE, dt=0.01, steps=5)
-    failure = caught.value
-    assert failure.step == 1 and failure.status == "exception"  # a structure seen once
+    assert failure.step == failing_call and failure.status == "exception"
     assert "native solve exploded" in failure.detail
-    check_partial(failure.trajectory, 0)
+    check_partial(failure.trajectory, failing_call - 1)
 
 
 def test_cvxpy_solver_error_becomes_a_step_failure(monkeypatch: pytest.MonkeyPatch) -> None:
     raise_on_call(monkeypatch, 1, lambda: cp.error.SolverError("Solver 'CLARABEL' failed."))
-    with pytest.raises(StepFailure) as caught:  # native_new=False: step 1 through cvxpy
-        simulate(SCENE, dt=0.01, steps=3, native_new=False)
+    with pytest.raises(StepFailure) as caught:  # the compiled path: step 1 declared
+        simulate(SCENE, dt=0.01, steps=3, solve_path="compiled")
     assert caught.value.step == 1
     assert caught.value.status == "solver_error"
     check_partial(caught.value.trajectory, 0)
@@ -250,16 +243,17 @@ def test_kkt_residuals_with_an_equality_multiplier() -> None:
 def test_cvxpy_duals_follow_the_convention_of_solve_py(solver: str) -> None:
     """The multipliers cvxpy returns satisfy ``2 W (x - t) + E^T y - G^T z = 0``, ``z >= 0``."""
     qp = one_variable_qp(2.0, upper=1.0)
-    solution = solve_step_qp(qp, solver, "high")
+    solution = solve_step_qp(qp, solver, "high", path=SolvePath("declared"))
     np.testing.assert_allclose(solution.x, [1.0], atol=1e-6)
-    assert qp.ineq_constraint is not None
-    np.testing.assert_allclose(qp.ineq_constraint.dual_value, [2.0], atol=1e-5)
+    np.testing.assert_allclose(solution.ineq_dual, [2.0], atol=1e-5)
     assert solution.verified
     assert solution.residuals.worst() < 1e-6
 
     qp = one_variable_qp(2.0, eq=1.0)
-    solution = solve_step_qp(qp, solver, "high")
+    declared = declare(qp)
+    declared.problem.solve(solver=solver)
+    assert declared.eq_constraint is not None
+    np.testing.assert_allclose(declared.eq_constraint.dual_value, [2.0], atol=1e-5)
+    solution = solve_step_qp(qp, solver, "high", path=SolvePath("declared"))
     np.testing.assert_allclose(solution.x, [1.0], atol=1e-6)
-    assert qp.eq_constraint is not None
-    np.testing.assert_allclose(qp.eq_constraint.dual_value, [2.0], atol=1e-5)
     assert solution.verified

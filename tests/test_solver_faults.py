@@ -27,9 +27,9 @@ from wuerfel_cvx.errors import InputError, StepFailure
 from wuerfel_cvx.formulations import StepQP, step_qp
 from wuerfel_cvx.formulations.velocity import VelocityFormulation
 from wuerfel_cvx.model import Model, State
-from wuerfel_cvx.robustness.faults import SQUEEZED_SCENE, NaNInQP
+from wuerfel_cvx.robustness.faults import SQUEEZED_SCENE, NaNInQP, clarabel_raises
 from wuerfel_cvx.scene import Square, Table
-from wuerfel_cvx.solve import VERIFY_FACTOR, Residuals, solve_step_qp
+from wuerfel_cvx.solve import VERIFY_FACTOR, Residuals, SolvePath, solve_step_qp
 from wuerfel_cvx.solvers import TOLERANCE_PRESETS, available_solvers
 from wuerfel_cvx.trajectory import Trajectory
 
@@ -262,7 +262,7 @@ def test_nan_multipliers_make_a_step_unverified(monkeypatch: pytest.MonkeyPatch)
     qp = step_qp(VelocityFormulation(), model, State.initial(Scene.named(SCENE)), 0.01)
     assert solve_step_qp(qp, "CLARABEL").verified
     monkeypatch.setattr(solve_module, "_dual", lambda constraint, size: np.full(size, np.nan))
-    solution = solve_step_qp(qp, "CLARABEL")  # no cache: through cvxpy and _dual
+    solution = solve_step_qp(qp, "CLARABEL", path=SolvePath("declared"))  # through _dual
     assert solution.status == cp.OPTIMAL and not solution.verified
     assert solution.residuals.worst() == np.inf
 
@@ -270,37 +270,31 @@ def test_nan_multipliers_make_a_step_unverified(monkeypatch: pytest.MonkeyPatch)
 # ------------------------------------------------------------------ exceptions
 def test_exception_while_applying_compiled_parameters_is_a_step_failure(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.compiled import CompiledQPCache
+    from wuerfel_cvx.compiled import CompiledQP
 
-    original = CompiledQPCache.direct_solver
+    original = CompiledQP.load
     calls = {"n": 0}
 
-    def direct_solver(self: CompiledQPCache, *args: Any, **kwargs: Any) -> Any:
+    def load(self: CompiledQP, *args: Any, **kwargs: Any) -> Any:
         calls["n"] += 1
-        if calls["n"] == 3:
+        if calls["n"] == 2:  # step 1 is declared, step 2 compiles, step 3 reloads
             raise ValueError("Parameter value must be real.")
         return original(self, *args, **kwargs)
 
-    monkeypatch.setattr(CompiledQPCache, "direct_solver", direct_solver)
+    monkeypatch.setattr(CompiledQP, "load", load)
     with pytest.raises(StepFailure) as caught:
-        simulate(SCENE, steps=5)
+        simulate(SCENE, steps=5, solve_path="compiled")
     assert (caught.value.step, caught.value.status) == (3, "exception")
     assert "Parameter value must be real" in str(caught.value)
     assert_clean_partial(caught.value.trajectory, 2)
 
 
 def test_fallback_takes_over_from_a_raising_solver(monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.backends.clarabel import DirectClarabel
-
-    def explode(self: DirectClarabel, *args: Any, **kwargs: Any) -> Any:
-        raise RuntimeError("direct solver exploded")
-
-    monkeypatch.setattr(DirectClarabel, "solve", explode)
-    traj = simulate(SCENE, steps=4, fallback=("OSQP",))
-    # step 3 is the first on CLARABEL's direct path (see test_solver_failures.py)
-    assert list(traj.metrics["primary_status"]) == ["optimal", "optimal", "exception",
+    with clarabel_raises():  # from step 2 on: each update of CLARABEL's native solver
+        traj = simulate(SCENE, steps=4, fallback=("OSQP",))
+    assert list(traj.metrics["primary_status"]) == ["optimal", "exception", "exception",
                                                     "exception"]
-    assert list(traj.metrics["solver"]) == ["CLARABEL", "CLARABEL", "OSQP", "OSQP"]
+    assert list(traj.metrics["solver"]) == ["CLARABEL", "OSQP", "OSQP", "OSQP"]
 
 
 # ------------------------------------------------------------------ command line
@@ -309,12 +303,16 @@ def _inject_nan(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def _inject_exception(monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.backends.clarabel import DirectClarabel
+    from wuerfel_cvx.backends.clarabel import ClarabelAdapter
 
-    def explode(self: DirectClarabel, *args: Any, **kwargs: Any) -> Any:
-        raise RuntimeError("direct solver exploded")
+    original = ClarabelAdapter.solve
 
-    monkeypatch.setattr(DirectClarabel, "solve", explode)
+    def explode(self: ClarabelAdapter, data: Any, warm: Any = None) -> Any:
+        if data is not self._pending:  # an update in place: from step 2 on
+            raise RuntimeError("native solver exploded")
+        return original(self, data, warm)
+
+    monkeypatch.setattr(ClarabelAdapter, "solve", explode)
 
 
 def _inject_iteration_limit(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -326,7 +324,7 @@ CLI_FAULTS: dict[str, tuple[Any, str | None, int, str]] = {
     "iteration limit": (_inject_iteration_limit, None, 3, cp.USER_LIMIT),
     "infeasible": (None, SQUEEZED_TOML, 1, cp.INFEASIBLE),
     "nan data": (_inject_nan, None, 3, "invalid_data"),
-    "exception": (_inject_exception, None, 3, "exception"),
+    "exception": (_inject_exception, None, 2, "exception"),
 }
 
 
@@ -370,17 +368,12 @@ def test_cli_fallback_completes_the_run_and_says_so(
 
 def test_fallback_takes_over_island_by_island(monkeypatch: pytest.MonkeyPatch,
                                              two_stacks_and_a_faller: Scene) -> None:
-    from wuerfel_cvx.backends.clarabel import DirectClarabel
-
-    def explode(self: DirectClarabel, *args: Any, **kwargs: Any) -> Any:
-        raise RuntimeError("direct solver exploded")
-
-    monkeypatch.setattr(DirectClarabel, "solve", explode)
-    traj = simulate(two_stacks_and_a_faller, steps=6, islands=True, fallback=("OSQP",))
+    with clarabel_raises():
+        traj = simulate(two_stacks_and_a_faller, steps=6, islands=True, fallback=("OSQP",))
     m = traj.metrics
     assert traj.n_steps == 6 and m["verified"].all()
-    # An island QP on CLARABEL's direct path raises and OSQP solves it; islands still on
-    # cvxpy's path stay CLARABEL's.  The row names every solver that produced the step.
+    # An island QP whose structure CLARABEL's native solver has seen raises (an update in
+    # place) and OSQP solves it; an island QP of a new structure stays CLARABEL's.  The row names every solver that produced the step.
     rescued = m["primary_status"] == "exception"
     assert rescued.any()
     assert m.loc[rescued, "solver"].str.contains("OSQP").all()

@@ -63,18 +63,21 @@ def test_formulation_variants_side_by_side_on_a_drop() -> None:
 
 def test_a_failing_variant_is_a_row_with_its_step_and_status() -> None:
     # OSQP at 1e9 kg per table corner: with weights 0.25 and 1e9 kg in one QP it reports
-    # the step infeasible in cvxpy's form (see notebooks/03), from step 2, the first
-    # through cvxpy (step 1's structure is new: solved natively, and verified); the run
-    # must keep going for the others.
+    # the step infeasible in cvxpy's form (see notebooks/03), on the declared path from
+    # step 1; the same QPs in OSQP's own form (native) are solved.  The run must keep going
+    # for the others.
+    heavy = {"formulation": "seed-baumgarte", "solver": "OSQP", "table_mass": 1e9}
     variants = [Variant("fixed", formulation="seed-baumgarte"),
-                Variant("heavy", formulation="seed-baumgarte", solver="OSQP", table_mass=1e9)]
+                Variant("heavy", solve_path="declared", **heavy),  # type: ignore[arg-type]
+                Variant("heavy native", **heavy)]  # type: ignore[arg-type]
     _, summary = run_variants("tilted-drop", variants, dt=0.01, steps=5, reference="fixed")
-    heavy = summary.set_index("label").loc["heavy"]
-    assert heavy["failed_step"] == 2
-    assert heavy["steps_completed"] == 1
-    assert "OSQP" in heavy["failure"]
-    assert heavy["error_m"] < 1e-12  # one step in common, a free fall: the target itself
-    assert summary.set_index("label").loc["fixed", "steps_completed"] == 5
+    by_label = summary.set_index("label")
+    assert by_label.loc["heavy", "failed_step"] == 1
+    assert by_label.loc["heavy", "steps_completed"] == 0
+    assert "OSQP" in by_label.loc["heavy", "failure"]
+    assert np.isnan(by_label.loc["heavy", "error_m"])  # no step in common
+    assert by_label.loc["heavy native", "steps_completed"] == 5
+    assert by_label.loc["fixed", "steps_completed"] == 5
 
 
 def test_a_variant_failing_its_first_step_has_no_error(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -83,7 +86,7 @@ def test_a_variant_failing_its_first_step_has_no_error(monkeypatch: pytest.Monke
     def explode(*args: object, **kwargs: object) -> object:
         raise RuntimeError("OSQP exploded")
 
-    monkeypatch.setattr(osqp, "solve_new", explode)  # step 1's structure is new: native
+    monkeypatch.setattr(osqp.OSQPAdapter, "solve", explode)  # step 1: its first solve
     variants = [Variant("fixed"), Variant("broken", solver="OSQP")]
     _, summary = run_variants("tilted-drop", variants, dt=0.01, steps=3, reference="fixed")
     broken = summary.set_index("label").loc["broken"]
@@ -149,7 +152,7 @@ def test_redundant_rows_count_a_duplicated_contact() -> None:
 def test_resolve_records_a_failed_solve_with_its_status() -> None:
     _, recorded = record_step_qps("tilted-drop", "seed-baumgarte", 0.01, 1,
                                   table_mass=1e9)
-    table = resolve_steps(recorded, ["OSQP"], ["default"])
+    table = resolve_steps(recorded, ["OSQP"], ["default"], solve_path="declared")
     assert table["status"].iloc[0] != "optimal"
     assert np.isnan(table["disagreement"].iloc[0])
     assert not table["verified"].iloc[0]

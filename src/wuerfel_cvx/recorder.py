@@ -18,7 +18,8 @@ from .geometry import FloatArray
 from .metrics import kinetic_energy, potential_energy, rod_length_drift
 from .model import Model, State
 from .scene import Scene
-from .settings import Settings
+from .settings import SETTING_NAMES, Settings
+from .solve import PATH_COUNTS
 from .trajectory import NULLABLE_COLUMNS, Trajectory
 from .versions import package_version
 
@@ -92,9 +93,12 @@ def info_of(scene: Scene, fields: dict[str, Any],
 
     ``packages`` maps a key of ``info["versions"]`` to a distribution whose version it
     records (``wuerfel_cvx`` is always recorded).  A peer engine's run
-    (:mod:`wuerfel_cvx.peers`) gives its own ``fields``.
+    (:mod:`wuerfel_cvx.peers`) gives its own ``fields``; every run's ``info`` has the same
+    keys (the settings, ``steps``, ``friction_model`` and the solve path's counts), ``None``
+    where a run has no such value.
     """
-    return {"scene": scene.name, "scene_data": scene.to_dict(), **fields,
+    standard = dict.fromkeys((*SETTING_NAMES, "steps", "friction_model", *PATH_COUNTS))
+    return {"scene": scene.name, "scene_data": scene.to_dict(), **standard, **fields,
             "versions": {key: package_version(package) for key, package in
                          {"wuerfel_cvx": "wuerfel_cvx", **(packages or {})}.items()}}
 

@@ -65,6 +65,10 @@ SOLVE_PATHS = (NATIVE, COMPILED, DECLARED)
 the step QP's numbers (:mod:`wuerfel_cvx.backends`), a cvxpy problem compiled once per
 structure, or a cvxpy problem declared afresh per QP (:mod:`wuerfel_cvx.compiled`)."""
 
+PATH_COUNTS = ("compiled_structures", "steps_reusing_a_compiled_structure",
+               "canonicalised_qps", "native_setups", "native_updates")
+"""What a run's :class:`SolvePath` counted (its trajectory's ``info``; ``None`` for a peer)."""
+
 INVALID_DATA = "invalid_data"
 """Status of a step whose QP data holds NaN or inf: no solver is called."""
 
@@ -159,14 +163,17 @@ class SolvePath:
     (:attr:`~wuerfel_cvx.solvers.SolverSpec.native_only`).
     ``warm_start``: start the solvers that take one from the last step's solution mapped by
     contact (:mod:`wuerfel_cvx.warm_start`), and OSQP from its structure's last solution.
+    ``capacity`` structures are kept (compiled problems, native solvers); ``compile_after``
+    is the sighting of a structure that compiles it (:class:`~wuerfel_cvx.compiled.CompiledQPCache`).
     """
 
-    def __init__(self, name: str = NATIVE, *, warm_start: bool = True, capacity: int = 64):
+    def __init__(self, name: str = NATIVE, *, warm_start: bool = True, capacity: int = 64,
+                 compile_after: int = 2):
         if name not in SOLVE_PATHS:
             raise InputError(f"unknown solve path '{name}' (one of {', '.join(SOLVE_PATHS)})",
                              field="solve_path")
         self.name = name
-        self.compiled = CompiledQPCache(capacity=capacity)
+        self.compiled = CompiledQPCache(capacity=capacity, compile_after=compile_after)
         self.warm_starts = WarmStarts() if warm_start else None
         self.capacity = capacity
         self.native_setups = 0
@@ -212,7 +219,7 @@ class SolvePath:
         return adapter.solve(data, warm)
 
     def counts(self) -> dict[str, int]:
-        """What the path did so far, for a trajectory's settings."""
+        """What the path did so far, for a trajectory's ``info`` (:data:`PATH_COUNTS`)."""
         return {"compiled_structures": self.compiled.compiled,
                 "steps_reusing_a_compiled_structure": self.compiled.reused,
                 "canonicalised_qps": self.compiled.canonicalised,

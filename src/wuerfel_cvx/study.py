@@ -26,7 +26,7 @@ from .metrics import largest_corner_distance, total_energy
 from .model import Model, State
 from .scene import Scene
 from .simulate import resolve_scene, simulate
-from .solve import StepSolution, solve_step_qp
+from .solve import SolvePath, StepSolution, solve_step_qp
 from .trajectory import Trajectory
 
 REFERENCE_SOLVER = "CLARABEL"
@@ -63,6 +63,8 @@ class Variant:
     """``None``: fixed tables; a mass (kg per corner): the seed's heavy table."""
     extra_rod: bool = False
     """Add the redundant sixth rod (second diagonal) to every square."""
+    solve_path: str = "native"
+    """How the QPs reach the solver (:class:`~wuerfel_cvx.solve.SolvePath`)."""
 
 
 FORMULATION_VARIANTS: tuple[Variant, ...] = (
@@ -101,7 +103,8 @@ def run_variant(scene: Scene | str | Path, variant: Variant, dt: float,
     try:
         trajectory = simulate(scene, dt=dt, steps=steps, solver=variant.solver,
                               formulation=variant.formulation, tol=variant.tol,
-                              table_mass=variant.table_mass, extra_rod=variant.extra_rod)
+                              table_mass=variant.table_mass, extra_rod=variant.extra_rod,
+                              solve_path=variant.solve_path)
     except StepFailure as exc:
         if exc.trajectory is None:
             raise
@@ -220,8 +223,13 @@ def record_step_qps(scene: Scene | str | Path, formulation: str, dt: float, step
 
 
 def resolve_steps(recorded: Sequence[tuple[int, StepQP, StepSolution]],
-                  solvers: Sequence[str], tols: Sequence[str | float]) -> pd.DataFrame:
-    """Re-solve each recorded step QP with each solver and tolerance (see RESOLVE_COLUMNS)."""
+                  solvers: Sequence[str], tols: Sequence[str | float],
+                  solve_path: str = "native") -> pd.DataFrame:
+    """Re-solve each recorded step QP with each solver and tolerance (see RESOLVE_COLUMNS).
+
+    Each QP reaches the solvers on ``solve_path`` (:class:`~wuerfel_cvx.solve.SolvePath`;
+    a fresh one per QP).
+    """
     rows = []
     for step, qp, reference in recorded:
         redundant = redundant_active_rows(qp, reference.x)
@@ -232,7 +240,8 @@ def resolve_steps(recorded: Sequence[tuple[int, StepQP, StepSolution]],
                                        "redundant_rows": redundant,
                                        "solver": solver.upper(), "tol": str(tol)}
                 try:
-                    answer = solve_step_qp(qp, solver, tol, step=step)
+                    answer = solve_step_qp(qp, solver, tol, step=step,
+                                           path=SolvePath(solve_path))
                 except StepFailure as failure:
                     row.update(status=failure.status, verified=False,
                                worst_residual=np.nan, disagreement=np.nan,

@@ -126,9 +126,8 @@ def run_peer(engine: str, package: str, scene: Scene, world: PeerWorld, dt: floa
     """
     model = Model.from_scene(scene)
     info = info_of(scene, {"formulation": "peer", "solver": engine, "tol": "native",
-                           "dt": float(dt), "steps": int(steps), "table_mass": None,
-                           "extra_rod": False, "fallback": [], "friction_model": None},
-                   {package: package})
+                           "dt": float(dt), "steps": int(steps), "extra_rod": False,
+                           "fallback": [], "solve_path": "peer"}, {package: package})
     recorder = TrajectoryRecorder.start(model, info, State.initial(scene), _METRIC_DTYPES)
     for step in tqdm(range(1, int(steps) + 1), disable=not progress, unit="step",
                      desc=f"{scene.name} ({engine})"):
