@@ -8,8 +8,7 @@ import pytest
 from qp_bank import AGREEMENT, qp_bank
 from wuerfel_cvx import simulate
 from wuerfel_cvx.compiled import structure_key
-from wuerfel_cvx.solve import SolvePath
-from wuerfel_cvx.solve import solve_step_qp
+from wuerfel_cvx.solve import SolvePath, solve_step_qp
 
 pytestmark = pytest.mark.integration
 

@@ -149,8 +149,7 @@ def test_proxqp_solves_the_stack_qp_with_a_primal_infeasibility_tolerance_of_1e_
 
 
 def on_every_path(name: str, solver: str) -> list[StepSolution]:
-    """``name`` declared, compiled (twice: compiled, then reused), native (twice: set up,
-    then updated in place)."""
+    """``name`` declared, compiled twice (compiled, reused), native twice (set up, updated)."""
     compiled, native = SolvePath("compiled", compile_after=1), SolvePath("native")
     return [solve_step_qp(saved_qp(name), solver, "default", path=SolvePath("declared")),
             *(solve_step_qp(saved_qp(name), solver, "default", path=compiled)

@@ -81,7 +81,8 @@ def test_results_of_schema_version_5_are_read_with_the_frictionless_model(
                                               formulation=formulation, max_penetration=1e-6),
                              "schema_version": 5})
     frame = schema.read_results(old)
-    assert (frame["schema_version"] == schema.SCHEMA_VERSION).all() and len(frame) == len(formulations)
+    assert (frame["schema_version"] == schema.SCHEMA_VERSION).all()
+    assert len(frame) == len(formulations)
     # no friction in any version-5 scene: ccp (the frictionless model) where it applies
     assert frame["friction_model"].tolist() == ["ccp", "ccp", pd.NA, pd.NA]
     for name in added:

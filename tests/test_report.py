@@ -418,8 +418,8 @@ def test_a_results_csv_with_a_wrong_header_still_lists_the_columns(tmp_path: Pat
         writer.writerows(rows)
     # the fixture is of schema version 3, so the version-4 to -6 columns are missing too
     with pytest.raises(InputError,
-                       match=r"missing \['islands', 'solve_path', 'max_overlap_depth', 'energy_gain', "
-                             r"'friction_model', "):
+                       match=r"missing \['islands', 'solve_path', 'max_overlap_depth', "
+                             r"'energy_gain', 'friction_model', "):
         write_report(broken, tmp_path / "reports")
 
 

@@ -13,9 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from wuerfel_cvx import Scene, Settings, Simulation, simulate
 from wuerfel_cvx import compiled as compiled_module
+from wuerfel_cvx.backends._native import RowStack, stacked
 from wuerfel_cvx.errors import InputError
 from wuerfel_cvx.robustness.determinism import GOLDEN_RUN, largest_difference
 from wuerfel_cvx.solve import SOLVE_PATHS
@@ -99,6 +101,23 @@ def test_memory_of_a_large_pile_grows_with_its_nonzeros() -> None:
         # on each path the step's memory is a small multiple of the QP's nonzeros and
         # unknowns, far below one dense copy of its matrix
         assert peak < dense, (path, peak, dense)
+
+
+def test_a_row_stack_gathers_the_stacked_matrix_of_new_numbers() -> None:
+    # the patterns fixed at set-up, new values: the same CSC matrix as stacking afresh
+    rng = np.random.default_rng(3)
+    pattern_e = sp.random_array((3, 6), density=0.5, format="csr", rng=rng)
+    pattern_g = sp.random_array((7, 6), density=0.4, format="csr", rng=rng)
+    for matrix in (pattern_e, pattern_g):
+        matrix.sort_indices()
+    upper = np.array([1, 4, 6])
+    stack = RowStack([(pattern_e, 1.0, None), (pattern_g, -1.0, None), (pattern_g, 1.0, upper)])
+    new_e, new_g = pattern_e.copy(), pattern_g.copy()
+    new_e.data, new_g.data = rng.normal(size=new_e.nnz), rng.normal(size=new_g.nnz)
+    fresh = stacked((new_e, 1.0), (new_g, -1.0), (sp.csr_array(new_g[upper]), 1.0))
+    np.testing.assert_array_equal(stack.matrix.indices, fresh.indices)
+    np.testing.assert_array_equal(stack.matrix.indptr, fresh.indptr)
+    np.testing.assert_array_equal(stack.values([new_e, new_g, new_g]), fresh.data)
 
 
 def test_no_module_reads_a_private_cvxpy_attribute() -> None:

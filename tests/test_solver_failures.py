@@ -20,11 +20,11 @@ import scipy.sparse as sp
 
 from wuerfel_cvx import simulate, solvers
 from wuerfel_cvx.cli import main
+from wuerfel_cvx.compiled import declare
 from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations import StepQP, declare_qp
 from wuerfel_cvx.simulate import METRIC_COLUMNS
-from wuerfel_cvx.compiled import declare
 from wuerfel_cvx.solve import SolvePath, kkt_residuals, solve_step_qp
 from wuerfel_cvx.solvers import _osqp_polish_option
 from wuerfel_cvx.trajectory import Trajectory

@@ -373,7 +373,8 @@ def test_fallback_takes_over_island_by_island(monkeypatch: pytest.MonkeyPatch,
     m = traj.metrics
     assert traj.n_steps == 6 and m["verified"].all()
     # An island QP whose structure CLARABEL's native solver has seen raises (an update in
-    # place) and OSQP solves it; an island QP of a new structure stays CLARABEL's.  The row names every solver that produced the step.
+    # place) and OSQP solves it; an island QP of a new structure stays CLARABEL's.  The
+    # row names every solver that produced the step.
     rescued = m["primary_status"] == "exception"
     assert rescued.any()
     assert m.loc[rescued, "solver"].str.contains("OSQP").all()

@@ -164,7 +164,8 @@ class SolvePath:
     ``warm_start``: start the solvers that take one from the last step's solution mapped by
     contact (:mod:`wuerfel_cvx.warm_start`), and OSQP from its structure's last solution.
     ``capacity`` structures are kept (compiled problems, native solvers); ``compile_after``
-    is the sighting of a structure that compiles it (:class:`~wuerfel_cvx.compiled.CompiledQPCache`).
+    is the sighting of a structure that compiles it
+    (:class:`~wuerfel_cvx.compiled.CompiledQPCache`).
     """
 
     def __init__(self, name: str = NATIVE, *, warm_start: bool = True, capacity: int = 64,

@@ -14,11 +14,10 @@ import time
 from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..geometry import FloatArray
 from ..warm_start import WarmStart
-from ._native import Answer, NativeData, PatternChanged, check_patterns, stacked, status_name
+from ._native import Answer, NativeData, PatternChanged, RowStack, check_patterns, status_name
 
 _STATUS = {"Solved": "optimal", "PrimalInfeasible": "infeasible", "DualInfeasible": "unbounded",
            "AlmostSolved": "optimal_inaccurate", "AlmostPrimalInfeasible": "infeasible_inaccurate",
@@ -43,13 +42,16 @@ def settings_of(options: dict[str, Any]) -> Any:
     return settings
 
 
-def _form(data: NativeData) -> tuple[sp.csc_matrix, FloatArray]:
-    """Clarabel's ``A`` and ``b``."""
+def _rows(data: NativeData) -> RowStack:
+    """Clarabel's ``A = [E; -G; G_u]``, its pattern fixed."""
     qp = data.qp
-    upper_rows = qp.upper_rows
-    rows = stacked((qp.eq_matrix, 1.0), (qp.ineq_matrix, -1.0),
-                   (sp.csr_array(qp.ineq_matrix[upper_rows]), 1.0))
-    return rows, np.concatenate([data.eq_rhs, -data.lower, data.upper[upper_rows]])
+    return RowStack([(qp.eq_matrix, 1.0, None), (qp.ineq_matrix, -1.0, None),
+                     (qp.ineq_matrix, 1.0, qp.upper_rows)])
+
+
+def _rhs(data: NativeData) -> FloatArray:
+    """Clarabel's ``b``."""
+    return np.concatenate([data.eq_rhs, -data.lower, data.upper[data.qp.upper_rows]])
 
 
 class ClarabelAdapter:
@@ -59,26 +61,28 @@ class ClarabelAdapter:
         import clarabel
 
         qp = data.qp
-        self.rows, b = _form(data)
+        self.rows = _rows(data)
         self.hessian = data.upper_triangle
         self.sizes = (qp.n_equalities, qp.n_inequalities, qp.upper_rows)
         cones = [clarabel.ZeroConeT(qp.n_equalities)] if qp.n_equalities else []
         if qp.n_inequalities + qp.upper_rows.size:
             cones.append(clarabel.NonnegativeConeT(qp.n_inequalities + qp.upper_rows.size))
-        self.solver = clarabel.DefaultSolver(self.hessian, data.linear, self.rows, b, cones,
-                                             settings_of(options))
+        self.solver = clarabel.DefaultSolver(self.hessian, data.linear, self.rows.matrix,
+                                             _rhs(data), cones, settings_of(options))
         self._pending: NativeData | None = data
 
     def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
         """Solve ``data`` (this structure): update the solver in place unless just set up."""
         started = time.perf_counter()
         if data is not self._pending:
-            rows, b = _form(data)
             hessian = data.upper_triangle
-            check_patterns((hessian, self.hessian), (rows, self.rows))
+            check_patterns((hessian, self.hessian))  # E's and G's: fixed by the structure
             if not self.solver.is_data_update_allowed():
                 raise PatternChanged  # set it up afresh
-            self.solver.update(P=hessian.data, q=data.linear, A=rows.data, b=b)
+            qp = data.qp
+            self.solver.update(P=hessian.data, q=data.linear, b=_rhs(data),
+                               A=self.rows.values([qp.eq_matrix, qp.ineq_matrix,
+                                                   qp.ineq_matrix]))
         self._pending = None
         result = self.solver.solve()
         native_time = time.perf_counter() - started

@@ -22,11 +22,10 @@ import time
 from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..geometry import FloatArray
 from ..warm_start import WarmStart
-from ._native import Answer, NativeData, check_patterns, stacked, status_name
+from ._native import Answer, NativeData, RowStack, check_patterns, status_name
 
 _STATUS = {1: "optimal", 2: "optimal_inaccurate", 3: "infeasible", 4: "infeasible_inaccurate",
            5: "unbounded", 6: "unbounded_inaccurate", 7: "user_limit", 8: "user_limit",
@@ -47,13 +46,11 @@ def _settings(options: dict[str, Any]) -> dict[str, Any]:
     return settings
 
 
-def _form(data: NativeData) -> tuple[sp.csc_matrix, tuple[FloatArray, FloatArray]]:
-    """``A = [E; G]`` and its bounds ``(l, u)``."""
-    qp = data.qp
-    rows = stacked((qp.eq_matrix, 1.0), (qp.ineq_matrix, 1.0))
+def _bounds(data: NativeData) -> tuple[FloatArray, FloatArray]:
+    """The bounds ``(l, u)`` of ``A = [E; G]``."""
     lower = np.concatenate([data.eq_rhs, data.lower])
     upper = np.concatenate([data.eq_rhs, data.upper])
-    return rows, (np.maximum(lower, -_INFINITY), np.minimum(upper, _INFINITY))
+    return np.maximum(lower, -_INFINITY), np.minimum(upper, _INFINITY)
 
 
 class OSQPAdapter:
@@ -62,12 +59,14 @@ class OSQPAdapter:
     def __init__(self, data: NativeData, options: dict[str, Any]):
         import osqp
 
-        self.rows, (lower, upper) = _form(data)
+        qp = data.qp
+        self.rows = RowStack([(qp.eq_matrix, 1.0, None), (qp.ineq_matrix, 1.0, None)])
         self.hessian = data.upper_triangle
-        self.n_eq = data.qp.n_equalities
+        self.n_eq = qp.n_equalities
+        lower, upper = _bounds(data)
         self.solver = osqp.OSQP()
-        self.solver.setup(P=self.hessian, q=data.linear, A=self.rows, l=lower, u=upper,
-                          **_settings(options))
+        self.solver.setup(P=self.hessian, q=data.linear, A=self.rows.matrix, l=lower,
+                          u=upper, **_settings(options))
         self.native = getattr(self.solver, "_solver", None)
         self._pending: NativeData | None = data
 
@@ -94,14 +93,15 @@ class OSQPAdapter:
                       native_time=native_time)
 
     def _update(self, data: NativeData) -> None:
-        rows, (lower, upper) = _form(data)
+        lower, upper = _bounds(data)
         hessian = data.upper_triangle
-        check_patterns((hessian, self.hessian), (rows, self.rows))
+        check_patterns((hessian, self.hessian))  # E's and G's: fixed by the structure
+        values = self.rows.values([data.qp.eq_matrix, data.qp.ineq_matrix])
         if self.native is not None:
             self.native.update_data_vec(q=data.linear, l=lower, u=upper)
-            self.native.update_data_mat(P_x=hessian.data, P_i=None, A_x=rows.data, A_i=None)
+            self.native.update_data_mat(P_x=hessian.data, P_i=None, A_x=values, A_i=None)
         else:
-            self.solver.update(q=data.linear, l=lower, u=upper, Px=hessian.data, Ax=rows.data)
+            self.solver.update(q=data.linear, l=lower, u=upper, Px=hessian.data, Ax=values)
 
 
 def setup(data: NativeData, options: dict[str, Any]) -> OSQPAdapter:
