@@ -99,8 +99,11 @@ def test_round_off_differences_stay_far_below_the_golden_rounding(solver: str) -
 
     Shifting every square's angle by 1e-15 rad and its height by 1e-15 m stands for what
     another machine's arithmetic could change; over the 100 steps the positions must
-    stay within 1e-12 m of the reference (measured: 2e-15 to 3e-15 m), three orders
-    below the 1e-9 m rounding step of the golden digest.
+    stay within 1e-11 m of the reference, two orders below the 1e-9 m rounding step of
+    the golden digest.  OSQP and PIQP move by 1e-14 m or less; Clarabel, updated in place
+    on the native path, keeps the equilibration of its set-up, which amplifies input
+    round-off to about 2e-12 m (set up afresh for every QP: 3e-14 m, at 1.5 to 5 times
+    the solve time).
     """
     scene = Scene.named(GOLDEN_RUN.scene)
     shifted = tuple(
@@ -111,4 +114,4 @@ def test_round_off_differences_stay_far_below_the_golden_rounding(solver: str) -
     perturbed = simulate(dataclasses.replace(scene, squares=shifted), dt=GOLDEN_RUN.dt,
                          steps=GOLDEN_RUN.steps, solver=solver, tol=GOLDEN_RUN.tol)
     difference = largest_difference(perturbed, reference_run(solver))
-    assert 0.0 < difference < 1e-12  # > 0: the perturbation did reach the run
+    assert 0.0 < difference < 1e-11  # > 0: the perturbation did reach the run
