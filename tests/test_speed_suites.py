@@ -12,18 +12,20 @@ import pytest
 
 from wuerfel_cvx.bench.suite import Suite
 from wuerfel_cvx.scene import Scene
+from wuerfel_cvx.solve import SOLVE_PATHS
 
 pytestmark = pytest.mark.unit
 
 
-def test_perf_times_the_small_scenes_in_every_formulation_and_solver() -> None:
+def test_perf_times_the_small_scenes_in_every_formulation_solver_and_path() -> None:
     points = Suite.named("perf").points
-    formulations = {"velocity", "velocity-baumgarte", "rigid", "rigid-slots", "velocity-slots"}
+    formulations = {"velocity", "velocity-baumgarte", "rigid"}
     solvers = {"CLARABEL", "OSQP", "PIQP", "PROXQP", "DAQP", "HIGHS"}
     for scene in ("tilted-drop", "stack-10"):
-        configurations = {(p.formulation, p.solver) for p in points if p.scene == scene}
-        assert configurations == {(formulation, solver)
-                                  for formulation in formulations for solver in solvers}
+        configurations = {(p.formulation, p.solver, p.solve_path)
+                          for p in points if p.scene == scene}
+        assert configurations == {(formulation, solver, path) for formulation in formulations
+                                  for solver in solvers for path in SOLVE_PATHS}
 
 
 def test_scaling_fits_a_settled_pile_up_to_the_large_pyramid() -> None:

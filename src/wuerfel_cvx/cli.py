@@ -31,13 +31,8 @@ from .trajectory import Trajectory
 PROG = "wuerfel-cvx"
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of the ``wuerfel-cvx`` command."""
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
-    parser.add_argument("--version", action="version", version=f"{PROG} {package_version()}")
-    commands = parser.add_subparsers(dest="command", required=True)
-
-    run = commands.add_parser("simulate", help="simulate a scene and print a summary")
+def _add_simulate_arguments(run: argparse.ArgumentParser) -> None:
+    """The arguments of ``wuerfel-cvx simulate`` (the run's settings, its outputs)."""
     run.add_argument("scene", help="a named scene (see 'wuerfel-cvx scenes') or a .toml path")
     run.add_argument("--dt", type=float, default=0.01, help="time step in s (default 0.01)")
     run.add_argument("--steps", type=int, default=200, help="number of steps (default 200)")
@@ -70,6 +65,16 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write an animation here (.gif; .mp4 needs ffmpeg)")
     run.add_argument("--fps", type=float, default=25.0,
                      help="animation frames per simulated second (default 25)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``wuerfel-cvx`` command."""
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"{PROG} {package_version()}")
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    _add_simulate_arguments(commands.add_parser(
+        "simulate", help="simulate a scene and print a summary"))
 
     bench = commands.add_parser("bench", help="run a benchmark suite (rows append; resumes)")
     bench.add_argument("--suite", required=True,
