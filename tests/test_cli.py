@@ -342,7 +342,8 @@ def test_ctrl_c_keeps_the_steps_done(tmp_path: Path, monkeypatch: pytest.MonkeyP
     assert status == 130
     assert captured.out == ""  # no summary of a run that did not end
     assert captured.err.splitlines()[-1] == (
-        f"wuerfel-cvx: interrupted during step 4; kept 3 steps in {out}.npz and {gif}")
+        f"wuerfel-cvx: interrupted during step 4 of 300; kept the 3 steps done in {out}.npz "
+        f"and {gif}")
     assert "Traceback" not in captured.err
     kept = Trajectory.load(f"{out}.npz")
     assert kept.n_steps == 3 and len(kept.metrics) == 3
@@ -354,8 +355,8 @@ def test_ctrl_c_without_outputs_says_so(monkeypatch: pytest.MonkeyPatch,
                                         capsys: pytest.CaptureFixture[str]) -> None:
     _interrupt_after(2, monkeypatch)
     assert main(["simulate", "tilted-drop", "--no-progress"]) == 130
-    assert capsys.readouterr().err == ("wuerfel-cvx: interrupted during step 3; kept 2 steps "
-                                       "(no --out or --animate to keep them in)\n")
+    assert capsys.readouterr().err == ("wuerfel-cvx: interrupted during step 3 of 200; kept the "
+                                       "2 steps done (no --out or --animate to keep them in)\n")
 
 
 def test_ctrl_c_outside_a_run_is_one_line(monkeypatch: pytest.MonkeyPatch,
@@ -391,5 +392,6 @@ def test_ctrl_c_before_any_trajectory_keeps_nothing(tmp_path: Path,
 
     monkeypatch.setattr(cli, "simulate", stopped)
     assert main(["simulate", "tilted-drop", "--out", str(tmp_path / "run")]) == 130
-    assert capsys.readouterr().err == "wuerfel-cvx: interrupted during step 1; kept no steps\n"
+    assert capsys.readouterr().err == ("wuerfel-cvx: interrupted during step 1 of 200; kept no "
+                                       "steps\n")
     assert list(tmp_path.iterdir()) == []

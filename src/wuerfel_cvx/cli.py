@@ -17,6 +17,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from ._entry import INTERRUPTED, PROG
 from .errors import InputError, Interrupted, StepFailure
 from .formulations import FORMULATIONS, FRICTION_MODELS
 from .library import ENTRIES
@@ -24,8 +25,6 @@ from .simulate import simulate
 from .sleep import SleepSettings
 from .solvers import SOLVERS, TOLERANCE_PRESETS, available_solvers
 from .trajectory import Trajectory
-
-PROG = "wuerfel-cvx"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -137,8 +136,8 @@ def package_version() -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
-    args = build_parser().parse_args(argv)
     try:
+        args = build_parser().parse_args(argv)
         if args.command == "scenes":
             width = max(len(entry.pattern) for entry in ENTRIES)
             for entry in ENTRIES:
@@ -181,12 +180,13 @@ def _simulate(args: argparse.Namespace) -> int:
         return 1
     except Interrupted as stop:
         where = _keep_partial(stop.trajectory, args, progress, "done")
-        if stop.trajectory is None:
+        if stop.trajectory is None or stop.trajectory.n_steps == 0:
             kept = "kept no steps"
         else:
-            kept = f"kept {stop.trajectory.n_steps} steps " + (
+            kept = f"kept the {_count(stop.trajectory.n_steps, 'step')} done " + (
                 f"in {where}" if where else "(no --out or --animate to keep them in)")
-        print(f"{PROG}: interrupted during step {stop.step}; {kept}", file=sys.stderr)
+        print(f"{PROG}: interrupted during step {stop.step} of {args.steps}; {kept}",
+              file=sys.stderr)
         return INTERRUPTED
     print(trajectory.summary())
     rescued = trajectory.metrics["status"] != trajectory.metrics["primary_status"]
@@ -202,8 +202,9 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-INTERRUPTED = 130
-"""Exit status of a run stopped by Ctrl-C (128 + SIGINT, as shells report it)."""
+def _count(n: int, noun: str) -> str:
+    """``n`` and ``noun``, plural unless ``n`` is 1: "1 step", "330 steps"."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -250,13 +251,13 @@ def _keep_partial(trajectory: Trajectory | None, args: argparse.Namespace, progr
     if args.out:
         path = _save(trajectory, args.out)
         kept.append(str(path))
-        print(f"{PROG}: saved the {trajectory.n_steps} steps {steps_were} to {path}",
+        print(f"{PROG}: saved the {_count(trajectory.n_steps, 'step')} {steps_were} to {path}",
               file=sys.stderr)
     if args.animate:  # a picture of the run so far
         written = _animate(trajectory, args, progress)
         kept.append(str(written))
-        print(f"{PROG}: animated the {trajectory.n_steps} steps {steps_were} in {written}",
-              file=sys.stderr)
+        print(f"{PROG}: animated the {_count(trajectory.n_steps, 'step')} {steps_were} in "
+              f"{written}", file=sys.stderr)
     return " and ".join(kept)
 
 
@@ -268,7 +269,7 @@ def _animate(trajectory: Trajectory, args: argparse.Namespace, progress: bool) -
 
 def _bench(args: argparse.Namespace) -> int:
     from .bench.suite import Suite
-    from .bench.sweep import run_sweep
+    from .bench.sweep import RESULTS_FILE, run_sweep
 
     dask = None
     if args.dask is not None or args.scheduler is not None:
@@ -278,7 +279,12 @@ def _bench(args: argparse.Namespace) -> int:
         require_distributed(dask.option)  # before the suite is read
     suite = Suite.named(args.suite)
     out = Path(args.out) if args.out else Path("bench-results") / suite.name
-    summary = run_sweep(suite, out, jobs=args.jobs, progress=args.progress, dask=dask)
+    try:
+        summary = run_sweep(suite, out, jobs=args.jobs, progress=args.progress, dask=dask)
+    except KeyboardInterrupt:  # the rows written stay; the points cut short run on resume
+        print(f"{PROG}: interrupted; the finished rows are in {out / RESULTS_FILE}, and the "
+              "same command runs the rest", file=sys.stderr)
+        return INTERRUPTED
     print(f"suite {suite.name}: {summary.ran} grid points run, {summary.skipped_done} already "
           f"done, {len(summary.skipped_unavailable)} skipped (not installed), "
           f"{summary.failed} failed or errored")
@@ -303,10 +309,14 @@ def _robustness(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
             raise InputError(f"must be a non-negative integer, got {getattr(args, name)}",
                              field=f"--{name}")
     words = sys.argv[1:] if argv is None else list(argv)
-    path = write_robustness_report(
-        Path(args.out), args.scenes, args.fuzz, args.seed, steps=args.steps,
-        command=" ".join([PROG, *words]),
-        say=lambda text: print(text, file=sys.stderr))
+    try:
+        path = write_robustness_report(
+            Path(args.out), args.scenes, args.fuzz, args.seed, steps=args.steps,
+            command=" ".join([PROG, *words]),
+            say=lambda text: print(text, file=sys.stderr))
+    except KeyboardInterrupt:  # the report is written whole or not at all
+        print(f"{PROG}: interrupted; {args.out} not written", file=sys.stderr)
+        return INTERRUPTED
     print(f"wrote {path}")
     return 0
 
@@ -334,5 +344,7 @@ def _save(trajectory: Trajectory, out: str) -> Path:
         raise InputError(f"cannot write ({exc.strerror})", source=out, field="--out") from None
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":  # ``python -m wuerfel_cvx`` also takes a Ctrl-C during start-up
+    from ._entry import main as entry
+
+    sys.exit(entry())
