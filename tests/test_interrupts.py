@@ -1,6 +1,6 @@
 """Ctrl-C in real processes: ``simulate``, ``bench`` (one process, a pool, Dask), ``robustness``.
 
-Each test starts ``python -m wuerfel_cvx`` (what the ``wuerfel-cvx`` script runs) in a
+Most tests start ``python -m wuerfel_cvx`` (what the ``wuerfel-cvx`` script runs) in a
 session of its own and sends SIGINT to its whole process group, as a terminal does on
 Ctrl-C.  It then checks what a user sees: exit status 130, one line and no traceback on
 standard error, no process of the command left running, every finished row kept, and the
@@ -22,14 +22,14 @@ from pathlib import Path
 
 import pytest
 
-from wuerfel_cvx.bench import schema
+from wuerfel_cvx.bench import runner, schema
 from wuerfel_cvx.bench.suite import Suite
 from wuerfel_cvx.bench.sweep import RESULTS_FILE
+from wuerfel_cvx.errors import Interrupted, WuerfelError
 from wuerfel_cvx.trajectory import Trajectory
 
-pytestmark = [pytest.mark.subprocess, pytest.mark.integration,
-              pytest.mark.skipif(not Path("/proc/self/stat").exists(),
-                                 reason="reads the process table from /proc (Linux)")]
+LINUX = pytest.mark.skipif(not Path("/proc/self/stat").exists(),
+                           reason="reads the process table from /proc (Linux)")
 
 TIMEOUT = 180.0
 """Seconds a command may take to reach the point where the test presses Ctrl-C."""
@@ -130,7 +130,45 @@ def relay_started(command: Command) -> Callable[[], bool]:
     return lambda: tasks.is_dir() and len(list(tasks.iterdir())) > 1
 
 
+# -------------------------------------------------------------------------- in-process
+@pytest.mark.unit
+def test_ctrl_c_is_not_an_error_that_catch_all_handlers_take() -> None:
+    stop = Interrupted(3)
+    assert isinstance(stop, KeyboardInterrupt)
+    assert not isinstance(stop, Exception) and not isinstance(stop, WuerfelError)
+
+
+@pytest.mark.unit
+def test_a_grid_point_cut_short_by_ctrl_c_becomes_no_row(monkeypatch: pytest.MonkeyPatch,
+                                                         tmp_path: Path) -> None:
+    def interrupted(*args: object, **kwargs: object) -> Trajectory:
+        raise Interrupted(13)
+
+    monkeypatch.setattr(runner, "simulate", interrupted)
+    point = Suite.from_dict({"name": "s", "grid": [{"scenes": ["tilted-drop"],
+                                                    "duration": 0.05}]}).points[0]
+    with pytest.raises(Interrupted):
+        runner.run_point(point, None, tmp_path / "series")
+    assert not (tmp_path / "series").exists()
+
+
+@pytest.mark.subprocess
+def test_the_package_imports_cvxpy_only_when_a_name_needs_it() -> None:
+    code = ("import sys, wuerfel_cvx, wuerfel_cvx._entry\n"
+            "assert 'cvxpy' not in sys.modules and 'numpy' not in sys.modules\n"
+            "import wuerfel_cvx.bench.runner  # imports the module wuerfel_cvx.simulate\n"
+            "from wuerfel_cvx import Scene, simulate\n"
+            "assert callable(simulate) and wuerfel_cvx.simulate is simulate\n"
+            "print(simulate(Scene.named('tilted-drop'), steps=2).n_steps)\n")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=120, check=False)
+    assert (result.returncode, result.stdout) == (0, "2\n"), result.stderr
+
+
 # ---------------------------------------------------------------------------- simulate
+@LINUX
+@pytest.mark.subprocess
+@pytest.mark.integration
 def test_ctrl_c_during_start_up_is_one_line(tmp_path: Path) -> None:
     command = Command(["simulate", "tilted-drop", "--steps", "50"], tmp_path)
     command.wait_until(relay_started(command), "the Ctrl-C relay")  # cvxpy still importing
@@ -139,6 +177,9 @@ def test_ctrl_c_during_start_up_is_one_line(tmp_path: Path) -> None:
     assert (out, err) == ("", "wuerfel-cvx: interrupted\n")
 
 
+@LINUX
+@pytest.mark.subprocess
+@pytest.mark.integration
 def test_ctrl_c_during_osqp_friction_solves_keeps_the_steps_done(tmp_path: Path) -> None:
     # OSQP installs its own SIGINT handler while it iterates; coulomb friction solves a
     # friction problem through cvxpy and OSQP in every step of the card house.
@@ -175,6 +216,9 @@ tols = ["low", "default"]
 """
 
 
+@LINUX
+@pytest.mark.subprocess
+@pytest.mark.integration
 @pytest.mark.parametrize(("executor", "presses"), [
     pytest.param(["--jobs", "1"], 1, id="one-process"),
     pytest.param(["--jobs", "2"], 1, id="pool"),
@@ -214,6 +258,9 @@ def test_ctrl_c_in_a_sweep_keeps_its_rows_and_resume_runs_the_rest(
 
 
 # ------------------------------------------------------------------------- robustness
+@LINUX
+@pytest.mark.subprocess
+@pytest.mark.integration
 def test_ctrl_c_in_robustness_writes_no_report(tmp_path: Path) -> None:
     command = Command(["robustness", "--scenes", "200", "--fuzz", "0", "--out", "report.md"],
                       tmp_path)
