@@ -202,7 +202,7 @@ class DaskExecutor:
         from distributed import as_completed
 
         futures = {self.client.submit(measure_point, point, point_reference(point, out),
-                                      self._scene(point.scene), pure=False): point
+                                      self._scene(point.scene_input), pure=False): point
                    for point in longest_first(todo)}
         for future in as_completed(futures):
             point = futures.pop(future)

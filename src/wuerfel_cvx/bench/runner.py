@@ -147,11 +147,12 @@ def measure_point(point: GridPoint, reference: Reference | None,
                   scene: Scene | None = None) -> PointResult:
     """Run one grid point, writing nothing: its row and series (never raises for a bad config).
 
-    ``scene`` is the point's scene as data; without it, ``point.scene`` is resolved here.
+    ``scene`` is the point's scene as data; without it, ``point.scene_input`` is resolved
+    here.
     """
     base = _configuration(point)
     try:
-        scene = resolve_scene(point.scene if scene is None else scene)  # loaded once
+        scene = resolve_scene(point.scene_input if scene is None else scene)  # loaded once
         base["n_squares"] = scene.n_boxes
         trajectory, failure, disagreement = _simulate(point, scene)
     except Exception as exc:  # any configuration error becomes an error row

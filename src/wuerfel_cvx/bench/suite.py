@@ -110,6 +110,14 @@ class GridPoint:
     """One QP per island instead of one joint QP (``simulate(..., islands=True)``)."""
     friction_model: str | None = DEFAULT_FRICTION_MODEL
     """``simulate(..., friction_model=...)``: ``ccp`` or ``coulomb``; ``None`` for a peer."""
+    scene_file: str | None = None
+    """The scene's TOML file, absolute, when ``scene`` names one: found relative to the suite
+    file as the suite was read.  ``scene`` stays as the suite wrote it, in the point's id."""
+
+    @property
+    def scene_input(self) -> str:
+        """What to load the scene from: its file if it has one, else its library name."""
+        return self.scene_file or self.scene
 
     @property
     def engine(self) -> str:
@@ -149,7 +157,7 @@ class GridPoint:
         if self.reference != "dt/8":
             return None
         formulation = "velocity" if self.formulation == "peer" else self.formulation
-        return (self.scene, formulation, self.dt, self.duration,
+        return (self.scene_input, formulation, self.dt, self.duration,
                 self.friction_model or DEFAULT_FRICTION_MODEL)
 
 
@@ -174,7 +182,7 @@ class Suite:
             raise InputError("no such suite file", source=str(path)) from None
         except tomllib.TOMLDecodeError as exc:
             raise InputError(f"not valid TOML ({exc})", source=str(path)) from None
-        return cls.from_dict(data, source=str(path))
+        return cls.from_dict(data, source=str(path), folder=path.parent)
 
     @classmethod
     def named(cls, name: str) -> Suite:
@@ -192,8 +200,13 @@ class Suite:
                          "or give a .toml path)", source=name)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any], source: str = "suite") -> Suite:
-        """Build from parsed TOML; checks keys and types."""
+    def from_dict(cls, data: dict[str, Any], source: str = "suite",
+                  folder: Path | None = None) -> Suite:
+        """Build from parsed TOML; checks keys and types.
+
+        Scene files are found relative to ``folder`` (the suite file's; default: the
+        working directory); one that is not there is an :class:`InputError`.
+        """
         unknown = set(data) - {"name", "description", "defaults", "grid"}
         if unknown:
             raise InputError(f"unknown keys {sorted(unknown)}", source=source)
@@ -212,7 +225,7 @@ class Suite:
             runnable, left_out = _runnable_peers(settings["peers"])
             skipped.update(left_out)
             settings["solvers"] = [*settings["solvers"], *runnable]
-            points.extend(_expand(name, settings, source, where))
+            points.extend(_expand(name, settings, source, where, folder or Path.cwd()))
         unique = list(dict.fromkeys(points))
         return cls(name, str(data.get("description", "")), tuple(unique),
                    tuple(skipped.values()))
@@ -277,9 +290,12 @@ def _is(value: Any, kind: type) -> bool:
     return isinstance(value, kind)
 
 
-def _expand(suite: str, s: dict[str, Any], source: str, where: str) -> list[GridPoint]:
+def _expand(suite: str, s: dict[str, Any], source: str, where: str,
+            folder: Path) -> list[GridPoint]:
     if "scenes" not in s:
         raise InputError("needs 'scenes'", source=source, field=where)
+    files = {scene: _scene_file(scene, folder, source, f"{where}.scenes")
+             for scene in s["scenes"]}
     duration = s.get("duration")
     if duration is None or not (math.isfinite(duration) and duration > 0):
         raise InputError("needs a positive 'duration' (s)", source=source, field=where)
@@ -311,8 +327,22 @@ def _expand(suite: str, s: dict[str, Any], source: str, where: str) -> list[Grid
                                 float(duration), mass, bool(rod), bool(sleep),
                                 s["reference"], s["compare_every"],
                                 float(s["time_limit"]), islands=bool(islands),
-                                friction_model=friction_model))
+                                friction_model=friction_model, scene_file=files[scene]))
     return points
+
+
+def _scene_file(scene: str, folder: Path, source: str, field: str) -> str | None:
+    """The absolute path of a scene given as a file (relative to ``folder``); else ``None``.
+
+    A file that is not there is an :class:`InputError` now, before any point runs.
+    """
+    if not (scene.endswith(".toml") or "/" in scene or "\\" in scene):
+        return None  # a library name (an unknown one becomes its points' error rows)
+    path = (folder / Path(scene).expanduser()).resolve()
+    if not path.is_file():
+        raise InputError(f"scene file {scene!r} not found (looked for {path})",
+                         source=source, field=field)
+    return str(path)
 
 
 def _friction_model(value: str, source: str, field: str) -> str:
