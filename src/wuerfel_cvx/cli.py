@@ -3,7 +3,8 @@
 ``wuerfel-cvx simulate SCENE ...`` runs a simulation and prints a summary;
 ``wuerfel-cvx bench --suite NAME`` runs a benchmark suite into a results CSV and
 ``wuerfel-cvx report RESULTS.csv`` turns one into ``reports/<suite>/README.md``;
-``wuerfel-cvx robustness`` writes ``reports/robustness.md``;
+``wuerfel-cvx robustness`` checks generated and fuzzed scenes and solver faults (its report
+goes to ``bench-results/robustness.md``, or with ``--report`` to ``reports/robustness.md``);
 ``wuerfel-cvx scenes`` lists the named scenes; ``wuerfel-cvx solvers`` lists the
 installed solvers.  Bad input ends with one line on standard error and exit status 2;
 a failed step ends with status 1, and Ctrl-C with status 130, after saving (and
@@ -90,7 +91,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     robust = commands.add_parser(
         "robustness", help="generated scenes, fuzzed scene files and solver faults "
-                           "-> reports/robustness.md")
+                           f"-> {ROBUSTNESS_OUT} (--report: {ROBUSTNESS_REPORT})")
     robust.add_argument("--scenes", type=int, default=200,
                         help="random valid scenes to simulate and check (default 200)")
     robust.add_argument("--fuzz", type=int, default=2000,
@@ -98,13 +99,24 @@ def build_parser() -> argparse.ArgumentParser:
     robust.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     robust.add_argument("--steps", type=int, default=200,
                         help="steps per generated scene (default 200)")
-    robust.add_argument("--out", default="reports/robustness.md",
-                        help="report file (default reports/robustness.md)")
+    where = robust.add_mutually_exclusive_group()
+    where.add_argument("--out", default=ROBUSTNESS_OUT,
+                       help=f"report file (default {ROBUSTNESS_OUT})")
+    where.add_argument("--report", action="store_const", dest="out",
+                       const=ROBUSTNESS_REPORT,
+                       help=f"write the repository's report, {ROBUSTNESS_REPORT}")
 
     _add_export_parser(commands)
     commands.add_parser("scenes", help="list the named scenes")
     commands.add_parser("solvers", help="list the installed solvers")
     return parser
+
+
+ROBUSTNESS_OUT = "bench-results/robustness.md"
+"""Where ``wuerfel-cvx robustness`` writes by default: beside the sweeps' results, not over
+the committed report."""
+ROBUSTNESS_REPORT = "reports/robustness.md"
+"""The repository's robustness report, written with ``--report``."""
 
 
 def _add_export_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
