@@ -395,3 +395,95 @@ def test_ctrl_c_before_any_trajectory_keeps_nothing(tmp_path: Path,
     assert capsys.readouterr().err == ("wuerfel-cvx: interrupted during step 1 of 200; kept no "
                                        "steps\n")
     assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------- what a new user tripped over (issue 27, item 7)
+@pytest.mark.parametrize("given", ["dirout/", "existing"])
+def test_out_naming_a_folder_writes_the_scene_inside_it(
+        given: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "existing").mkdir()
+    monkeypatch.chdir(tmp_path)
+    assert main(["simulate", "tilted-drop", "--steps", "2", "--out", given]) == 0
+    folder = tmp_path / given.rstrip("/")
+    assert Trajectory.load(folder / "tilted-drop.npz").n_steps == 2
+    assert (folder / "tilted-drop.metrics.csv").is_file()
+    assert not (tmp_path / "dirout.npz").exists()
+    assert f"saved {Path(given.rstrip('/')) / 'tilted-drop.npz'}" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("flags", "note"), [
+    (["--table-mass", "10"], "note: --table-mass 10: the table corners are variables of that "
+                             "mass held still by equalities; the tables do not move"),
+    (["--friction-model", "coulomb"], "note: scene tilted-drop has no friction: "
+                                      "--friction-model coulomb changes nothing"),
+    ([], None),
+])
+def test_options_without_effect_on_the_motion_are_noted(
+        flags: list[str], note: str | None, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", "tilted-drop", "--steps", "2", "--no-progress", *flags]) == 0
+    err = capsys.readouterr().err
+    assert err == ("" if note is None else f"wuerfel-cvx: {note}\n")
+
+
+def test_friction_model_on_a_scene_with_friction_is_no_note(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", "card-house", "--steps", "1", "--no-progress",
+                 "--friction-model", "ccp"]) == 0
+    assert "note:" not in capsys.readouterr().err
+
+
+def test_help_lists_what_the_checks_accept_without_markup(
+        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    from wuerfel_cvx.bench.suite import suite_names
+
+    monkeypatch.setenv("COLUMNS", "1000")  # argparse wraps help at the terminal's width
+    helps = {}
+    for command in ([], ["simulate"], ["bench"], ["robustness"], ["report"], ["export-qps"]):
+        with pytest.raises(SystemExit):
+            main([*command, "--help"])
+        helps[" ".join(command)] = " ".join(capsys.readouterr().out.split())
+    for text in helps.values():
+        assert "``" not in text and ":func:" not in text and ":class:" not in text
+    assert (f"installed: {', '.join(available_solvers())}; default CLARABEL"
+            in helps["simulate"])
+    assert f"suite name ({', '.join(suite_names())})" in helps["bench"]
+    assert main(["bench", "--suite", "no-such-suite"]) == 2
+    assert f"known: {', '.join(suite_names())};" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("scene", "said"), [
+    ("tilted-drop", "scene tilted-drop: 1 square, "),
+    ("plank-drop", "scene plank-drop: 1 box, "),
+])
+def test_the_summary_names_squares_and_boxes(scene: str, said: str) -> None:
+    from wuerfel_cvx import simulate
+
+    assert simulate(scene, steps=1).summary().startswith(said)
+
+
+def test_the_summary_counts_both_kinds() -> None:
+    from wuerfel_cvx.trajectory import _bodies_text
+
+    assert _bodies_text(2, 1) == "2 squares and 1 box"
+    assert (_bodies_text(1, 0), _bodies_text(0, 3), _bodies_text(0, 0)) == (
+        "1 square", "3 boxes", "0 boxes")
+
+
+def test_a_fallback_shared_within_a_step_is_explained() -> None:
+    import pandas as pd
+
+    from wuerfel_cvx.cli import fallback_line
+
+    metrics = pd.DataFrame({"status": ["optimal", "optimal", "optimal"],
+                            "primary_status": ["optimal", "solver_error", "solver_error"],
+                            "solver": ["CLARABEL", "OSQP", "CLARABEL+OSQP"]})
+    run = Trajectory(times=np.zeros(4), points=np.zeros((4, 4, 2)),
+                     velocities=np.zeros((4, 4, 2)), metrics=metrics,
+                     info={"solver": "CLARABEL"})
+    assert fallback_line(run) == (
+        "fallback             2 steps solved by CLARABEL+OSQP, OSQP after CLARABEL failed "
+        "(CLARABEL+OSQP: a step whose QPs were solved partly by each)")
+    metrics.loc[2, "solver"] = "OSQP"
+    assert fallback_line(run) == ("fallback             2 steps solved by OSQP after "
+                                  "CLARABEL failed")

@@ -14,142 +14,27 @@ animating) the steps computed so far.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from ._cli_parser import build_parser
 from ._entry import INTERRUPTED, PROG
 from .errors import InputError, Interrupted, StepFailure
-from .formulations import FORMULATIONS, FRICTION_MODELS
+from .friction import body_friction
 from .library import ENTRIES
-from .simulate import simulate
+from .scene import Scene
+from .simulate import resolve_scene, simulate
 from .sleep import SleepSettings
-from .solvers import SOLVERS, TOLERANCE_PRESETS, available_solvers
+from .solvers import SOLVERS, available_solvers
 from .trajectory import Trajectory
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of the ``wuerfel-cvx`` command."""
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
-    parser.add_argument("--version", action="version", version=f"{PROG} {package_version()}")
-    commands = parser.add_subparsers(dest="command", required=True)
-
-    run = commands.add_parser("simulate", help="simulate a scene and print a summary")
-    run.add_argument("scene", help="a named scene (see 'wuerfel-cvx scenes') or a .toml path")
-    run.add_argument("--dt", type=float, default=0.01, help="time step in s (default 0.01)")
-    run.add_argument("--steps", type=int, default=200, help="number of steps (default 200)")
-    run.add_argument("--solver", default="CLARABEL",
-                     help=f"solver name, case-insensitive (known: {', '.join(SOLVERS)})")
-    run.add_argument("--formulation", default="velocity",
-                     help=f"formulation ({', '.join(FORMULATIONS)}; default velocity)")
-    run.add_argument("--friction-model", default=FRICTION_MODELS[0],
-                     help=f"friction model for scenes with friction ({', '.join(FRICTION_MODELS)}"
-                          f"; default {FRICTION_MODELS[0]})")
-    run.add_argument("--tol", default="default",
-                     help=f"tolerance preset ({', '.join(TOLERANCE_PRESETS)}) or a number")
-    run.add_argument("--table-mass", type=float, default=None,
-                     help="seed variant: table corners as variables of this mass (kg)")
-    run.add_argument("--fallback", action="append", default=[], metavar="NAME",
-                     help="solver to retry a failed step with (repeatable; the metrics "
-                          "record it in 'solver' and the failed status in 'primary_status')")
-    run.add_argument("--sleep", action="store_true",
-                     help="let islands at rest sleep (left out of the QP until touched)")
-    run.add_argument("--islands", action="store_true",
-                     help="solve each island (squares joined by contacts) as its own QP")
-    run.add_argument("--out", default=None,
-                     help="write the trajectory (.npz) and metrics (.metrics.csv) here")
-    run.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
-                     help="progress bar (default: on when standard error is a terminal)")
-    run.add_argument("--animate", default=None, metavar="PATH",
-                     help="write an animation here (.gif; .mp4 needs ffmpeg)")
-    run.add_argument("--fps", type=float, default=25.0,
-                     help="animation frames per simulated second (default 25)")
-
-    bench = commands.add_parser("bench", help="run a benchmark suite (rows append; resumes)")
-    bench.add_argument("--suite", required=True,
-                       help="suite name (benchmarks/<NAME>.toml: smoke, standard, hard, "
-                            "scaling) or a .toml path")
-    bench.add_argument("--out", default=None,
-                       help="results directory (default bench-results/<suite>)")
-    bench.add_argument("--jobs", type=int, default=1,
-                       help="worker processes (default 1; timings are cleanest with 1)")
-    bench.add_argument("--dask", type=int, default=None, metavar="N",
-                       help="run on a dask.distributed LocalCluster of N worker processes "
-                            "(the 'dask' extra)")
-    bench.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                       help="run on the Dask cluster of the scheduler at ADDRESS")
-    bench.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
-                       help="progress bar with ETA (default: on when stderr is a terminal)")
-
-    report = commands.add_parser("report", help="write reports/<suite>/README.md from results")
-    report.add_argument("results", help="a results CSV written by 'wuerfel-cvx bench'")
-    report.add_argument("--root", default="reports",
-                        help="reports directory (default reports)")
-    report.add_argument("--headline", default=None,
-                        help="scene of the large speed/accuracy plot (default: the scene "
-                             "with the most points)")
-
-    robust = commands.add_parser(
-        "robustness", help="generated scenes, fuzzed scene files and solver faults "
-                           f"-> {ROBUSTNESS_OUT} (--report: {ROBUSTNESS_REPORT})")
-    robust.add_argument("--scenes", type=int, default=200,
-                        help="random valid scenes to simulate and check (default 200)")
-    robust.add_argument("--fuzz", type=int, default=2000,
-                        help="mutated scene files to load and step (default 2000)")
-    robust.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    robust.add_argument("--steps", type=int, default=200,
-                        help="steps per generated scene (default 200)")
-    where = robust.add_mutually_exclusive_group()
-    where.add_argument("--out", default=ROBUSTNESS_OUT,
-                       help=f"report file (default {ROBUSTNESS_OUT})")
-    where.add_argument("--report", action="store_const", dest="out",
-                       const=ROBUSTNESS_REPORT,
-                       help=f"write the repository's report, {ROBUSTNESS_REPORT}")
-
-    _add_export_parser(commands)
-    commands.add_parser("scenes", help="list the named scenes")
-    commands.add_parser("solvers", help="list the installed solvers")
-    return parser
-
-
-ROBUSTNESS_OUT = "bench-results/robustness.md"
-"""Where ``wuerfel-cvx robustness`` writes by default: beside the sweeps' results, not over
-the committed report."""
-ROBUSTNESS_REPORT = "reports/robustness.md"
-"""The repository's robustness report, written with ``--report``."""
-
-
-def _add_export_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """The ``export-qps`` subcommand's arguments."""
-    export = commands.add_parser(
-        "export-qps", help="write a suite's step QPs as a qpbenchmark test set")
-    export.add_argument("--suite", required=True, help="suite name or a .toml path")
-    export.add_argument("--out", required=True, help="folder of the test set")
-    export.add_argument("--scene", default=None, help="only this scene's runs")
-    export.add_argument("--steps", type=int, default=None,
-                        help="at most this many steps per run (default: the suite's)")
-    export.add_argument("--every", type=int, default=1,
-                        help="keep the QP of step 1 and of every N-th step after (default 1)")
-    export.add_argument("--ours", action="store_true",
-                        help="also solve each QP with our solvers and presets (ours.csv)")
-
-
-def package_version() -> str:
-    """The installed version of the package (from its distribution's metadata)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("wuerfel_cvx")
-    except PackageNotFoundError:  # run from a source tree that was never installed
-        from . import __version__
-
-        return f"{__version__} (not installed)"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     try:
-        args = build_parser().parse_args(argv)
+        args = build_parser(__doc__.splitlines()[0]).parse_args(argv)
         if args.command == "scenes":
             width = max(len(entry.pattern) for entry in ENTRIES)
             for entry in ENTRIES:
@@ -178,9 +63,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _simulate(args: argparse.Namespace) -> int:
     progress = sys.stderr.isatty() if args.progress is None else args.progress
+    args.out = _out_file(args.out, args.scene)
     _check_outputs(args)  # a bad --out, --animate or --fps is reported before the run
+    scene = resolve_scene(args.scene)
+    for note in _notes(scene, args):
+        print(f"{PROG}: note: {note}", file=sys.stderr)
     try:
-        trajectory = simulate(args.scene, dt=args.dt, steps=args.steps, solver=args.solver,
+        trajectory = simulate(scene, dt=args.dt, steps=args.steps, solver=args.solver,
                               formulation=args.formulation, tol=args.tol,
                               table_mass=args.table_mass, progress=progress,
                               sleep=SleepSettings() if args.sleep else None,
@@ -201,17 +90,61 @@ def _simulate(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return INTERRUPTED
     print(trajectory.summary())
-    rescued = trajectory.metrics["status"] != trajectory.metrics["primary_status"]
-    if rescued.any():
-        print(f"fallback             {int(rescued.sum())} steps solved by "
-              f"{', '.join(sorted(set(trajectory.metrics['solver'][rescued])))} after "
-              f"{trajectory.info['solver']} failed")
+    if (line := fallback_line(trajectory)) is not None:
+        print(line)
     if args.out:
         path = _save(trajectory, args.out)
         print(f"saved {path} and {trajectory.metrics_path(path)}")
     if args.animate:
         print(f"wrote {_animate(trajectory, args, progress)}")
     return 0
+
+
+
+def _notes(scene: Scene, args: argparse.Namespace) -> list[str]:
+    """What the run will not do although the options might suggest it (one line each)."""
+    notes = []
+    if args.friction_model is not None and not (body_friction(scene) > 0).any():
+        notes.append(f"scene {scene.name} has no friction: --friction-model "
+                     f"{args.friction_model} changes nothing")
+    if args.table_mass is not None:
+        notes.append(f"--table-mass {args.table_mass:g}: the table corners are variables of "
+                     f"that mass held still by equalities; the tables do not move")
+    return notes
+
+
+def fallback_line(trajectory: Trajectory) -> str | None:
+    """The summary's line on steps a fallback solver rescued; ``None`` if there were none.
+
+    A step of several QPs (islands, passes) solved partly by each solver shows as
+    ``A+B``, which the line explains.
+    """
+    metrics = trajectory.metrics
+    rescued = metrics["status"] != metrics["primary_status"]
+    if not rescued.any():
+        return None
+    solvers = sorted(set(metrics["solver"][rescued]))
+    line = (f"fallback             {_count(int(rescued.sum()), 'step')} solved by "
+            f"{', '.join(solvers)} after {trajectory.info['solver']} failed")
+    shared = next((name for name in solvers if "+" in name), None)
+    if shared is not None:
+        line += f" ({shared}: a step whose QPs were solved partly by each)"
+    return line
+
+
+def _out_file(out: str | None, scene: str) -> str | None:
+    """``--out`` as a file: a folder (ending in a separator, or existing) gets the scene's name.
+
+    A path that names a ``.npz`` file is taken as one, even where a folder of that name
+    exists (which :func:`_check_outputs` then refuses).
+    """
+    if out is None:
+        return None
+    folder = out.endswith(("/", os.sep)) or (Path(out).is_dir() and Path(out).suffix != ".npz")
+    if not folder:
+        return out
+    name = Path(scene).stem if scene.endswith(".toml") or "/" in scene else scene
+    return str(Path(out) / f"{name}.npz")
 
 
 def _count(n: int, noun: str) -> str:
