@@ -487,3 +487,38 @@ def test_a_fallback_shared_within_a_step_is_explained() -> None:
     metrics.loc[2, "solver"] = "OSQP"
     assert fallback_line(run) == ("fallback             2 steps solved by OSQP after "
                                   "CLARABEL failed")
+
+
+# ------------------------------------------------------- noise (issue 27, item 8)
+def test_a_warning_during_a_run_is_one_line(monkeypatch: pytest.MonkeyPatch,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    import warnings
+
+    import wuerfel_cvx.cli as cli
+    from wuerfel_cvx.coulomb import CoulombNotConverged
+    from wuerfel_cvx.simulate import simulate
+
+    def warning(*args: object, **kwargs: object) -> Trajectory:
+        warnings.warn("step 3: the Coulomb fixed point did not converge in 50 iterations",
+                      CoulombNotConverged, stacklevel=1)
+        return simulate(*args, **kwargs)  # type: ignore[arg-type]
+
+    shown = warnings.showwarning
+    monkeypatch.setattr(cli, "simulate", warning)
+    assert main(["simulate", "tilted-drop", "--steps", "2", "--progress"]) == 0
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if "warning" in line]
+    assert lines == ["wuerfel-cvx: warning: step 3: the Coulomb fixed point did not converge "
+                     "in 50 iterations"], err
+    assert ".py:" not in err and "warnings.warn" not in err
+    assert warnings.showwarning is shown  # Python's own again after the command
+
+
+@pytest.mark.subprocess
+@pytest.mark.skipif("HIGHS" not in available_solvers(), reason="highspy is not installed")
+def test_highs_prints_no_banner(tmp_path: Path) -> None:
+    result = run_cli("simulate", "tilted-drop", "--steps", "2", "--solver", "highs",
+                     cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("scene tilted-drop: 1 square, 2 steps")
+    assert "HiGHS" not in result.stdout + result.stderr

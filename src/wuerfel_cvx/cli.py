@@ -16,8 +16,12 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TextIO
+
+from tqdm.auto import tqdm
 
 from ._cli_parser import build_parser
 from ._entry import INTERRUPTED, PROG
@@ -33,6 +37,20 @@ from .trajectory import Trajectory
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
+    with warnings.catch_warnings():  # put back as they were when the command ends
+        warnings.showwarning = _show_warning
+        return _run(argv)
+
+
+def _show_warning(message: Warning | str, category: type[Warning], filename: str,
+                  lineno: int, file: TextIO | None = None, line: str | None = None) -> None:
+    """A warning as one line, above a progress bar (not Python's file, line and source)."""
+    text = " ".join(str(message).split())
+    tqdm.write(f"{PROG}: warning: {text}", file=sys.stderr)
+
+
+def _run(argv: Sequence[str] | None) -> int:
+    """The command of ``argv``; its exit status."""
     try:
         args = build_parser(__doc__.splitlines()[0]).parse_args(argv)
         if args.command == "scenes":
