@@ -64,7 +64,7 @@ def reference_file_name(key: ReferenceKey) -> str:
     scene, formulation, dt, duration, friction_model = key
     named = key[:4] if friction_model == DEFAULT_FRICTION_MODEL else key
     digest = hashlib.sha1(repr(named).encode("utf-8")).hexdigest()[:10]
-    name = Path(scene).stem if scene.endswith(".toml") else scene  # a scene file by path
+    name = Path(scene).stem if scene.endswith(".toml") or "/" in scene else scene  # a file
     model = "" if friction_model == DEFAULT_FRICTION_MODEL else f"-{friction_model}"
     return f"{name}-{formulation}{model}-dt{dt:g}-T{duration:g}-{digest}.npz"
 
