@@ -342,7 +342,8 @@ def test_ctrl_c_keeps_the_steps_done(tmp_path: Path, monkeypatch: pytest.MonkeyP
     assert status == 130
     assert captured.out == ""  # no summary of a run that did not end
     assert captured.err.splitlines()[-1] == (
-        f"wuerfel-cvx: interrupted during step 4; kept 3 steps in {out}.npz and {gif}")
+        f"wuerfel-cvx: interrupted during step 4 of 300; kept the 3 steps done in {out}.npz "
+        f"and {gif}")
     assert "Traceback" not in captured.err
     kept = Trajectory.load(f"{out}.npz")
     assert kept.n_steps == 3 and len(kept.metrics) == 3
@@ -354,8 +355,8 @@ def test_ctrl_c_without_outputs_says_so(monkeypatch: pytest.MonkeyPatch,
                                         capsys: pytest.CaptureFixture[str]) -> None:
     _interrupt_after(2, monkeypatch)
     assert main(["simulate", "tilted-drop", "--no-progress"]) == 130
-    assert capsys.readouterr().err == ("wuerfel-cvx: interrupted during step 3; kept 2 steps "
-                                       "(no --out or --animate to keep them in)\n")
+    assert capsys.readouterr().err == ("wuerfel-cvx: interrupted during step 3 of 200; kept the "
+                                       "2 steps done (no --out or --animate to keep them in)\n")
 
 
 def test_ctrl_c_outside_a_run_is_one_line(monkeypatch: pytest.MonkeyPatch,
@@ -391,5 +392,133 @@ def test_ctrl_c_before_any_trajectory_keeps_nothing(tmp_path: Path,
 
     monkeypatch.setattr(cli, "simulate", stopped)
     assert main(["simulate", "tilted-drop", "--out", str(tmp_path / "run")]) == 130
-    assert capsys.readouterr().err == "wuerfel-cvx: interrupted during step 1; kept no steps\n"
+    assert capsys.readouterr().err == ("wuerfel-cvx: interrupted during step 1 of 200; kept no "
+                                       "steps\n")
     assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------- what a new user tripped over (issue 27, item 7)
+@pytest.mark.parametrize("given", ["dirout/", "existing"])
+def test_out_naming_a_folder_writes_the_scene_inside_it(
+        given: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "existing").mkdir()
+    monkeypatch.chdir(tmp_path)
+    assert main(["simulate", "tilted-drop", "--steps", "2", "--out", given]) == 0
+    folder = tmp_path / given.rstrip("/")
+    assert Trajectory.load(folder / "tilted-drop.npz").n_steps == 2
+    assert (folder / "tilted-drop.metrics.csv").is_file()
+    assert not (tmp_path / "dirout.npz").exists()
+    assert f"saved {Path(given.rstrip('/')) / 'tilted-drop.npz'}" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("flags", "note"), [
+    (["--table-mass", "10"], "note: --table-mass 10: the table corners are variables of that "
+                             "mass held still by equalities; the tables do not move"),
+    (["--friction-model", "coulomb"], "note: scene tilted-drop has no friction: "
+                                      "--friction-model coulomb changes nothing"),
+    ([], None),
+])
+def test_options_without_effect_on_the_motion_are_noted(
+        flags: list[str], note: str | None, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", "tilted-drop", "--steps", "2", "--no-progress", *flags]) == 0
+    err = capsys.readouterr().err
+    assert err == ("" if note is None else f"wuerfel-cvx: {note}\n")
+
+
+def test_friction_model_on_a_scene_with_friction_is_no_note(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", "card-house", "--steps", "1", "--no-progress",
+                 "--friction-model", "ccp"]) == 0
+    assert "note:" not in capsys.readouterr().err
+
+
+def test_help_lists_what_the_checks_accept_without_markup(
+        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    from wuerfel_cvx.bench.suite import suite_names
+
+    monkeypatch.setenv("COLUMNS", "1000")  # argparse wraps help at the terminal's width
+    helps = {}
+    for command in ([], ["simulate"], ["bench"], ["robustness"], ["report"], ["export-qps"]):
+        with pytest.raises(SystemExit):
+            main([*command, "--help"])
+        helps[" ".join(command)] = " ".join(capsys.readouterr().out.split())
+    for text in helps.values():
+        assert "``" not in text and ":func:" not in text and ":class:" not in text
+    assert (f"installed: {', '.join(available_solvers())}; default CLARABEL"
+            in helps["simulate"])
+    assert f"suite name ({', '.join(suite_names())})" in helps["bench"]
+    assert main(["bench", "--suite", "no-such-suite"]) == 2
+    assert f"known: {', '.join(suite_names())};" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("scene", "said"), [
+    ("tilted-drop", "scene tilted-drop: 1 square, "),
+    ("plank-drop", "scene plank-drop: 1 box, "),
+])
+def test_the_summary_names_squares_and_boxes(scene: str, said: str) -> None:
+    from wuerfel_cvx import simulate
+
+    assert simulate(scene, steps=1).summary().startswith(said)
+
+
+def test_the_summary_counts_both_kinds() -> None:
+    from wuerfel_cvx.trajectory import _bodies_text
+
+    assert _bodies_text(2, 1) == "2 squares and 1 box"
+    assert (_bodies_text(1, 0), _bodies_text(0, 3), _bodies_text(0, 0)) == (
+        "1 square", "3 boxes", "0 boxes")
+
+
+def test_a_fallback_shared_within_a_step_is_explained() -> None:
+    import pandas as pd
+
+    from wuerfel_cvx.cli import fallback_line
+
+    metrics = pd.DataFrame({"status": ["optimal", "optimal", "optimal"],
+                            "primary_status": ["optimal", "solver_error", "solver_error"],
+                            "solver": ["CLARABEL", "OSQP", "CLARABEL+OSQP"]})
+    run = Trajectory(times=np.zeros(4), points=np.zeros((4, 4, 2)),
+                     velocities=np.zeros((4, 4, 2)), metrics=metrics,
+                     info={"solver": "CLARABEL"})
+    assert fallback_line(run) == (
+        "fallback             2 steps solved by CLARABEL+OSQP, OSQP after CLARABEL failed "
+        "(CLARABEL+OSQP: a step whose QPs were solved partly by each)")
+    metrics.loc[2, "solver"] = "OSQP"
+    assert fallback_line(run) == ("fallback             2 steps solved by OSQP after "
+                                  "CLARABEL failed")
+
+
+# ------------------------------------------------------- noise (issue 27, item 8)
+def test_a_warning_during_a_run_is_one_line(monkeypatch: pytest.MonkeyPatch,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    import warnings
+
+    import wuerfel_cvx.cli as cli
+    from wuerfel_cvx.coulomb import CoulombNotConverged
+    from wuerfel_cvx.simulate import simulate
+
+    def warning(*args: object, **kwargs: object) -> Trajectory:
+        warnings.warn("step 3: the Coulomb fixed point did not converge in 50 iterations",
+                      CoulombNotConverged, stacklevel=1)
+        return simulate(*args, **kwargs)  # type: ignore[arg-type]
+
+    shown = warnings.showwarning
+    monkeypatch.setattr(cli, "simulate", warning)
+    assert main(["simulate", "tilted-drop", "--steps", "2", "--progress"]) == 0
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if "warning" in line]
+    assert lines == ["wuerfel-cvx: warning: step 3: the Coulomb fixed point did not converge "
+                     "in 50 iterations"], err
+    assert ".py:" not in err and "warnings.warn" not in err
+    assert warnings.showwarning is shown  # Python's own again after the command
+
+
+@pytest.mark.subprocess
+@pytest.mark.skipif("HIGHS" not in available_solvers(), reason="highspy is not installed")
+def test_highs_prints_no_banner(tmp_path: Path) -> None:
+    result = run_cli("simulate", "tilted-drop", "--steps", "2", "--solver", "highs",
+                     cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("scene tilted-drop: 1 square, 2 steps")
+    assert "HiGHS" not in result.stdout + result.stderr

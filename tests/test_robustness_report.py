@@ -53,6 +53,19 @@ def test_command_writes_a_stamped_report_with_every_section(
     assert not (tmp_path / "reports" / "robustness-crashes").exists()  # nothing crashed
 
 
+@pytest.mark.parametrize(("flags", "written"), [
+    ([], "bench-results/robustness.md"),
+    (["--report"], "reports/robustness.md"),
+])
+def test_the_committed_report_is_written_only_when_asked_for(
+        flags: list[str], written: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)  # as from the repository's root
+    assert main(["robustness", "--scenes", "1", "--fuzz", "1", "--steps", "2", *flags]) == 0
+    assert capsys.readouterr().out == f"wrote {written}\n"
+    assert [str(path.relative_to(tmp_path)) for path in tmp_path.rglob("*.md")] == [written]
+
+
 def test_negative_counts_are_input_errors(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["robustness", "--fuzz", "-1"]) == 2
     assert "--fuzz" in capsys.readouterr().err

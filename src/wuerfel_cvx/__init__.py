@@ -6,19 +6,66 @@
 Each square or box is 4 corner masses joined by 5 rods (the seed paper "Fallende Wuerfel");
 each step minimises ``sum m_i |a_i - g|^2`` (or its velocity form) under rod equalities
 and point-versus-edge inequalities, declared in CVXPY and solved by a chosen solver.
+
+The public names are imported on first use (PEP 562), so that ``import wuerfel_cvx.<x>``
+costs no cvxpy import until it is needed: the command line (:mod:`wuerfel_cvx.__main__`)
+starts taking Ctrl-C before it imports anything heavy.
 """
 
 from __future__ import annotations
 
+import importlib
+import sys
+import types
+from typing import TYPE_CHECKING, Any
+
 from .errors import InputError, Interrupted, StepFailure, WuerfelError
-from .scene import Box, Scene, Square, Table
-from .settings import Settings
-from .simulate import simulate
-from .simulation import Simulation
-from .solvers import available_solvers
-from .trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from .scene import Box, Scene, Square, Table
+    from .settings import Settings
+    from .simulate import simulate
+    from .simulation import Simulation
+    from .solvers import available_solvers
+    from .trajectory import Trajectory
 
 __version__ = "0.1.0"
 
 __all__ = ["Box", "InputError", "Interrupted", "Scene", "Settings", "Simulation", "Square",
            "StepFailure", "Table", "Trajectory", "WuerfelError", "available_solvers", "simulate"]
+
+_LAZY = {"Box": "scene", "Scene": "scene", "Square": "scene", "Table": "scene",
+         "Settings": "settings", "simulate": "simulate", "Simulation": "simulation",
+         "available_solvers": "solvers", "Trajectory": "trajectory"}
+"""Each public name imported on first use, and its module."""
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name on first use."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})
+
+
+class _Package(types.ModuleType):
+    """The package's type: its ``simulate`` stays the function when the module is imported.
+
+    Importing the module ``wuerfel_cvx.simulate`` sets the package's attribute of that name
+    to the module; the function of the same name is the public one (as it was when this
+    file imported it eagerly).
+    """
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name == "simulate" and isinstance(value, types.ModuleType):
+            value = value.simulate
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

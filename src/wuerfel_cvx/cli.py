@@ -3,7 +3,8 @@
 ``wuerfel-cvx simulate SCENE ...`` runs a simulation and prints a summary;
 ``wuerfel-cvx bench --suite NAME`` runs a benchmark suite into a results CSV and
 ``wuerfel-cvx report RESULTS.csv`` turns one into ``reports/<suite>/README.md``;
-``wuerfel-cvx robustness`` writes ``reports/robustness.md``;
+``wuerfel-cvx robustness`` checks generated and fuzzed scenes and solver faults (its report
+goes to ``bench-results/robustness.md``, or with ``--report`` to ``reports/robustness.md``);
 ``wuerfel-cvx scenes`` lists the named scenes; ``wuerfel-cvx solvers`` lists the
 installed solvers.  Bad input ends with one line on standard error and exit status 2;
 a failed step ends with status 1, and Ctrl-C with status 130, after saving (and
@@ -13,143 +14,46 @@ animating) the steps computed so far.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TextIO
 
-from .compiled import NATIVE
+from tqdm.auto import tqdm
+
+from ._cli_parser import build_parser
+from ._entry import INTERRUPTED, PROG
 from .errors import InputError, Interrupted, StepFailure
-from .formulations import FORMULATIONS, FRICTION_MODELS
+from .friction import body_friction
 from .library import ENTRIES
+from .scene import Scene
 from .settings import Settings
-from .simulate import simulate
+from .simulate import resolve_scene, simulate
 from .sleep import SleepSettings
-from .solve import SOLVE_PATHS
-from .solvers import SOLVERS, TOLERANCE_PRESETS, available_solvers
+from .solvers import SOLVERS, available_solvers
 from .trajectory import Trajectory
-
-PROG = "wuerfel-cvx"
-
-
-def _add_simulate_arguments(run: argparse.ArgumentParser) -> None:
-    """The arguments of ``wuerfel-cvx simulate`` (the run's settings, its outputs)."""
-    run.add_argument("scene", help="a named scene (see 'wuerfel-cvx scenes') or a .toml path")
-    run.add_argument("--dt", type=float, default=0.01, help="time step in s (default 0.01)")
-    run.add_argument("--steps", type=int, default=200, help="number of steps (default 200)")
-    run.add_argument("--solver", default="CLARABEL",
-                     help=f"solver name, case-insensitive (known: {', '.join(SOLVERS)})")
-    run.add_argument("--formulation", default="velocity",
-                     help=f"formulation ({', '.join(FORMULATIONS)}; default velocity)")
-    run.add_argument("--friction-model", default=FRICTION_MODELS[0],
-                     help=f"friction model for scenes with friction ({', '.join(FRICTION_MODELS)}"
-                          f"; default {FRICTION_MODELS[0]})")
-    run.add_argument("--tol", default="default",
-                     help=f"tolerance preset ({', '.join(TOLERANCE_PRESETS)}) or a number")
-    run.add_argument("--solve-path", default=NATIVE, choices=SOLVE_PATHS,
-                     help="how the QPs reach the solver: its own API (native, default), a "
-                          "cvxpy problem compiled per structure, or one declared per step")
-    run.add_argument("--table-mass", type=float, default=None,
-                     help="seed variant: table corners as variables of this mass (kg)")
-    run.add_argument("--fallback", action="append", default=[], metavar="NAME",
-                     help="solver to retry a failed step with (repeatable; the metrics "
-                          "record it in 'solver' and the failed status in 'primary_status')")
-    run.add_argument("--sleep", action="store_true",
-                     help="let islands at rest sleep (left out of the QP until touched)")
-    run.add_argument("--islands", action="store_true",
-                     help="solve each island (squares joined by contacts) as its own QP")
-    run.add_argument("--out", default=None,
-                     help="write the trajectory (.npz) and metrics (.metrics.csv) here")
-    run.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
-                     help="progress bar (default: on when standard error is a terminal)")
-    run.add_argument("--animate", default=None, metavar="PATH",
-                     help="write an animation here (.gif; .mp4 needs ffmpeg)")
-    run.add_argument("--fps", type=float, default=25.0,
-                     help="animation frames per simulated second (default 25)")
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of the ``wuerfel-cvx`` command."""
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
-    parser.add_argument("--version", action="version", version=f"{PROG} {package_version()}")
-    commands = parser.add_subparsers(dest="command", required=True)
-
-    _add_simulate_arguments(commands.add_parser(
-        "simulate", help="simulate a scene and print a summary"))
-
-    bench = commands.add_parser("bench", help="run a benchmark suite (rows append; resumes)")
-    bench.add_argument("--suite", required=True,
-                       help="suite name (benchmarks/<NAME>.toml: smoke, standard, hard, "
-                            "scaling) or a .toml path")
-    bench.add_argument("--out", default=None,
-                       help="results directory (default bench-results/<suite>)")
-    bench.add_argument("--jobs", type=int, default=1,
-                       help="worker processes (default 1; timings are cleanest with 1)")
-    bench.add_argument("--dask", type=int, default=None, metavar="N",
-                       help="run on a dask.distributed LocalCluster of N worker processes "
-                            "(the 'dask' extra)")
-    bench.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                       help="run on the Dask cluster of the scheduler at ADDRESS")
-    bench.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
-                       help="progress bar with ETA (default: on when stderr is a terminal)")
-
-    report = commands.add_parser("report", help="write reports/<suite>/README.md from results")
-    report.add_argument("results", help="a results CSV written by 'wuerfel-cvx bench'")
-    report.add_argument("--root", default="reports",
-                        help="reports directory (default reports)")
-    report.add_argument("--headline", default=None,
-                        help="scene of the large speed/accuracy plot (default: the scene "
-                             "with the most points)")
-
-    robust = commands.add_parser(
-        "robustness", help="generated scenes, fuzzed scene files and solver faults "
-                           "-> reports/robustness.md")
-    robust.add_argument("--scenes", type=int, default=200,
-                        help="random valid scenes to simulate and check (default 200)")
-    robust.add_argument("--fuzz", type=int, default=2000,
-                        help="mutated scene files to load and step (default 2000)")
-    robust.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    robust.add_argument("--steps", type=int, default=200,
-                        help="steps per generated scene (default 200)")
-    robust.add_argument("--out", default="reports/robustness.md",
-                        help="report file (default reports/robustness.md)")
-
-    _add_export_parser(commands)
-    commands.add_parser("scenes", help="list the named scenes")
-    commands.add_parser("solvers", help="list the installed solvers")
-    return parser
-
-
-def _add_export_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """The ``export-qps`` subcommand's arguments."""
-    export = commands.add_parser(
-        "export-qps", help="write a suite's step QPs as a qpbenchmark test set")
-    export.add_argument("--suite", required=True, help="suite name or a .toml path")
-    export.add_argument("--out", required=True, help="folder of the test set")
-    export.add_argument("--scene", default=None, help="only this scene's runs")
-    export.add_argument("--steps", type=int, default=None,
-                        help="at most this many steps per run (default: the suite's)")
-    export.add_argument("--every", type=int, default=1,
-                        help="keep the QP of step 1 and of every N-th step after (default 1)")
-    export.add_argument("--ours", action="store_true",
-                        help="also solve each QP with our solvers and presets (ours.csv)")
-
-
-def package_version() -> str:
-    """The installed version of the package (from its distribution's metadata)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("wuerfel_cvx")
-    except PackageNotFoundError:  # run from a source tree that was never installed
-        from . import __version__
-
-        return f"{__version__} (not installed)"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
-    args = build_parser().parse_args(argv)
+    with warnings.catch_warnings():  # put back as they were when the command ends
+        warnings.showwarning = _show_warning
+        return _run(argv)
+
+
+def _show_warning(message: Warning | str, category: type[Warning], filename: str,
+                  lineno: int, file: TextIO | None = None, line: str | None = None) -> None:
+    """A warning as one line, above a progress bar (not Python's file, line and source)."""
+    text = " ".join(str(message).split())
+    tqdm.write(f"{PROG}: warning: {text}", file=sys.stderr)
+
+
+def _run(argv: Sequence[str] | None) -> int:
+    """The command of ``argv``; its exit status."""
     try:
+        args = build_parser(__doc__.splitlines()[0]).parse_args(argv)
         if args.command == "scenes":
             width = max(len(entry.pattern) for entry in ENTRIES)
             for entry in ENTRIES:
@@ -178,34 +82,35 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _simulate(args: argparse.Namespace) -> int:
     progress = sys.stderr.isatty() if args.progress is None else args.progress
+    args.out = _out_file(args.out, args.scene)
     _check_outputs(args)  # a bad --out, --animate or --fps is reported before the run
+    scene = resolve_scene(args.scene)
+    for note in _notes(scene, args):
+        print(f"{PROG}: note: {note}", file=sys.stderr)
     try:
         settings = Settings(dt=args.dt, solver=args.solver, formulation=args.formulation,
                             tol=args.tol, solve_path=args.solve_path,
                             friction_model=args.friction_model, table_mass=args.table_mass,
                             sleep=SleepSettings() if args.sleep else None,
                             islands=args.islands, fallback=tuple(args.fallback))
-        trajectory = simulate(args.scene, steps=args.steps, progress=progress,
-                              settings=settings)
+        trajectory = simulate(scene, steps=args.steps, progress=progress, settings=settings)
     except StepFailure as failure:
         print(f"{PROG}: {failure}", file=sys.stderr)
         _keep_partial(failure.trajectory, args, progress, "before it")
         return 1
     except Interrupted as stop:
         where = _keep_partial(stop.trajectory, args, progress, "done")
-        if stop.trajectory is None:
+        if stop.trajectory is None or stop.trajectory.n_steps == 0:
             kept = "kept no steps"
         else:
-            kept = f"kept {stop.trajectory.n_steps} steps " + (
+            kept = f"kept the {_count(stop.trajectory.n_steps, 'step')} done " + (
                 f"in {where}" if where else "(no --out or --animate to keep them in)")
-        print(f"{PROG}: interrupted during step {stop.step}; {kept}", file=sys.stderr)
+        print(f"{PROG}: interrupted during step {stop.step} of {args.steps}; {kept}",
+              file=sys.stderr)
         return INTERRUPTED
     print(trajectory.summary())
-    rescued = trajectory.metrics["status"] != trajectory.metrics["primary_status"]
-    if rescued.any():
-        print(f"fallback             {int(rescued.sum())} steps solved by "
-              f"{', '.join(sorted(set(trajectory.metrics['solver'][rescued])))} after "
-              f"{trajectory.info['solver']} failed")
+    if (line := fallback_line(trajectory)) is not None:
+        print(line)
     if args.out:
         path = _save(trajectory, args.out)
         print(f"saved {path} and {trajectory.metrics_path(path)}")
@@ -214,8 +119,56 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-INTERRUPTED = 130
-"""Exit status of a run stopped by Ctrl-C (128 + SIGINT, as shells report it)."""
+
+def _notes(scene: Scene, args: argparse.Namespace) -> list[str]:
+    """What the run will not do although the options might suggest it (one line each)."""
+    notes = []
+    if args.friction_model is not None and not (body_friction(scene) > 0).any():
+        notes.append(f"scene {scene.name} has no friction: --friction-model "
+                     f"{args.friction_model} changes nothing")
+    if args.table_mass is not None:
+        notes.append(f"--table-mass {args.table_mass:g}: the table corners are variables of "
+                     f"that mass held still by equalities; the tables do not move")
+    return notes
+
+
+def fallback_line(trajectory: Trajectory) -> str | None:
+    """The summary's line on steps a fallback solver rescued; ``None`` if there were none.
+
+    A step of several QPs (islands, passes) solved partly by each solver shows as
+    ``A+B``, which the line explains.
+    """
+    metrics = trajectory.metrics
+    rescued = metrics["status"] != metrics["primary_status"]
+    if not rescued.any():
+        return None
+    solvers = sorted(set(metrics["solver"][rescued]))
+    line = (f"fallback             {_count(int(rescued.sum()), 'step')} solved by "
+            f"{', '.join(solvers)} after {trajectory.info['solver']} failed")
+    shared = next((name for name in solvers if "+" in name), None)
+    if shared is not None:
+        line += f" ({shared}: a step whose QPs were solved partly by each)"
+    return line
+
+
+def _out_file(out: str | None, scene: str) -> str | None:
+    """``--out`` as a file: a folder (ending in a separator, or existing) gets the scene's name.
+
+    A path that names a ``.npz`` file is taken as one, even where a folder of that name
+    exists (which :func:`_check_outputs` then refuses).
+    """
+    if out is None:
+        return None
+    folder = out.endswith(("/", os.sep)) or (Path(out).is_dir() and Path(out).suffix != ".npz")
+    if not folder:
+        return out
+    name = Path(scene).stem if scene.endswith(".toml") or "/" in scene else scene
+    return str(Path(out) / f"{name}.npz")
+
+
+def _count(n: int, noun: str) -> str:
+    """``n`` and ``noun``, plural unless ``n`` is 1: "1 step", "330 steps"."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -262,13 +215,13 @@ def _keep_partial(trajectory: Trajectory | None, args: argparse.Namespace, progr
     if args.out:
         path = _save(trajectory, args.out)
         kept.append(str(path))
-        print(f"{PROG}: saved the {trajectory.n_steps} steps {steps_were} to {path}",
+        print(f"{PROG}: saved the {_count(trajectory.n_steps, 'step')} {steps_were} to {path}",
               file=sys.stderr)
     if args.animate:  # a picture of the run so far
         written = _animate(trajectory, args, progress)
         kept.append(str(written))
-        print(f"{PROG}: animated the {trajectory.n_steps} steps {steps_were} in {written}",
-              file=sys.stderr)
+        print(f"{PROG}: animated the {_count(trajectory.n_steps, 'step')} {steps_were} in "
+              f"{written}", file=sys.stderr)
     return " and ".join(kept)
 
 
@@ -280,7 +233,7 @@ def _animate(trajectory: Trajectory, args: argparse.Namespace, progress: bool) -
 
 def _bench(args: argparse.Namespace) -> int:
     from .bench.suite import Suite
-    from .bench.sweep import run_sweep
+    from .bench.sweep import RESULTS_FILE, run_sweep
 
     dask = None
     if args.dask is not None or args.scheduler is not None:
@@ -290,7 +243,12 @@ def _bench(args: argparse.Namespace) -> int:
         require_distributed(dask.option)  # before the suite is read
     suite = Suite.named(args.suite)
     out = Path(args.out) if args.out else Path("bench-results") / suite.name
-    summary = run_sweep(suite, out, jobs=args.jobs, progress=args.progress, dask=dask)
+    try:
+        summary = run_sweep(suite, out, jobs=args.jobs, progress=args.progress, dask=dask)
+    except KeyboardInterrupt:  # the rows written stay; the points cut short run on resume
+        print(f"{PROG}: interrupted; the finished rows are in {out / RESULTS_FILE}, and the "
+              "same command runs the rest", file=sys.stderr)
+        return INTERRUPTED
     print(f"suite {suite.name}: {summary.ran} grid points run, {summary.skipped_done} already "
           f"done, {len(summary.skipped_unavailable)} skipped (not installed), "
           f"{summary.failed} failed or errored")
@@ -315,10 +273,14 @@ def _robustness(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
             raise InputError(f"must be a non-negative integer, got {getattr(args, name)}",
                              field=f"--{name}")
     words = sys.argv[1:] if argv is None else list(argv)
-    path = write_robustness_report(
-        Path(args.out), args.scenes, args.fuzz, args.seed, steps=args.steps,
-        command=" ".join([PROG, *words]),
-        say=lambda text: print(text, file=sys.stderr))
+    try:
+        path = write_robustness_report(
+            Path(args.out), args.scenes, args.fuzz, args.seed, steps=args.steps,
+            command=" ".join([PROG, *words]),
+            say=lambda text: print(text, file=sys.stderr))
+    except KeyboardInterrupt:  # the report is written whole or not at all
+        print(f"{PROG}: interrupted; {args.out} not written", file=sys.stderr)
+        return INTERRUPTED
     print(f"wrote {path}")
     return 0
 
@@ -346,5 +308,7 @@ def _save(trajectory: Trajectory, out: str) -> Path:
         raise InputError(f"cannot write ({exc.strerror})", source=out, field="--out") from None
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":  # ``python -m wuerfel_cvx`` also takes a Ctrl-C during start-up
+    from ._entry import main as entry
+
+    sys.exit(entry())

@@ -3,7 +3,8 @@
 Every error a user can cause by bad input is an :class:`InputError`: the command
 line prints it as one line and exits with status 2.  A solver that fails on a step
 raises :class:`StepFailure`, which carries the step, solver and status and the
-trajectory computed so far.
+trajectory computed so far.  Ctrl-C during a run raises :class:`Interrupted`, which is a
+:class:`KeyboardInterrupt`, not an error.
 """
 
 from __future__ import annotations
@@ -64,15 +65,19 @@ class StepFailure(WuerfelError, RuntimeError):
         super().__init__(f"{text} ({detail})" if detail else text)
 
 
-class Interrupted(WuerfelError, KeyboardInterrupt):
+class Interrupted(KeyboardInterrupt):
     """A run stopped by the user (Ctrl-C); it keeps what was computed before.
 
-    A :class:`KeyboardInterrupt`, so code that does not know it stops as before.
+    A :class:`KeyboardInterrupt` and deliberately not an :class:`Exception` (nor a
+    :class:`WuerfelError`): code that turns any exception into a result, such as a
+    benchmark's error row or a robustness finding, lets a Ctrl-C through, and code that
+    does not know it stops as before.
 
     Attributes
     ----------
     step:
-        The 1-based index of the step that was interrupted (not part of ``trajectory``).
+        The 1-based index of the step that was interrupted, one more than the steps in
+        ``trajectory`` (it is not part of it).
     trajectory:
         The trajectory up to the last completed step.
 

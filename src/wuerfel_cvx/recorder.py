@@ -134,9 +134,14 @@ class TrajectoryRecorder:
         self.rows.append(row)
 
     def trajectory(self) -> Trajectory:
-        """The trajectory recorded so far (a copy of the lists' current contents)."""
+        """The trajectory recorded so far (a copy of the lists' current contents).
+
+        Whole steps only: a state whose row a Ctrl-C kept from being recorded is left out.
+        """
+        states = len(self.rows) + 1
         metrics = pd.DataFrame(self.rows, columns=list(METRIC_COLUMNS))
         metrics = metrics.astype({**NULLABLE_COLUMNS, **self.column_dtypes})
-        return Trajectory(times=np.array(self.times), points=np.array(self.points),
-                          velocities=np.array(self.velocities), metrics=metrics,
+        return Trajectory(times=np.array(self.times[:states]),
+                          points=np.array(self.points[:states]),
+                          velocities=np.array(self.velocities[:states]), metrics=metrics,
                           table_points=self.model.table_points.copy(), info=dict(self.info))

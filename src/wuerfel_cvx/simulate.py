@@ -117,9 +117,14 @@ def simulate(
 
 
 def _interrupted(simulation: Simulation) -> Interrupted:
-    """The :class:`Interrupted` of a run stopped during its next step."""
-    interrupted = Interrupted(simulation.step_index + 1)
-    interrupted.trajectory = simulation.trajectory()
+    """The :class:`Interrupted` of a run stopped during its next step.
+
+    Its step is the one after the last recorded: a Ctrl-C while a finished step's contacts
+    are searched leaves the simulation's step index ahead of its recorder.
+    """
+    trajectory = simulation.trajectory()
+    interrupted = Interrupted(trajectory.n_steps + 1)
+    interrupted.trajectory = trajectory
     return interrupted
 
 
@@ -129,8 +134,10 @@ def _noticing_ctrl_c() -> Iterator[threading.Event]:
 
     A solver library that checks for signals while it iterates may take the
     :class:`KeyboardInterrupt` and return a failed status instead; the event tells the loop
-    that the user, not the solver, stopped the step.  Only the main thread can handle
-    signals, and a handler someone else installed is left in place.
+    that the user, not the solver, stopped the step.  (A library that installs its own
+    SIGINT handler, as OSQP and SCS do, takes the signal before Python sees it; the command
+    line relays Ctrl-C so that none can, :mod:`wuerfel_cvx._entry`.)  Only the main thread
+    can handle signals, and a handler someone else installed is left in place.
     """
     noticed = threading.Event()
     if (threading.current_thread() is not threading.main_thread()

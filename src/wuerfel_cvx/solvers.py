@@ -12,6 +12,8 @@ tight setting used by the tests and as the reference.
 from __future__ import annotations
 
 import math
+import os
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cache
@@ -105,6 +107,33 @@ class SolverSpec:
         return package_version(self.package)
 
 
+@cache
+def _quiet_highs() -> dict[str, Any]:
+    """No options; HiGHS's banner swallowed, once per process, before any solve.
+
+    The first ``highspy.Highs()`` of a process prints "Running HiGHS ..." to standard
+    output whatever its options say; it is created here with file descriptor 1 on
+    ``os.devnull`` (the C++ library writes there, not to ``sys.stdout``).
+    """
+    try:
+        import highspy
+    except ImportError:  # not installed: nothing to silence
+        return {}
+    sys.stdout.flush()
+    try:
+        saved = os.dup(1)
+    except OSError:  # no standard output to keep clean
+        return {}
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
+            highspy.Highs()  # type: ignore[no-untyped-call]
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+    return {}
+
+
 SOLVERS: dict[str, SolverSpec] = {
     spec.name: spec
     for spec in (
@@ -142,7 +171,7 @@ SOLVERS: dict[str, SolverSpec] = {
                    timing=Timing(note="its setup_time plus solve_time (dense form built before)")),
         # HiGHS drops matrix entries below small_matrix_value (default 1e-9) from the
         # model; 1e-12 is the floor of that option's range, so only round-off is dropped.
-        SolverSpec("HIGHS", "HIGHS", lambda eps: {
+        SolverSpec("HIGHS", "HIGHS", lambda eps: _quiet_highs() | {
             "primal_feasibility_tolerance": eps, "dual_feasibility_tolerance": eps,
             "small_matrix_value": 1e-12, "output_flag": False}, "active-set (QP)",
             "highspy", ("#e377c2", "X")),

@@ -134,11 +134,18 @@ class Trajectory:
         return animate(self, path, fps=fps, max_frames=max_frames, dpi=dpi, figsize=figsize,
                        progress=progress)
 
+    def _bodies(self) -> str:
+        """The moving bodies as the scene has them: squares and boxes."""
+        scene = self.scene
+        if scene is None:  # a trajectory saved without its scene
+            return _count(self.points.shape[1] // 4, "body", "bodies")
+        return _bodies_text(len(scene.squares), len(scene.boxes))
+
     def summary(self) -> str:
         """A few lines on the run: duration, extremes of the metrics, timing."""
         m = self.metrics
         lines = [
-            f"scene {self.info.get('scene', '?')}: {_count(self.points.shape[1] // 4, 'box')}, "
+            f"scene {self.info.get('scene', '?')}: {self._bodies()}, "
             f"{self.n_steps} steps of {self.info.get('dt', float('nan')):g} s "
             f"({self.times[-1]:g} s simulated)",
             f"formulation {self.info.get('formulation')}, solver {self.info.get('solver')}, "
@@ -161,6 +168,14 @@ class Trajectory:
             ]
             lines += _friction_lines(self.info, m) + _coulomb_lines(m)
         return "\n".join(lines)
+
+
+def _bodies_text(squares: int, boxes: int) -> str:
+    """``"1 square"``, ``"2 squares and 1 box"``, ``"3 boxes"``."""
+    parts = [_count(squares, "square", "squares")] if squares else []
+    if boxes or not squares:
+        parts.append(_count(boxes, "box", "boxes"))
+    return " and ".join(parts)
 
 
 def _friction_lines(info: dict[str, Any], metrics: pd.DataFrame) -> list[str]:
@@ -191,6 +206,6 @@ def _coulomb_lines(metrics: pd.DataFrame) -> list[str]:
     return [line]
 
 
-def _count(number: int, noun: str) -> str:
+def _count(number: int, noun: str, plural: str) -> str:
     """``"1 box"``, ``"3 boxes"``."""
-    return f"{number} {noun}" if number == 1 else f"{number} {noun}es"
+    return f"{number} {noun if number == 1 else plural}"

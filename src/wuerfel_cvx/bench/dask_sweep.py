@@ -26,6 +26,7 @@ travels:
 from __future__ import annotations
 
 import logging
+import signal
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -35,19 +36,21 @@ from typing import TYPE_CHECKING, Any
 from ..errors import InputError
 from ..scene import Scene
 from ..simulate import resolve_scene
+from .ctrl_c import held_ctrl_c
 from .runner import PointResult, error_row, measure_point, save_reference, write_series
 from .suite import GridPoint, ReferenceKey
-from .sweep import longest_first, point_reference, try_reference
+from .sweep import ReferenceKeys, Rows, longest_first, point_reference, try_reference
 
 if TYPE_CHECKING:
-    from distributed import Client, Future
+    from distributed import Client, Future, LocalCluster
 
 EXTRA = "dask"
 """The optional dependency group that installs ``dask[distributed]``."""
 
-PRELOAD = "wuerfel_cvx.bench.runner"
-"""The module a ``LocalCluster``'s workers import as they start, all at once, rather than
-each on its first point (cvxpy and the solvers with it)."""
+PRELOAD = "wuerfel_cvx.bench.dask_worker"
+"""The module a ``LocalCluster``'s workers import as they start: the runner (cvxpy and the
+solvers with it) all at once rather than on each worker's first point, and Ctrl-C left to
+this process (:mod:`wuerfel_cvx.bench.dask_worker`)."""
 
 
 @dataclass(frozen=True)
@@ -86,25 +89,79 @@ def require_distributed(option: str = "--dask") -> None:
 @contextmanager
 def dask_executor(cluster: DaskCluster,
                   note: Callable[[str], None]) -> Iterator[DaskExecutor]:
-    """Start (or join) the cluster, say where its dashboard is, and close it afterwards."""
+    """Start (or join) the cluster, say where its dashboard is, and close it afterwards.
+
+    Starting and closing are not cut short by Ctrl-C (a cluster half started cannot be
+    closed cleanly, :func:`~wuerfel_cvx.bench.ctrl_c.held_ctrl_c`); a Ctrl-C while it
+    starts stops the sweep once it has.
+    """
     require_distributed(cluster.option)
+    _start_resource_tracker()
+    failure: Exception | None = None
+    with held_ctrl_c() as pressed:
+        try:
+            local, client = _start(cluster)
+        except Exception as exc:  # raised below, unless the Ctrl-C caused it
+            failure = exc
+    if failure is not None:
+        if pressed.is_set():  # a worker that took the Ctrl-C as it started
+            raise KeyboardInterrupt from None
+        raise failure
+    try:
+        if pressed.is_set():
+            raise KeyboardInterrupt
+        yield _ready(client, note)
+    finally:
+        with held_ctrl_c():
+            client.close()
+            if local is not None:
+                local.close()
+
+
+def _start_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker from this thread, its signal mask kept.
+
+    Starting it unblocks SIGINT in the thread that does (``resource_tracker.ensure_running``
+    in CPython); left to the cluster's first worker process, that is a thread of Dask's,
+    which would then take the Ctrl-C that the command line's relay must get
+    (:mod:`wuerfel_cvx._entry`).  Once it runs, later starts leave every mask alone.
+    """
+    from multiprocessing import resource_tracker
+
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, ())  # the current mask, unchanged
+    resource_tracker.ensure_running()
+    signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+
+
+def _start(cluster: DaskCluster) -> tuple[LocalCluster | None, Client]:
+    """A new ``LocalCluster`` and its client, or a client of the running scheduler."""
     from distributed import Client, LocalCluster
 
-    if cluster.workers is not None:
-        with LocalCluster(n_workers=cluster.workers, threads_per_worker=1, processes=True,
-                          dashboard_address=":0", silence_logs=logging.ERROR,
-                          preload=[PRELOAD]) as local, \
-                Client(local) as client:
-            yield _ready(client, note)
-        return
+    if cluster.workers is None:
+        return None, _connect(cluster)
+    # CRITICAL: a worker busy with a point when a Ctrl-C closes the cluster loses its
+    # scheduler and logs that as an ERROR with a traceback; a failed point or task is
+    # reported by the sweep itself (an error row, or the task's exception)
+    local = LocalCluster(n_workers=cluster.workers, threads_per_worker=1, processes=True,
+                         dashboard_address=":0", silence_logs=logging.CRITICAL,
+                         preload=[PRELOAD])
+    try:
+        return local, Client(local)
+    except BaseException:
+        local.close()
+        raise
+
+
+def _connect(cluster: DaskCluster) -> Client:
+    """A client of the running scheduler at ``cluster.scheduler``."""
+    from distributed import Client
+
     assert cluster.scheduler is not None
     try:
-        client = Client(cluster.scheduler)
+        return Client(cluster.scheduler)
     except (OSError, ValueError, TypeError) as exc:  # unreachable, or not an address
         raise InputError(f"cannot connect ({exc})", source=cluster.scheduler,
                          field="--scheduler") from None
-    with client:
-        yield _ready(client, note)
 
 
 def _ready(client: Client, note: Callable[[str], None]) -> DaskExecutor:
@@ -122,7 +179,7 @@ class DaskExecutor:
     client: Client
     _scenes: dict[str, Scene | None] = field(default_factory=dict)
 
-    def references(self, needed: dict[ReferenceKey, Path]) -> Iterator[ReferenceKey]:
+    def references(self, needed: dict[ReferenceKey, Path]) -> ReferenceKeys:
         """Run each reference on a worker; save it here as it arrives, and yield its key."""
         from distributed import as_completed
 
@@ -140,12 +197,12 @@ class DaskExecutor:
             yield key
 
     def points(self, todo: list[GridPoint],
-               out: Path) -> Iterator[tuple[GridPoint, dict[str, Any]]]:
+               out: Path) -> Rows:
         """Run each point on a worker; write its series here, and yield its row."""
         from distributed import as_completed
 
         futures = {self.client.submit(measure_point, point, point_reference(point, out),
-                                      self._scene(point.scene), pure=False): point
+                                      self._scene(point.scene_input), pure=False): point
                    for point in longest_first(todo)}
         for future in as_completed(futures):
             point = futures.pop(future)

@@ -63,7 +63,7 @@ def reference_file_name(key: ReferenceKey) -> str:
     scene, formulation, dt, duration, friction_model = key
     named = key[:4] if friction_model == DEFAULT_FRICTION_MODEL else key
     digest = hashlib.sha1(repr(named).encode("utf-8")).hexdigest()[:10]
-    name = Path(scene).stem if scene.endswith(".toml") else scene  # a scene file by path
+    name = Path(scene).stem if scene.endswith(".toml") or "/" in scene else scene  # a file
     model = "" if friction_model == DEFAULT_FRICTION_MODEL else f"-{friction_model}"
     return f"{name}-{formulation}{model}-dt{dt:g}-T{duration:g}-{digest}.npz"
 
@@ -146,11 +146,12 @@ def measure_point(point: GridPoint, reference: Reference | None,
                   scene: Scene | None = None) -> PointResult:
     """Run one grid point, writing nothing: its row and series (never raises for a bad config).
 
-    ``scene`` is the point's scene as data; without it, ``point.scene`` is resolved here.
+    ``scene`` is the point's scene as data; without it, ``point.scene_input`` is resolved
+    here.
     """
     base = _configuration(point)
     try:
-        scene = resolve_scene(point.scene if scene is None else scene)  # loaded once
+        scene = resolve_scene(point.scene_input if scene is None else scene)  # loaded once
         base["n_squares"] = scene.n_boxes
         trajectory, failure, disagreement = _simulate(point, scene)
     except Exception as exc:  # any configuration error becomes an error row

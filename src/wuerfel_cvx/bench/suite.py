@@ -120,6 +120,9 @@ class GridPoint:
     solve_path: str = NATIVE
     """How the QPs reach the solver (:class:`~wuerfel_cvx.solve.SolvePath`); ``native``
     for a peer."""
+    scene_file: str | None = None
+    """The scene's TOML file, absolute, when ``scene`` names one: found relative to the suite
+    file as the suite was read.  ``scene`` stays as the suite wrote it, in the point's id."""
 
     def settings(self) -> Settings:
         """The run's :class:`~wuerfel_cvx.settings.Settings` (not for a peer point)."""
@@ -128,6 +131,11 @@ class GridPoint:
                         friction_model=self.friction_model or DEFAULT_FRICTION_MODEL,
                         table_mass=self.table_mass, extra_rod=self.extra_rod,
                         sleep=SleepSettings() if self.sleep else None, islands=self.islands)
+
+    @property
+    def scene_input(self) -> str:
+        """What to load the scene from: its file if it has one, else its library name."""
+        return self.scene_file or self.scene
 
     @property
     def engine(self) -> str:
@@ -169,7 +177,7 @@ class GridPoint:
         if self.reference != "dt/8":
             return None
         formulation = "velocity" if self.formulation == "peer" else self.formulation
-        return (self.scene, formulation, self.dt, self.duration,
+        return (self.scene_input, formulation, self.dt, self.duration,
                 self.friction_model or DEFAULT_FRICTION_MODEL)
 
 
@@ -194,7 +202,7 @@ class Suite:
             raise InputError("no such suite file", source=str(path)) from None
         except tomllib.TOMLDecodeError as exc:
             raise InputError(f"not valid TOML ({exc})", source=str(path)) from None
-        return cls.from_dict(data, source=str(path))
+        return cls.from_dict(data, source=str(path), folder=path.parent)
 
     @classmethod
     def named(cls, name: str) -> Suite:
@@ -212,8 +220,13 @@ class Suite:
                          "or give a .toml path)", source=name)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any], source: str = "suite") -> Suite:
-        """Build from parsed TOML; checks keys and types."""
+    def from_dict(cls, data: dict[str, Any], source: str = "suite",
+                  folder: Path | None = None) -> Suite:
+        """Build from parsed TOML; checks keys and types.
+
+        Scene files are found relative to ``folder`` (the suite file's; default: the
+        working directory); one that is not there is an :class:`InputError`.
+        """
         unknown = set(data) - {"name", "description", "defaults", "grid"}
         if unknown:
             raise InputError(f"unknown keys {sorted(unknown)}", source=source)
@@ -232,7 +245,7 @@ class Suite:
             runnable, left_out = _runnable_peers(settings["peers"])
             skipped.update(left_out)
             settings["solvers"] = [*settings["solvers"], *runnable]
-            points.extend(_expand(name, settings, source, where))
+            points.extend(_expand(name, settings, source, where, folder or Path.cwd()))
         unique = list(dict.fromkeys(points))
         return cls(name, str(data.get("description", "")), tuple(unique),
                    tuple(skipped.values()))
@@ -297,9 +310,12 @@ def _is(value: Any, kind: type) -> bool:
     return isinstance(value, kind)
 
 
-def _expand(suite: str, s: dict[str, Any], source: str, where: str) -> list[GridPoint]:
+def _expand(suite: str, s: dict[str, Any], source: str, where: str,
+            folder: Path) -> list[GridPoint]:
     if "scenes" not in s:
         raise InputError("needs 'scenes'", source=source, field=where)
+    files = {scene: _scene_file(scene, folder, source, f"{where}.scenes")
+             for scene in s["scenes"]}
     duration = s.get("duration")
     if duration is None or not (math.isfinite(duration) and duration > 0):
         raise InputError("needs a positive 'duration' (s)", source=source, field=where)
@@ -334,9 +350,24 @@ def _expand(suite: str, s: dict[str, Any], source: str, where: str) -> list[Grid
         point = GridPoint(suite, scene, formulation, solver, str(tol), float(dt),
                           float(duration), mass, bool(rod), bool(sleep), s["reference"],
                           s["compare_every"], float(s["time_limit"]), islands=bool(islands),
-                          friction_model=friction_model, solve_path=path)
+                          friction_model=friction_model, solve_path=path,
+                          scene_file=files[scene])
         points.setdefault(point.point_id, point)
     return list(points.values())
+
+
+def _scene_file(scene: str, folder: Path, source: str, field: str) -> str | None:
+    """The absolute path of a scene given as a file (relative to ``folder``); else ``None``.
+
+    A file that is not there is an :class:`InputError` now, before any point runs.
+    """
+    if not (scene.endswith(".toml") or "/" in scene or "\\" in scene):
+        return None  # a library name (an unknown one becomes its points' error rows)
+    path = (folder / Path(scene).expanduser()).resolve()
+    if not path.is_file():
+        raise InputError(f"scene file {scene!r} not found (looked for {path})",
+                         source=source, field=field)
+    return str(path)
 
 
 def _friction_model(value: str, source: str, field: str) -> str:

@@ -11,9 +11,9 @@ either way only the main process writes the results file, and the rows are the s
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from contextlib import AbstractContextManager, nullcontext
+from contextlib import AbstractContextManager, closing, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -26,6 +26,7 @@ from ..peers import PEER_ENGINES, available_peers
 from ..scene import Scene
 from ..solvers import SOLVERS, available_solvers
 from . import schema
+from .ctrl_c import held_ctrl_c, ignore_ctrl_c
 from .runner import (
     Reference,
     load_reference,
@@ -40,6 +41,11 @@ if TYPE_CHECKING:
     from .dask_sweep import DaskCluster
 
 RESULTS_FILE = "results.csv"
+
+ReferenceKeys = Generator[ReferenceKey, None, None]
+"""What an executor yields for the references: each key once its reference is saved."""
+Rows = Generator[tuple[GridPoint, dict[str, Any]], None, None]
+"""What an executor yields for the grid points: each point with its row, as it finishes."""
 
 
 @dataclass(frozen=True)
@@ -97,12 +103,15 @@ def run_sweep(suite: Suite, out: str | Path, *, jobs: int = 1, progress: bool | 
     with _executor(jobs, dask if todo else None, note) as executor, \
             tqdm(total=work, unit="step", disable=not show, desc=suite.name,
                  dynamic_ncols=True) as bar:
-        for key in executor.references(references):
-            bar.update(key_steps(key))
-        for point, row in executor.points(todo, out):
-            schema.append_row(results, row)
-            failed += row["status"] != "ok"
-            bar.update(point.steps)
+        # closing: on Ctrl-C the executor stops its workers now, not when collected
+        with closing(executor.references(references)) as keys:
+            for key in keys:
+                bar.update(key_steps(key))
+        with closing(executor.points(todo, out)) as rows:
+            for point, row in rows:
+                schema.append_row(results, row)
+                failed += row["status"] != "ok"
+                bar.update(point.steps)
     return SweepSummary(results, len(todo), len(runnable) - len(todo), tuple(unavailable),
                         failed)
 
@@ -110,11 +119,11 @@ def run_sweep(suite: Suite, out: str | Path, *, jobs: int = 1, progress: bool | 
 class Executor(Protocol):
     """Where a sweep's references and grid points run; :func:`run_sweep` writes the rows."""
 
-    def references(self, needed: dict[ReferenceKey, Path]) -> Iterator[ReferenceKey]:
+    def references(self, needed: dict[ReferenceKey, Path]) -> ReferenceKeys:
         """Compute each reference and save it to its path; yield its key once saved."""
 
     def points(self, todo: list[GridPoint],
-               out: Path) -> Iterator[tuple[GridPoint, dict[str, Any]]]:
+               out: Path) -> Rows:
         """Run each point, its series written under ``out/series``; yield its row."""
 
 
@@ -124,13 +133,13 @@ class ProcessPool:
 
     jobs: int
 
-    def references(self, needed: dict[ReferenceKey, Path]) -> Iterator[ReferenceKey]:
+    def references(self, needed: dict[ReferenceKey, Path]) -> ReferenceKeys:
         """Compute each reference in a worker, which saves it; yield its key."""
         for key, _ in _run_all(_reference_tasks(needed), self.jobs):
             yield key
 
     def points(self, todo: list[GridPoint],
-               out: Path) -> Iterator[tuple[GridPoint, dict[str, Any]]]:
+               out: Path) -> Rows:
         """Run each point in a worker, which writes its series; yield its row."""
         yield from _run_all(_point_tasks(todo, out), self.jobs)
 
@@ -236,16 +245,45 @@ def _point_job(point: GridPoint, out: Path) -> dict[str, Any]:
     return run_point(point, point_reference(point, out), out / "series")
 
 
-def _run_all(tasks: list[Task], jobs: int) -> Iterator[tuple[Any, Any]]:
-    """Yield ``(label, result)`` as tasks finish, in this process or in ``jobs`` workers."""
+def _run_all(tasks: list[Task], jobs: int) -> Generator[tuple[Any, Any], None, None]:
+    """Yield ``(label, result)`` as tasks finish, in this process or in ``jobs`` workers.
+
+    The workers ignore Ctrl-C (a terminal sends it to them too); this process takes it,
+    stops them at once and raises :class:`KeyboardInterrupt`, so a point cut short
+    leaves no row and no process behind.
+    """
     if jobs == 1 or len(tasks) <= 1:
         for label, function, args in tasks:
             yield label, function(*args)
         return
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=ignore_ctrl_c)
+    try:
         pending: dict[Future[Any], Any] = {pool.submit(function, *args): label
                                            for label, function, args in tasks}
         while pending:
-            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            # with a timeout: a Ctrl-C relayed to this thread (wuerfel_cvx._entry) is
+            # acted on within it, not only when the next point finishes
+            finished, _ = wait(pending, timeout=WAIT_POLL, return_when=FIRST_COMPLETED)
             for future in finished:
                 yield pending.pop(future), future.result()
+    except BaseException:  # Ctrl-C, a failed task, or the consumer stopping early
+        with held_ctrl_c():  # a second Ctrl-C must not leave workers behind
+            _stop_workers(pool)
+        raise
+    pool.shutdown()
+
+
+WAIT_POLL = 0.2
+"""Seconds between looks for a Ctrl-C while waiting for the workers."""
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    """Cancel what has not started and end the workers now, waiting for each to exit."""
+    # ProcessPoolExecutor has no public way to end busy workers before Python 3.14
+    # (terminate_workers); their processes are the executor's ``_processes``.
+    workers = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for worker in workers:
+        worker.terminate()
+    for worker in workers:
+        worker.join(timeout=10)
