@@ -153,7 +153,7 @@ class Contacts:
         boxes, the numbering is mapped back (its inverse); ``None``: they are numbered so
         already.
         """
-        points = np.stack((self.point, self.edge_i, self.edge_j), axis=1).astype(np.int64)
+        points = np.stack((self.point, self.edge_i, self.edge_j), axis=1, dtype=np.int64)
         if boxes is None:
             return points
         body = points // 4

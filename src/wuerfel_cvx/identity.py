@@ -16,13 +16,12 @@ Two things are carried from step to step by it, through one matcher (:class:`Con
   from one step to the next, and from one pass's contacts to the next pass's).
 
 Matching.  :meth:`ContactIndex.of` puts one set of ids in a hash table (open addressing,
-linear probing, a power-of-two size at least twice the count): each id's slot is a hash of
-its columns (products with odd constants, added, then mixed and its high bits taken, all in
-wrapping 64-bit arithmetic); :meth:`ContactIndex.find` looks another set's ids up, comparing
-whole ids, so the answer is exact whatever the hash: each id's place in the indexed set, or
--1.  Time O(n + m) for n indexed and m looked-up ids, where sorting would be O((n + m) log);
-the hashes are NumPy array operations and the probing two compiled loops
-(:func:`~wuerfel_cvx._numba.compiled`).
+linear probing, a power-of-two size at least twice the count); :meth:`ContactIndex.find`
+looks another set's ids up, comparing whole ids, so the answer is exact whatever the hash:
+each id's place in the indexed set, or -1.  Time O(n + m) for n indexed and m looked-up ids
+(sorting would be O((n + m) log(n + m)), and lexicographic sorting of three columns is
+several sorts); each is one compiled loop (:func:`~wuerfel_cvx._numba.compiled`), so a small
+scene pays a call, not a dozen NumPy operations.
 """
 
 from __future__ import annotations
@@ -39,30 +38,28 @@ from .model import IntArray
 ContactIds = IntArray
 """Contacts' ids ``(n, 3)`` int64: each row a contact's ``(point, edge_i, edge_j)``."""
 
-_COLUMN_FACTORS = (0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9)
-"""Odd 64-bit constants, one per id column, whose products with the column are added."""
-_MIX_FACTOR = 0xBF58476D1CE4E5B9
-"""The odd constant whose product's high bits are the slot (multiplicative hashing)."""
 
+@compiled
+def _slot(ids: IntArray, row: int, mask: int) -> int:
+    """Row ``row`` of ``ids``: its first slot in a table of ``mask + 1`` slots (a power of 2).
 
-def _slots(ids: IntArray, bits: int) -> IntArray:
-    """Each id's first slot in a table of ``2**bits`` slots (``1 <= bits <= 63``)."""
-    words = ids.astype(np.uint64)
-    hashed = np.zeros(ids.shape[0], dtype=np.uint64)
+    Each column is folded to 32 bits, mixed in, and the result multiplied by an odd 31-bit
+    constant (a product below 2**63: no overflow, compiled or not) and shifted onto itself.
+    """
+    hashed = 0
     for column in range(ids.shape[1]):
-        factor = np.uint64(_COLUMN_FACTORS[column % len(_COLUMN_FACTORS)])
-        hashed += words[:, column] * factor  # wraps modulo 2**64, as meant
-    hashed ^= hashed >> np.uint64(29)
-    hashed *= np.uint64(_MIX_FACTOR)
-    return (hashed >> np.uint64(64 - bits)).astype(np.int64)
+        value = ids[row, column]
+        hashed = ((hashed ^ value ^ (value >> 32)) & 0xFFFFFFFF) * 0x7FEB352D
+        hashed ^= hashed >> 29
+    return hashed & mask
 
 
 @compiled
-def _table(slots: IntArray, size: int) -> IntArray:
-    """A table of ``size`` (a power of two) slots holding each row's place, -1 where empty."""
+def _table(ids: IntArray, size: int) -> IntArray:
+    """A table of ``size`` (a power of 2) slots holding each row's place, -1 where empty."""
     table = np.full(size, -1, dtype=np.int64)
-    for row in range(slots.shape[0]):
-        slot = slots[row]
+    for row in range(ids.shape[0]):
+        slot = _slot(ids, row, size - 1)
         while table[slot] >= 0:
             slot = (slot + 1) & (size - 1)
         table[slot] = row
@@ -70,12 +67,12 @@ def _table(slots: IntArray, size: int) -> IntArray:
 
 
 @compiled
-def _lookup(table: IntArray, ids: IntArray, wanted: IntArray, slots: IntArray) -> IntArray:
+def _lookup(table: IntArray, ids: IntArray, wanted: IntArray) -> IntArray:
     """Each ``wanted`` row's place in ``ids`` (indexed in ``table``), -1 where it is not."""
     mask = table.shape[0] - 1
     found = np.full(wanted.shape[0], -1, dtype=np.int64)
     for row in range(wanted.shape[0]):
-        slot = slots[row]
+        slot = _slot(wanted, row, mask)
         while table[slot] >= 0:
             held = table[slot]
             same = True
@@ -88,6 +85,27 @@ def _lookup(table: IntArray, ids: IntArray, wanted: IntArray, slots: IntArray) -
                 break
             slot = (slot + 1) & mask
     return found
+
+
+@compiled
+def carry_rows(place: IntArray, values: FloatArray, indexed: int, blocks: int,
+               out: FloatArray) -> int:
+    """Rows of values moved to the contacts found at ``place``, in place; the rows moved.
+
+    ``values`` holds blocks of rows, one row per indexed contact (row ``b * indexed + j``:
+    block ``b``, contact ``j``); ``out`` the same blocks for the ``m = len(place)`` contacts
+    looked up.  For each of the first ``blocks`` blocks and each contact ``k`` found
+    (``place[k] >= 0``), ``out[b * m + k] = values[b * indexed + place[k]]``; other rows
+    keep their value.
+    """
+    count = place.shape[0]
+    moved = 0
+    for k in range(count):
+        if place[k] >= 0:
+            for block in range(blocks):
+                out[block * count + k] = values[block * indexed + place[k]]
+            moved += blocks
+    return moved
 
 
 @dataclass(frozen=True)
@@ -105,8 +123,8 @@ class ContactIndex:
         held = np.ascontiguousarray(ids, dtype=np.int64)
         if held.ndim != 2:
             raise ValueError(f"ids must be (n, k), got shape {held.shape}")
-        bits = max(1, int(2 * held.shape[0] - 1).bit_length())  # 2**bits >= 2 n
-        return cls(held, _table(_slots(held, bits), 1 << bits))
+        size = 1 << max(1, int(2 * held.shape[0] - 1).bit_length())  # >= 2 n
+        return cls(held, _table(held, size))
 
     @classmethod
     def empty(cls) -> ContactIndex:
@@ -121,13 +139,11 @@ class ContactIndex:
         wanted = np.ascontiguousarray(ids, dtype=np.int64)
         if wanted.ndim != 2 or wanted.shape[1] != self.ids.shape[1]:
             raise ValueError(f"ids must be (m, {self.ids.shape[1]}), got shape {wanted.shape}")
-        bits = self._table.shape[0].bit_length() - 1
-        return _lookup(self._table, self.ids, wanted, _slots(wanted, bits))
+        return _lookup(self._table, self.ids, wanted)
 
     def carry(self, values: FloatArray, ids: NDArray[np.integer]) -> FloatArray:
         """``values`` (one per indexed contact) moved to the contacts ``ids``, 0 for a new one."""
         place = self.find(ids)
-        found = place >= 0
         carried = np.zeros(place.shape[0])
-        carried[found] = values[place[found]]
+        carry_rows(place, np.asarray(values, dtype=np.float64), len(self), 1, carried)
         return carried

@@ -31,8 +31,7 @@ import numpy as np
 
 from .formulations.qp import StepQP
 from .geometry import FloatArray
-from .identity import ContactIndex
-from .model import IntArray
+from .identity import ContactIndex, carry_rows
 
 
 def row_blocks(qp: StepQP) -> int | None:
@@ -105,21 +104,11 @@ class WarmStarts:
         eq_dual = (last.eq_dual if last.eq_dual.shape[0] == qp.n_equalities
                    else np.zeros(qp.n_equalities))
         ineq_dual = np.zeros(qp.n_inequalities)
-        new_rows, old_rows = _same_rows(qp, last)
-        ineq_dual[new_rows] = last.ineq_dual[old_rows]
+        blocks = min(row_blocks(qp) or 0, last.blocks)  # the rows (block, contact) of both
+        matched = 0
+        if blocks and last.contacts is not None:
+            matched = carry_rows(last.contacts.find(qp.contacts.ids()), last.ineq_dual,
+                                 len(last.contacts), blocks, ineq_dual)
         self.guesses += 1
-        return WarmStart(x=last.x, eq_dual=eq_dual, ineq_dual=ineq_dual,
-                         matched_rows=int(new_rows.size))
+        return WarmStart(x=last.x, eq_dual=eq_dual, ineq_dual=ineq_dual, matched_rows=matched)
 
-
-def _same_rows(qp: StepQP, last: _Solved) -> tuple[IntArray, IntArray]:
-    """The rows of ``qp`` whose block and contact a row of ``last`` has, and those rows."""
-    blocks = min(row_blocks(qp) or 0, last.blocks)
-    if last.contacts is None or not blocks or not len(last.contacts):
-        none = np.zeros(0, dtype=np.int64)
-        return none, none
-    place = last.contacts.find(qp.contacts.ids())
-    found = np.flatnonzero(place >= 0)
-    block = np.arange(blocks, dtype=np.int64)[:, None]
-    return ((block * len(qp.contacts) + found).ravel(),
-            (block * len(last.contacts) + place[found]).ravel())
