@@ -44,7 +44,7 @@ def _slot(ids: IntArray, row: int, mask: int) -> int:
     """Row ``row`` of ``ids``: its first slot in a table of ``mask + 1`` slots (a power of 2).
 
     Each column is folded to 32 bits, mixed in, and the result multiplied by an odd 31-bit
-    constant (a product below 2**63: no overflow, compiled or not) and shifted onto itself.
+    constant (a product below 2**63: no overflow) and shifted onto itself.
     """
     hashed = 0
     for column in range(ids.shape[1]):
