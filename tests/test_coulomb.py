@@ -27,6 +27,7 @@ from wuerfel_cvx.friction_problem import (
     solve_friction,
     solve_friction_with_fallback,
 )
+from wuerfel_cvx.identity import ContactIndex
 from wuerfel_cvx.model import Model, State
 from wuerfel_cvx.scene import Scene, Square, Table
 from wuerfel_cvx.simulation import Simulation
@@ -342,9 +343,7 @@ def test_an_island_finds_the_impulses_its_contacts_had_in_the_whole_model() -> N
     contacts = find_contacts(model, state.points,
                              get_formulation("velocity").body_reach(model, state, DT))
     impulses = np.arange(1.0, len(contacts) + 1.0)
-    keys = zip(contacts.point.tolist(), contacts.edge_i.tolist(), contacts.edge_j.tolist(),
-               strict=True)
-    memory = FrictionMemory(model.n_boxes, dict(zip(keys, impulses.tolist(), strict=True)))
+    memory = FrictionMemory(model.n_boxes, ContactIndex.of(contacts.ids()), impulses)
     second = np.array([1])
     island = contacts.restricted(second, model.n_boxes, model.n_tables)
     of_second = impulses[(contacts.point_body == 1) | (contacts.edge_body == 1)]

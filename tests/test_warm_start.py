@@ -1,4 +1,4 @@
-"""Warm starts across steps: contact ids, the mapped guess, and runs equal to cold ones."""
+"""Warm starts across steps: rows found by block and contact, and runs equal to cold ones."""
 
 from __future__ import annotations
 
@@ -6,15 +6,15 @@ import dataclasses
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
-from kernel_paths import both
 from qp_bank import AGREEMENT
 from wuerfel_cvx import Scene, Simulation, simulate
 from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations import StepQP, get_formulation, step_qp
 from wuerfel_cvx.model import Model, State
 from wuerfel_cvx.solvers import available_solvers
-from wuerfel_cvx.warm_start import WarmStarts, row_ids
+from wuerfel_cvx.warm_start import WarmStarts, row_blocks
 
 pytestmark = pytest.mark.integration
 
@@ -32,42 +32,55 @@ def _reordered(qp: StepQP, order: np.ndarray) -> StepQP:
     c = qp.contacts
     contacts = Contacts(*(getattr(c, name)[order] for name in
                           ("point", "edge_i", "edge_j", "point_body", "edge_body", "distance")))
+    rows = _reordered_rows(qp, order)
     return StepQP(weights=qp.weights, target=qp.target, eq_matrix=qp.eq_matrix,
-                  eq_rhs=qp.eq_rhs, ineq_matrix=qp.ineq_matrix[order], ineq_rhs=qp.ineq_rhs[order],
+                  eq_rhs=qp.eq_rhs, ineq_matrix=qp.ineq_matrix[rows], ineq_rhs=qp.ineq_rhs[rows],
                   contacts=contacts)
 
 
-def test_a_row_keeps_its_id_when_the_rows_are_reordered() -> None:
-    qp = _qp("stack-3")
-    order = np.arange(len(qp.contacts))[::-1].copy()
-    ids, moved = row_ids(qp), row_ids(_reordered(qp, order))
-    assert ids is not None and moved is not None
-    assert np.unique(ids).size == ids.size  # one id per row
-    assert np.array_equal(moved, ids[order])
+def _reordered_rows(qp: StepQP, order: np.ndarray) -> np.ndarray:
+    """The rows of ``qp`` in the order of :func:`_reordered` ``(qp, order)``'s rows."""
+    blocks, count = row_blocks(qp), len(qp.contacts)
+    assert blocks is not None
+    return (np.arange(blocks)[:, None] * count + order).ravel()
 
 
-def test_velocity_rows_have_one_id_per_block_and_contact() -> None:
-    qp = _qp("stack-3", "velocity")
-    ids = row_ids(qp)
-    assert ids is not None and ids.size == qp.n_inequalities == 2 * len(qp.contacts)
-    assert np.unique(ids).size == ids.size
-
-
-def test_the_guess_carries_each_multiplier_to_the_row_of_the_same_contact() -> None:
-    qp = _qp("stack-3")
-    rows = qp.n_inequalities
-    multipliers = np.arange(1.0, rows + 1)
+@pytest.mark.parametrize(("formulation", "blocks"), [("rigid", 1), ("velocity", 2)])
+def test_the_guess_carries_each_multiplier_to_the_row_of_the_same_block_and_contact(
+        formulation: str, blocks: int) -> None:
+    qp = _qp("stack-3", formulation)
+    assert row_blocks(qp) == blocks and qp.n_inequalities == blocks * len(qp.contacts)
+    multipliers = np.arange(1.0, qp.n_inequalities + 1)
     store = WarmStarts()
     store.remember("OSQP", qp, np.ones(qp.n_variables), np.zeros(0), multipliers, 1.0)
-    order = np.arange(rows)[::-1].copy()
+    order = np.arange(len(qp.contacts))[::-1].copy()
     guess = store.guess("OSQP", _reordered(qp, order), 1.0)
-    assert guess is not None and guess.matched_rows == rows
-    assert np.array_equal(guess.ineq_dual, multipliers[order])
+    assert guess is not None and guess.matched_rows == qp.n_inequalities
+    assert np.array_equal(guess.ineq_dual, multipliers[_reordered_rows(qp, order)])
     dropped = _reordered(qp, order[1:])  # a contact that is gone, none new
     partial = store.guess("OSQP", dropped, 1.0)
-    assert partial is not None and np.array_equal(partial.ineq_dual, multipliers[order[1:]])
+    assert partial is not None
+    assert np.array_equal(partial.ineq_dual, multipliers[_reordered_rows(qp, order[1:])])
     assert store.guess("OSQP", qp, 2.0) is None  # other units: no guess
     assert store.guess("PIQP", qp, 1.0) is None  # another solver's solution is not taken
+
+
+def test_a_new_contact_and_a_new_block_start_from_zero() -> None:
+    rigid = _qp("stack-3", "rigid")
+    count = len(rigid.contacts)
+    store = WarmStarts()
+    store.remember("OSQP", rigid, np.ones(rigid.n_variables), np.zeros(0),
+                   np.arange(1.0, count + 1), 1.0)
+    two_blocks = dataclasses.replace(  # the same contacts, a second block of rows
+        rigid, ineq_matrix=sp.vstack([rigid.ineq_matrix] * 2, format="csr"),
+        ineq_rhs=np.r_[rigid.ineq_rhs, rigid.ineq_rhs])
+    guess = store.guess("OSQP", two_blocks, 1.0)
+    assert guess is not None and guess.matched_rows == count
+    assert np.array_equal(guess.ineq_dual, np.r_[np.arange(1.0, count + 1), np.zeros(count)])
+    moved = dataclasses.replace(rigid, contacts=dataclasses.replace(
+        rigid.contacts, point=rigid.contacts.point + 4))  # every point another body's
+    fresh = store.guess("OSQP", moved, 1.0)
+    assert fresh is not None and fresh.matched_rows == 0 and not fresh.ineq_dual.any()
 
 
 @pytest.mark.parametrize("solver", WARM_SOLVERS)
@@ -102,15 +115,3 @@ def test_warm_starts_save_iterations_on_a_resting_stack(solver: str) -> None:
                          warm_start=warm)
         totals.append(sum(sim.step().solutions[0].iterations for _ in range(20)))
     assert totals[1] < totals[0]
-
-
-@pytest.mark.parametrize("formulation", ["rigid", "velocity"])
-def test_compiled_row_ids_are_the_numpy_ids(monkeypatch: pytest.MonkeyPatch,
-                                            formulation: str) -> None:
-    qp = _qp("stack-3", formulation)
-    reference, compiled = both(monkeypatch, lambda: row_ids(qp))
-    assert reference is not None and compiled is not None
-    assert compiled.dtype == reference.dtype and np.array_equal(compiled, reference)
-    big = dataclasses.replace(qp, contacts=dataclasses.replace(
-        qp.contacts, point=qp.contacts.point + (1 << 16)))  # past the ids' 16 bits
-    assert both(monkeypatch, lambda: row_ids(big)) == [None, None]

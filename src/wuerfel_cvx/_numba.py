@@ -2,9 +2,10 @@
 
 The kernels (:mod:`~wuerfel_cvx.contact_kernel`, :mod:`~wuerfel_cvx.row_kernel`,
 :mod:`~wuerfel_cvx.motion_kernel`, :mod:`~wuerfel_cvx.residual_kernel`,
-:mod:`~wuerfel_cvx.map_kernel`) are plain Python functions over arrays; :func:`compiled`
-hands them to ``numba.njit`` with its default strict IEEE semantics (no fast-math: no
-reassociation, no fused multiply-add), so each operation rounds as NumPy's does.  The
+:mod:`~wuerfel_cvx.map_kernel`, the contact matcher of :mod:`~wuerfel_cvx.identity`) are
+plain Python functions over arrays; :func:`compiled` hands them to ``numba.njit`` with its
+default strict IEEE semantics (no fast-math: no reassociation, no fused multiply-add), so
+each operation rounds as NumPy's does.  The
 machine code is cached on disk (next to the sources, or in ``NUMBA_CACHE_DIR``), so only a
 process that finds no cache pays the compilation.  The NumPy versions they replaced are
 kept in ``tests/reference_kernels.py`` and checked against them bit for bit.
@@ -16,11 +17,6 @@ from collections.abc import Callable
 from typing import Any, TypeVar
 
 import numba
-
-enabled = True
-"""Whether :mod:`wuerfel_cvx.backends._map` and :mod:`wuerfel_cvx.warm_start` run their
-compiled loops (``False``: their NumPy versions, with the same results bit for bit).  The
-rest of the step path has one implementation, the compiled one."""
 
 _Function = TypeVar("_Function", bound=Callable[..., Any])
 

@@ -145,28 +145,22 @@ class Contacts:
                        edge_j=renumbered(kept.edge_j), point_body=new_body[kept.point_body],
                        edge_body=new_body[kept.edge_body])
 
+    def ids(self, boxes: IntArray | None = None, n_boxes: int = 0) -> IntArray:
+        """Each contact's identity ``(point, edge_i, edge_j)``, ``(len, 3)`` int64.
 
-    def keys(self, boxes: IntArray | None = None, n_boxes: int = 0) -> list[ContactKey]:
-        """Each contact's :data:`ContactKey`, in the whole model's numbering.
-
-        For contacts :meth:`restricted` to ``boxes`` of a model with ``n_boxes`` boxes, the
-        numbering is mapped back (its inverse); ``None``: they are numbered so already.
+        The contact's name across steps (:mod:`wuerfel_cvx.identity`), in the whole model's
+        numbering: for contacts :meth:`restricted` to ``boxes`` of a model with ``n_boxes``
+        boxes, the numbering is mapped back (its inverse); ``None``: they are numbered so
+        already.
         """
-        def whole(points: IntArray) -> list[int]:
-            if boxes is None:
-                return points.tolist()  # type: ignore[no-any-return]
-            body = points // 4
-            kept = body < boxes.size
-            old = np.where(kept, boxes[np.minimum(body, boxes.size - 1)],
-                           n_boxes + body - boxes.size)
-            return (4 * old + points % 4).tolist()  # type: ignore[no-any-return]
-
-        return list(zip(whole(self.point), whole(self.edge_i), whole(self.edge_j),
-                        strict=True))
-
-
-ContactKey = tuple[int, int, int]
-"""A contact across steps: its point and its edge's two points (all-points indices)."""
+        points = np.stack((self.point, self.edge_i, self.edge_j), axis=1, dtype=np.int64)
+        if boxes is None:
+            return points
+        body = points // 4
+        kept = body < boxes.size
+        old = np.where(kept, boxes[np.minimum(body, boxes.size - 1)],
+                       n_boxes + body - boxes.size)
+        return np.asarray(4 * old + points % 4, dtype=np.int64)
 
 
 def _lengths(vectors: FloatArray) -> FloatArray:

@@ -58,12 +58,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .contacts import ContactKey, Contacts
+from .contacts import Contacts
 from .errors import InputError
 from .formulations import Formulation, StepQP
 from .friction import ContactForces
 from .friction_problem import FrictionAnswer, FrictionProblem, friction_problem, normal_impulses
 from .geometry import FloatArray
+from .identity import ContactIndex
 from .model import IntArray, Model, State
 from .solve import StepSolution
 from .trajectory import NULLABLE_COLUMNS
@@ -198,8 +199,7 @@ def _carried(values: FloatArray, old: Contacts, new: Contacts) -> FloatArray:
     """``values`` per contact of ``old`` moved to the same contacts of ``new`` (0 elsewhere)."""
     if old is new:
         return values
-    at = {key: k for k, key in enumerate(old.keys()) if k < len(values)}
-    return np.array([values[at[key]] if key in at else 0.0 for key in new.keys()])
+    return ContactIndex.of(old.ids()[:len(values)]).carry(values, new.ids())
 
 
 def _inf(values: FloatArray) -> float:
@@ -208,29 +208,33 @@ def _inf(values: FloatArray) -> float:
 
 @dataclass
 class FrictionMemory:
-    """The friction impulses (N s) of the last step's contacts, by contact key.
+    """The friction impulses (N s) of the last step's contacts, by the contacts' ids.
 
     What ``coulomb_warm_start`` starts the next step's fixed point from.  An island QP
     numbers its bodies on its own (:meth:`~wuerfel_cvx.contacts.Contacts.restricted`);
     ``boxes`` (the island's boxes, ``None``: every box) maps them back
-    (:meth:`~wuerfel_cvx.contacts.Contacts.keys`).
+    (:meth:`~wuerfel_cvx.contacts.Contacts.ids`).
     """
 
     n_boxes: int
     """Boxes of the whole model."""
-    impulses: dict[ContactKey, float] = dataclasses.field(default_factory=dict)
+    contacts: ContactIndex = dataclasses.field(default_factory=ContactIndex.empty)
+    """The last step's contacts, by their ids in the whole model's numbering."""
+    impulses: FloatArray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    """The friction impulse (N s) of each of :attr:`contacts`."""
 
     def initial(self, contacts: Contacts, boxes: IntArray | None) -> FloatArray:
         """The remembered impulse of each of ``contacts`` (0 for a new contact)."""
-        return np.array([self.impulses.get(key, 0.0)
-                         for key in contacts.keys(boxes, self.n_boxes)])
+        return self.contacts.carry(self.impulses, contacts.ids(boxes, self.n_boxes))
 
     def remember(self, steps: Sequence[tuple[CoulombStep, IntArray | None]]) -> None:
         """Keep the impulses the fixed points of one step ended with, forget the rest."""
-        self.impulses = {}
-        for outcome, boxes in steps:
-            self.impulses.update(zip(outcome.qp.contacts.keys(boxes, self.n_boxes),
-                                     map(float, outcome.forces.friction), strict=True))
+        self.contacts = ContactIndex.of(np.concatenate(
+            [np.zeros((0, 3), dtype=np.int64)]
+            + [outcome.qp.contacts.ids(boxes, self.n_boxes) for outcome, boxes in steps]))
+        self.impulses = np.concatenate(
+            [np.zeros(0)] + [np.asarray(outcome.forces.friction, dtype=np.float64)
+                             for outcome, _ in steps])
 
 
 class CoulombNotConverged(RuntimeWarning):

@@ -1,16 +1,18 @@
 """Warm starts across steps: last step's solution mapped onto this step's rows.
 
-A contact keeps its identity from step to step: the point and the edge (its two corner
-indices in the all-points array) name it, whatever its place among the rows.  A step QP's
-inequality rows are its contacts' rows, one block of rows per contact after another (the
-closest-approach rows of ``velocity``: all rate rows, then all approach rows), so each row
-has a *row id* ``(block, point, edge_i, edge_j)`` (:func:`row_ids`).  The next QP's guess
+A contact keeps its identity from step to step: its ids, the point and the edge's two
+corners (:mod:`wuerfel_cvx.identity`), name it, whatever its place among the rows.  A step
+QP's inequality rows are its contacts' rows, one block of rows per contact after another
+(the closest-approach rows of ``velocity``: all rate rows, then all approach rows), so each
+row is named by ``(block, contact)``: row ``block * count + k`` of a QP with ``count``
+contacts is its contact ``k``'s row of that block (:func:`row_blocks`).  The next QP's guess
 (:meth:`WarmStarts.guess`) is then
 
 * the unknowns: the last solution (the same bodies, so the same unknowns);
 * the equality multipliers: the last ones when the equalities are the same rows (rods);
-* each inequality multiplier: that of the row with the same id in the last QP, 0 for a
-  contact that is new.
+* each inequality multiplier: that of the row of the same block and contact in the last QP
+  (the contact found among the last QP's by :class:`~wuerfel_cvx.identity.ContactIndex`),
+  0 for a contact that is new.
 
 A warm start changes where a solver starts, never the problem: an iterative solver
 (PROXQP) stops at the same tolerance, an active-set solver (DAQP) at the same optimum, and
@@ -27,41 +29,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _numba, map_kernel
 from .formulations.qp import StepQP
 from .geometry import FloatArray
-from .model import IntArray
-
-_INDEX_BITS = 16
-"""Bits per point index in a row id: all-points indices below 2**16 (16 384 boxes)."""
+from .identity import ContactIndex, carry_rows
 
 
-def row_ids(qp: StepQP) -> IntArray | None:
-    """One int64 id per inequality row of ``qp``, from its contact and block; ``None``.
+def row_blocks(qp: StepQP) -> int | None:
+    """How many blocks of one row per contact ``qp``'s inequality rows are; ``None`` if not.
 
-    ``None`` when the rows are not one block per contact (friction cones, or a row count
-    that is no multiple of the contacts) or an index does not fit :data:`_INDEX_BITS`.
+    ``None`` when the rows are not one block per contact: friction cones, or a row count
+    that is no multiple of the contacts (or rows without contacts).
     """
     contacts, rows = qp.contacts, qp.n_inequalities
-    count = len(contacts)
     if rows == 0:
-        return np.zeros(0, dtype=np.int64)
-    if qp.cones is not None or count == 0 or rows % count:
+        return 0
+    if qp.cones is not None or len(contacts) == 0 or rows % len(contacts):
         return None
-    if _numba.enabled:  # the same ids, by a compiled loop
-        ids = map_kernel.row_ids(contacts.point.astype(np.int64, copy=False),
-                                 contacts.edge_i.astype(np.int64, copy=False),
-                                 contacts.edge_j.astype(np.int64, copy=False),
-                                 rows // count, _INDEX_BITS)
-        return ids if ids.size else None
-    limit = 1 << _INDEX_BITS
-    if max(int(contacts.point.max()), int(contacts.edge_i.max()),
-           int(contacts.edge_j.max())) >= limit:
-        return None
-    one = ((contacts.point.astype(np.int64) << (2 * _INDEX_BITS))
-           | (contacts.edge_i.astype(np.int64) << _INDEX_BITS)
-           | contacts.edge_j.astype(np.int64))
-    return np.concatenate([one + (block << (3 * _INDEX_BITS)) for block in range(rows // count)])
+    return rows // len(contacts)
 
 
 @dataclass(frozen=True)
@@ -78,12 +62,15 @@ class WarmStart:
 
 @dataclass(frozen=True)
 class _Solved:
-    """The last solution of one solver, in the solver's units, with its rows' ids."""
+    """The last solution of one solver, in the solver's units, with its rows' contacts."""
 
     x: FloatArray
     eq_dual: FloatArray
     ineq_dual: FloatArray
-    ids: IntArray | None
+    contacts: ContactIndex | None
+    """The QP's contacts, by their ids; ``None``: its rows are not blocks of contacts."""
+    blocks: int
+    """The QP's blocks of rows (:func:`row_blocks`)."""
     scale: float
 
 
@@ -92,21 +79,18 @@ class WarmStarts:
     """Each solver's last verified solution and how to map it onto the next QP."""
 
     _last: dict[str, _Solved] = field(default_factory=dict, repr=False)
-    _ids_of: tuple[StepQP, IntArray | None] | None = field(default=None, repr=False)
-    """The last QP given a guess and its row ids, for :meth:`remember` of the same QP."""
     guesses: int = 0
     """QPs given a warm start so far."""
 
     def remember(self, solver: str, qp: StepQP, x: FloatArray, eq_dual: FloatArray,
                  ineq_dual: FloatArray, scale: float) -> None:
         """Keep ``solver``'s solution of ``qp`` (solver units, unknowns scaled by ``scale``)."""
-        ids = self._row_ids(qp)
-        order = None if ids is None else np.argsort(ids, kind="stable")
+        blocks = row_blocks(qp)
         self._last[solver] = _Solved(
             x=np.array(x, dtype=np.float64), eq_dual=np.array(eq_dual, dtype=np.float64),
-            ineq_dual=np.array(ineq_dual if order is None else ineq_dual[order],
-                               dtype=np.float64),
-            ids=None if ids is None or order is None else ids[order], scale=scale)
+            ineq_dual=np.array(ineq_dual, dtype=np.float64),
+            contacts=None if blocks is None else ContactIndex.of(qp.contacts.ids()),
+            blocks=blocks or 0, scale=scale)
 
     def guess(self, solver: str, qp: StepQP, scale: float) -> WarmStart | None:
         """The warm start for ``qp`` from ``solver``'s last solution; ``None`` if none fits.
@@ -120,18 +104,11 @@ class WarmStarts:
         eq_dual = (last.eq_dual if last.eq_dual.shape[0] == qp.n_equalities
                    else np.zeros(qp.n_equalities))
         ineq_dual = np.zeros(qp.n_inequalities)
+        blocks = min(row_blocks(qp) or 0, last.blocks)  # the rows (block, contact) of both
         matched = 0
-        ids = self._row_ids(qp)
-        if ids is not None and last.ids is not None and last.ids.size and ids.size:
-            place = np.minimum(np.searchsorted(last.ids, ids), last.ids.size - 1)
-            hit = last.ids[place] == ids
-            ineq_dual[hit] = last.ineq_dual[place[hit]]
-            matched = int(np.count_nonzero(hit))
+        if blocks and last.contacts is not None:
+            matched = carry_rows(last.contacts.find(qp.contacts.ids()), last.ineq_dual,
+                                 len(last.contacts), blocks, ineq_dual)
         self.guesses += 1
         return WarmStart(x=last.x, eq_dual=eq_dual, ineq_dual=ineq_dual, matched_rows=matched)
 
-    def _row_ids(self, qp: StepQP) -> IntArray | None:
-        """:func:`row_ids` of ``qp``, computed once for its guess and its solution."""
-        if self._ids_of is None or self._ids_of[0] is not qp:
-            self._ids_of = (qp, row_ids(qp))
-        return self._ids_of[1]
