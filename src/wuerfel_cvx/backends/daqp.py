@@ -10,7 +10,11 @@ KKT check on step QPs of the solver bank.  The step QP's own Hessian is positive
 
 with the equalities marked as such (``sense`` 5) and ``h <= G x <= u`` as two-sided rows
 (``u = +inf`` where there is none), so this backend takes it as it is, on every path
-(:attr:`~wuerfel_cvx.solvers.SolverSpec.native`).  DAQP's multipliers ``lam`` enter its
+(:attr:`~wuerfel_cvx.solvers.SolverSpec.native`).  The friction problem's QP
+(:mod:`wuerfel_cvx.friction_problem`) has slacks without weight (``H`` singular, a linear
+cost ``l`` on them): DAQP (0.11) detects the singular ``H`` and solves by proximal-point
+iterations, which converge to the QP's own optimum, stopped at ``eta_prox`` (the registry
+sets it to ``eps``); the answer is checked as any other.  DAQP's multipliers ``lam`` enter its
 Lagrangian as ``H x + f + A' lam = 0``, so the package's ``y`` is ``lam`` on the equalities
 and its ``z = z_lower - z_upper`` is ``-lam`` on the inequalities.
 
