@@ -155,7 +155,7 @@ def test_the_friction_problem_gives_maximal_dissipation_at_the_cone_edge(solver:
 
 
 def friction_problems() -> dict[str, FrictionProblem]:
-    """A few friction problems: sliding, sticking, and with a contact without friction."""
+    """A few friction problems: sliding, sticking, with one or no contact with friction."""
     problems = {}
     for name, qp in {"sliding": sliding_qp(), "sticking": sliding_qp(mu=1.2, speed=0.0),
                      "rigid sliding": sliding_qp(formulation="rigid")}.items():
@@ -164,6 +164,7 @@ def friction_problems() -> dict[str, FrictionProblem]:
     problems["one smooth contact"] = FrictionProblem(sliding.qp, sliding.target,
                                                      sliding.bound * np.array([1.0, 0.0]))
     problems["half bound"] = FrictionProblem(sliding.qp, sliding.target, 0.5 * sliding.bound)
+    problems["no normal impulse"] = FrictionProblem(sliding.qp, sliding.target, 0 * sliding.bound)
     return problems
 
 
@@ -180,6 +181,9 @@ def test_the_friction_qp_solves_the_friction_problem_as_declared_in_cvxpy(solver
         tight = solve_friction(problem, solver_of(solver, tol="high"), "high")
         # the unknowns are unique (positive weights)
         assert np.max(np.abs(tight.x - x)) <= check_high * (1.0 + np.max(np.abs(x))), name
+        if not np.any(problem.bound > 0.0):  # no slack: no impulse (cvxpy's is its noise)
+            assert np.all(tight.friction == 0.0) and np.all(answer.friction == 0.0), name
+            continue
         # so is the box's friction impulse, the sum over its contacts on one table edge (a
         # sticking box may share it between them in other ways, the rods taking the rest),
         # to what the KKT check's stationarity allows, check_high (1 + its terms)
