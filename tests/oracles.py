@@ -10,6 +10,9 @@ way.
   :func:`wuerfel_cvx.formulations.rigid.body_rows` and
   :meth:`~wuerfel_cvx.formulations.RigidFormulation.new_velocities` write directly and
   must reproduce bit for bit.
+* :func:`declared_friction`: the Coulomb fixed point's friction problem declared in cvxpy
+  with ``|S x|`` as it is, which :func:`wuerfel_cvx.friction_problem.friction_qp` must
+  solve to the solver's tolerance.
 
 This is a plain helper module (not a test module); tests import it by name, as pytest puts
 ``tests/`` on ``sys.path``.
@@ -17,10 +20,13 @@ This is a plain helper module (not a test module); tests import it by name, as p
 
 from __future__ import annotations
 
+import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
+from wuerfel_cvx.friction_problem import FrictionProblem
 from wuerfel_cvx.geometry import FloatArray, edge_distances, rot90
+from wuerfel_cvx.solvers import get_solver, tolerance_value
 
 
 def penetration_depth(points: FloatArray, polygon: FloatArray) -> FloatArray:
@@ -66,3 +72,27 @@ def structural_product(left: sp.csr_array, right: sp.csr_array) -> sp.csr_array:
     product = sp.csr_array(left @ right)
     pattern.data = np.asarray(product[rows, pattern.indices], dtype=np.float64).ravel()
     return pattern
+
+
+def declared_friction(problem: FrictionProblem, solver: str,
+                      tol: str | float = "default") -> tuple[FloatArray, FloatArray]:
+    """A friction problem solved as it was declared in cvxpy before it became a step QP.
+
+    ``min sum w (x - t_n)^2 + 2 sum_c b_c |u_c|`` s.t. ``S x - u = 0`` (multiplier ``nu``),
+    ``E x = e``: the unknowns ``x`` and the friction impulse ``lambda_t = -nu / 2`` (N s).
+    """
+    qp = problem.qp
+    assert qp.cones is not None
+    x = cp.Variable(qp.n_variables)
+    slip = cp.Variable(len(problem.bound))
+    slip_constraint = qp.cones.slip @ x - slip == 0
+    constraints = [slip_constraint]
+    if qp.n_equalities:
+        constraints.append(qp.eq_matrix @ x == qp.eq_rhs)
+    cost = (cp.sum_squares(cp.multiply(np.sqrt(qp.weights), x - problem.target))
+            + 2.0 * cp.sum(cp.multiply(problem.bound, cp.abs(slip))))
+    spec = get_solver(solver)
+    cp.Problem(cp.Minimize(cost), constraints).solve(solver=spec.cvxpy_name,
+                                                     **spec.options(tolerance_value(tol)))
+    friction = -0.5 * np.atleast_1d(np.asarray(slip_constraint.dual_value, dtype=np.float64))
+    return np.asarray(x.value, dtype=np.float64), friction

@@ -12,26 +12,34 @@ import warnings
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
+from oracles import declared_friction
 from wuerfel_cvx import simulate
 from wuerfel_cvx.contacts import find_contacts
 from wuerfel_cvx.coulomb import CoulombNotConverged, FrictionMemory, with_friction_impulse
 from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations import VelocityFormulation, get_formulation
 from wuerfel_cvx.friction_problem import (
-    FrictionCache,
     FrictionProblem,
+    QPSolve,
     friction_problem,
     friction_residuals,
     normal_impulses,
     solve_friction,
-    solve_friction_with_fallback,
 )
 from wuerfel_cvx.identity import ContactIndex
 from wuerfel_cvx.model import Model, State
 from wuerfel_cvx.scene import Scene, Square, Table
 from wuerfel_cvx.simulation import Simulation
-from wuerfel_cvx.solve import VERIFY_FACTOR, solve_step_qp
+from wuerfel_cvx.solve import (
+    INVALID_DATA,
+    SOLVE_PATHS,
+    VERIFY_FACTOR,
+    SolvePath,
+    solve_step_qp,
+    solve_with_fallback,
+)
 from wuerfel_cvx.solvers import tolerance_value
 from wuerfel_cvx.trajectory import Trajectory
 
@@ -79,16 +87,17 @@ def fitted_acceleration(traj: Trajectory, theta: float) -> float:
     return float(-2.0 * coefficients[0])
 
 
-def sliding_qp(mu: float = 0.3, theta: float = 0.5):  # type: ignore[no-untyped-def]
-    """The first contact QP of a box on a slope, with the slide under way (coulomb rows)."""
+def sliding_qp(mu: float = 0.3, theta: float = 0.5, speed: float = 0.5,
+               formulation: str = "velocity"):  # type: ignore[no-untyped-def]
+    """The first contact QP of a box on a slope, sliding down at ``speed`` (coulomb rows)."""
     scene = slope(theta, mu)
     model = Model.from_scene(scene)
     start = State.initial(scene)
     tangent = np.array([math.cos(theta), math.sin(theta)])
-    state = State(start.points, np.tile(-0.5 * tangent, (4, 1)))  # sliding down at 0.5 m/s
-    formulation = VelocityFormulation(friction_model="coulomb")
-    contacts = find_contacts(model, state.points, formulation.body_reach(model, state, DT))
-    return formulation.build(model, state, contacts, DT)
+    state = State(start.points, np.tile(-speed * tangent, (4, 1)))
+    chosen = dataclasses.replace(get_formulation(formulation), friction_model="coulomb")
+    contacts = find_contacts(model, state.points, chosen.body_reach(model, state, DT))
+    return chosen.build(model, state, contacts, DT)
 
 
 def test_the_fixed_impulse_enters_the_contact_qp_as_its_work() -> None:
@@ -119,11 +128,17 @@ def test_the_fixed_impulse_enters_the_contact_qp_as_its_work() -> None:
     assert np.max(np.abs(stationarity)) < CHECK * (1.0 + np.max(np.abs(solution.ineq_dual)))
 
 
+def solver_of(*solvers: str, step: int = 1, path: SolvePath | None = None,
+              tol: str = "default") -> QPSolve:
+    """A run's solve function: ``solvers`` (then fallbacks) at tolerance ``tol``."""
+    return lambda qp: solve_with_fallback(qp, solvers, tol, step, path)
+
+
 def solved_friction_problem(solver: str = "CLARABEL"):  # type: ignore[no-untyped-def]
     qp = sliding_qp()
     solution = solve_step_qp(qp, "CLARABEL")
     problem = friction_problem(qp, solution, qp.target)
-    return problem, solve_friction(problem, solver, "default", step=1)
+    return problem, solve_friction(problem, solver_of(solver), "default")
 
 
 @pytest.mark.parametrize("solver", SOLVERS)
@@ -137,6 +152,47 @@ def test_the_friction_problem_gives_maximal_dissipation_at_the_cone_edge(solver:
     # the impulse opposes the slip with its full Coulomb bound mu lambda_n
     np.testing.assert_allclose(-np.sign(slip) * answer.friction, problem.bound, rtol=1e-5,
                                atol=CHECK * np.max(problem.bound))
+
+
+def friction_problems() -> dict[str, FrictionProblem]:
+    """A few friction problems: sliding, sticking, with one or no contact with friction."""
+    problems = {}
+    for name, qp in {"sliding": sliding_qp(), "sticking": sliding_qp(mu=1.2, speed=0.0),
+                     "rigid sliding": sliding_qp(formulation="rigid")}.items():
+        problems[name] = friction_problem(qp, solve_step_qp(qp, "CLARABEL", "high"), qp.target)
+    sliding = problems["sliding"]
+    problems["one smooth contact"] = FrictionProblem(sliding.qp, sliding.target,
+                                                     sliding.bound * np.array([1.0, 0.0]))
+    problems["half bound"] = FrictionProblem(sliding.qp, sliding.target, 0.5 * sliding.bound)
+    problems["no normal impulse"] = FrictionProblem(sliding.qp, sliding.target, 0 * sliding.bound)
+    return problems
+
+
+@pytest.mark.parametrize("solver", (*SOLVERS, "PROXQP", "DAQP"))
+def test_the_friction_qp_solves_the_friction_problem_as_declared_in_cvxpy(solver: str) -> None:
+    check_high = VERIFY_FACTOR * tolerance_value("high")
+    for name, problem in friction_problems().items():
+        # at the run's tolerance: verified, by the solver asked, friction residuals passed
+        answer = solve_friction(problem, solver_of(solver), "default")
+        assert answer.verified and answer.residuals.worst() <= CHECK, name
+        assert answer.solver == solver, name  # no fallback took over
+        # at the tight one: the answer of the problem as it was declared in cvxpy
+        x, friction = declared_friction(problem, "CLARABEL", "high")
+        tight = solve_friction(problem, solver_of(solver, tol="high"), "high")
+        # the unknowns are unique (positive weights)
+        assert np.max(np.abs(tight.x - x)) <= check_high * (1.0 + np.max(np.abs(x))), name
+        if not np.any(problem.bound > 0.0):  # no slack: no impulse (cvxpy's is its noise)
+            assert np.all(tight.friction == 0.0) and np.all(answer.friction == 0.0), name
+            continue
+        # so is the box's friction impulse, the sum over its contacts on one table edge (a
+        # sticking box may share it between them in other ways, the rods taking the rest),
+        # to what the KKT check's stationarity allows, check_high (1 + its terms)
+        impulses = 1.0 + np.max(problem.bound)
+        assert abs(np.sum(tight.friction - friction)) <= check_high * impulses, name
+        # and where a contact slips, its impulse is -mu lambda_n sign(s) in both
+        sliding = np.abs(problem.qp.cones.slip @ x) > 1e-3
+        np.testing.assert_allclose(tight.friction[sliding], friction[sliding], rtol=1e-5,
+                                   atol=check_high * np.max(problem.bound), err_msg=name)
 
 
 @pytest.mark.parametrize("perturb", ["half impulse", "impulse along the slip",
@@ -156,28 +212,49 @@ def test_the_friction_check_catches_a_wrong_answer(perturb: str) -> None:
     assert residuals.worst() > 10.0 * CHECK  # well beyond what verification accepts
 
 
-def test_a_compiled_friction_problem_gives_the_declared_answer() -> None:
+@pytest.mark.parametrize("path_name", SOLVE_PATHS)
+def test_a_friction_problem_repeated_on_a_solve_path_gives_the_same_answer(
+        path_name: str) -> None:
+    # one structure three times: set up, then updated in place (native); declared, then
+    # compiled on its second sighting (compiled); declared each time (declared)
     problem, answer = solved_friction_problem()
-    cache = FrictionCache()
-    first = solve_friction(problem, "CLARABEL", "default", step=1, cache=cache)  # declared
+    path = SolvePath(path_name)
+    first = solve_friction(problem, solver_of("CLARABEL", path=path), "default")
     other = FrictionProblem(problem.qp, problem.target, 0.5 * problem.bound)
-    compiled = solve_friction(other, "CLARABEL", "default", step=2, cache=cache)
-    again = solve_friction(problem, "CLARABEL", "default", step=3, cache=cache)
-    assert len(cache._problems) == 1  # one structure, compiled on its second sighting
-    np.testing.assert_allclose(first.friction, answer.friction, rtol=1e-12)
-    np.testing.assert_allclose(compiled.friction, 0.5 * answer.friction, rtol=1e-5)
+    updated = solve_friction(other, solver_of("CLARABEL", path=path), "default")
+    again = solve_friction(problem, solver_of("CLARABEL", path=path), "default")
+    counts = {"native": (1, 2, 0), "compiled": (0, 0, 1), "declared": (0, 0, 0)}[path_name]
+    assert (path.native_setups, path.native_updates, path.compiled.compiled) == counts
+    np.testing.assert_allclose(first.friction, answer.friction, rtol=1e-5,
+                               atol=CHECK * np.max(problem.bound))
+    np.testing.assert_allclose(updated.friction, 0.5 * answer.friction, rtol=1e-5)
     np.testing.assert_allclose(again.friction, answer.friction, rtol=1e-5,
                                atol=CHECK * np.max(problem.bound))
-    assert compiled.verified and again.verified
+    assert first.verified and updated.verified and again.verified
 
 
 def test_a_failed_friction_problem_names_its_step_and_every_solver() -> None:
     problem, _ = solved_friction_problem()
-    broken = FrictionProblem(problem.qp, np.full_like(problem.target, np.nan), problem.bound)
+    qp = problem.qp
+    assert qp.n_equalities
+    # the rods twice, the second time one of them 1 m/s apart: no x satisfies both
+    contradiction = dataclasses.replace(
+        qp, eq_matrix=sp.csr_array(sp.vstack([qp.eq_matrix, qp.eq_matrix[[0]]])),
+        eq_rhs=np.append(qp.eq_rhs, qp.eq_rhs[0] + 1.0))
+    broken = FrictionProblem(contradiction, problem.target, problem.bound)
     with pytest.raises(StepFailure) as caught:
-        solve_friction_with_fallback(broken, ["CLARABEL", "OSQP"], "default", step=7)
+        solve_friction(broken, solver_of("CLARABEL", "OSQP", step=7), "default")
     assert caught.value.step == 7 and caught.value.solver == "CLARABEL"
     assert "friction problem" in str(caught.value) and "then OSQP failed" in str(caught.value)
+
+
+def test_a_friction_problem_with_non_finite_data_fails_before_any_solver() -> None:
+    problem, _ = solved_friction_problem()
+    broken = FrictionProblem(problem.qp, np.full_like(problem.target, np.nan), problem.bound)
+    with pytest.raises(StepFailure) as caught:
+        solve_friction(broken, solver_of("CLARABEL", "OSQP", step=7), "default")
+    assert caught.value.step == 7 and caught.value.status == INVALID_DATA
+    assert "friction problem: non-finite target" in str(caught.value)
 
 
 def test_a_cone_violation_is_measured_even_where_stationarity_holds() -> None:

@@ -2,7 +2,9 @@
 
 A small QP with all three is solved exactly from its active set (a linear KKT system,
 solved by numpy), independently of every solver path; the KKT check, the fresh
-declaration, the compiled problem and each direct backend are measured against it.
+declaration, the compiled problem and each direct backend are measured against it.  A
+linear cost ``l' x`` on unknowns without weight (the friction problem's form) is measured
+against a QP whose solution is known in closed form.
 """
 
 from __future__ import annotations
@@ -193,7 +195,7 @@ def exact_of(qp: StepQP) -> Exact:
 
 def test_slots_and_structure_follow_the_data() -> None:
     qp = wide_qp()
-    assert qp.slots() == tuple(PARAMETER_SLOTS)  # this QP fills every slot
+    assert qp.slots() == tuple(PARAMETER_SLOTS)[:-1]  # every slot but the linear cost
     plain = dataclasses.replace(qp, ineq_upper=None, cost_factor=None)
     assert plain.slots() == ("weighted_target", "eq_values", "eq_rhs", "ineq_values",
                              "ineq_rhs")
@@ -262,3 +264,78 @@ def test_a_coupled_hessian_is_not_taken_as_diagonal() -> None:
     assert NativeData(coupled).hessian.nnz == 4  # 2 F' F: four entries in four columns
     triangle = NativeData(coupled).upper_triangle
     assert np.array_equal(triangle.toarray(), np.triu(NativeData(coupled).hessian.toarray()))
+
+
+def linear_qp(weight_scale: float = 1.0, scale: float = 1.0) -> StepQP:
+    """``min sum w (x - t)^2 + sum_i |x_i|`` on two unknowns, a third held by ``x_3 = 1``.
+
+    Written as the friction problem is: slacks ``s_i >= |x_i|`` (rows ``x_i + s_i >= 0``,
+    ``-x_i + s_i >= 0``) without weight and with the linear cost ``1`` each.  Weights times
+    ``weight_scale``, data times ``scale``, the cost ``scale weight_scale``: the minimiser
+    times ``scale`` (see :func:`linear_exact`).
+    """
+    rows = np.array([[1.0, 0.0, 0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 0.0, 1.0],
+                     [-1.0, 0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0, 1.0]])
+    return declare_qp(weight_scale * np.array([1.0, 2.0, 1.0, 0.0, 0.0]),
+                      scale * np.array([3.0, -0.1, 0.0, 0.0, 0.0]),
+                      sp.csr_array(np.array([[0.0, 0.0, 1.0, 0.0, 0.0]])), np.array([scale]),
+                      sp.csr_array(rows), np.zeros(4), Contacts.empty(),
+                      linear=scale * weight_scale * np.array([0.0, 0.0, 0.0, 1.0, 1.0]))
+
+
+def linear_exact(weight_scale: float = 1.0, scale: float = 1.0) -> Exact:
+    """:func:`linear_qp`'s solution: ``x_i`` is ``t_i`` soft-thresholded by ``1 / (2 w_i)``.
+
+    ``x_1 = 3 - 1/2`` (row ``-x_1 + s_1 >= 0`` active, ``z = 1``: the whole cost), ``x_2 =
+    0`` (``|t_2| < 1/4``: both rows active, ``z = 0.7`` and ``0.3``, summing to the cost
+    and balancing ``2 w_2 (0 - t_2) = 0.4``), ``x_3 = 1`` with ``y = -2 w_3 (1 - 0)``.
+    Multipliers times ``scale weight_scale``.
+    """
+    c = scale * weight_scale
+    return Exact(scale * np.array([2.5, 0.0, 1.0, 2.5, 0.0]), c * np.array([-2.0]),
+                 c * np.array([0.0, 0.7, 1.0, 0.3]))
+
+
+def test_the_linear_cost_enters_the_gradient() -> None:
+    qp, exact = linear_qp(), linear_exact()
+    assert kkt_residuals(qp, exact.x, exact.y, exact.z).worst() < 1e-15
+    without = dataclasses.replace(qp, linear=None)
+    assert kkt_residuals(without, exact.x, exact.y, exact.z).dual > 1e-2
+    np.testing.assert_allclose(qp.objective_gradient(exact.x),
+                               [-1.0, 0.4, 2.0, 1.0, 1.0], rtol=0, atol=1e-15)
+
+
+def test_a_linear_cost_is_a_slot_and_part_of_the_structure() -> None:
+    qp = linear_qp()
+    assert qp.slots()[-1] == "linear"
+    np.testing.assert_array_equal(PARAMETER_SLOTS["linear"].values(qp), qp.linear)
+    assert qp.structure() != dataclasses.replace(qp, linear=None).structure()
+    assert qp.structure() == linear_qp(scale=2.0).structure()  # the cost is a parameter
+    with pytest.raises(ValueError, match="linear"):
+        declare_qp(qp.weights, qp.target, qp.eq_matrix, qp.eq_rhs, qp.ineq_matrix,
+                   qp.ineq_rhs, qp.contacts, linear=np.ones(2))
+
+
+# HiGHS's QP solver stops about 1e-7 (relative) from this QP's optimum at the high
+# tolerance, where its KKT residuals sit at the verification limit (1.2e-7 on the large data)
+LINEAR_COST_SOLVERS = [name for name in available_solvers() if name != "HIGHS"]
+
+
+@pytest.mark.parametrize("path_name", SOLVE_PATHS)
+@pytest.mark.parametrize("solver", LINEAR_COST_SOLVERS)
+def test_a_linear_cost_is_solved_exactly_on_every_path(solver: str, path_name: str) -> None:
+    # ordinary, light (weights scaled up) and large (data scaled down) data; three solves of
+    # one structure on the path (declared then compiled; or set up then updated in place)
+    for weight_scale, scale in [(1.0, 1.0), (4.0**-7, 1.0), (1.0, 2.0**14)]:
+        exact = linear_exact(weight_scale, scale)
+        path = SolvePath(path_name)
+        for _ in range(3):
+            solution = solve_step_qp(linear_qp(weight_scale, scale), solver, "high", path=path)
+            case = (solution.path, weight_scale, scale)
+            assert solution.verified, (case, solution.residuals)
+            size = 1.0 + float(np.max(np.abs(exact.x)))
+            assert np.max(np.abs(solution.x - exact.x)) <= VERIFY_FACTOR * HIGH * size, case
+            np.testing.assert_allclose(
+                np.concatenate([solution.eq_dual, solution.ineq_dual]),
+                np.concatenate([exact.y, exact.z]), rtol=0, err_msg=str(case),
+                atol=VERIFY_FACTOR * HIGH * size * weight_scale * scale)

@@ -65,6 +65,23 @@ def test_the_guess_carries_each_multiplier_to_the_row_of_the_same_block_and_cont
     assert store.guess("PIQP", qp, 1.0) is None  # another solver's solution is not taken
 
 
+def test_a_qp_with_a_linear_cost_does_not_take_the_step_qps_place() -> None:
+    # the Coulomb fixed point alternates step QPs and friction problems (a linear cost)
+    qp = _qp("stack-3")
+    linear = dataclasses.replace(qp, linear=np.ones(qp.n_variables))
+    store = WarmStarts()
+    multipliers = np.arange(1.0, qp.n_inequalities + 1)
+    store.remember("DAQP", qp, np.ones(qp.n_variables), np.zeros(0), multipliers, 1.0)
+    assert store.guess("DAQP", linear, 1.0) is None  # no friction problem solved yet
+    store.remember("DAQP", linear, np.full(qp.n_variables, 2.0), np.zeros(0),
+                   -multipliers, 1.0)
+    step_guess, linear_guess = store.guess("DAQP", qp, 1.0), store.guess("DAQP", linear, 1.0)
+    assert step_guess is not None and linear_guess is not None
+    assert np.array_equal(step_guess.x, np.ones(qp.n_variables))
+    assert np.array_equal(step_guess.ineq_dual, multipliers)
+    assert np.array_equal(linear_guess.x, np.full(qp.n_variables, 2.0))
+
+
 def test_a_new_contact_and_a_new_block_start_from_zero() -> None:
     rigid = _qp("stack-3", "rigid")
     count = len(rigid.contacts)

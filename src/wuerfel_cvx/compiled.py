@@ -9,7 +9,7 @@ Two of the solve paths of :mod:`wuerfel_cvx.solve` go through cvxpy's public API
     A step QP's *structure* (:meth:`~wuerfel_cvx.formulations.qp.StepQP.structure`: sizes,
     weights, sparsity patterns) is declared once as a disciplined-parametrised problem::
 
-        minimise    sum (sqrt(w) x - sqrt(w) t)^2  +  sum (F(p) x - (F t)(p))^2
+        minimise    sum (sqrt(w) x - sqrt(w) t)^2  +  sum (F(p) x - (F t)(p))^2  +  l(p)' x
         subject to  E(p) x == e(p),  G(p) x >= h(p),  (G(p) x)[r] <= u(p)
 
     with one cvxpy parameter per slot of :data:`~wuerfel_cvx.formulations.qp.PARAMETER_SLOTS`
@@ -71,6 +71,8 @@ def declare(qp: StepQP) -> DeclaredQP:
     cost = cp.sum_squares(cp.multiply(np.sqrt(qp.weights), x - qp.target))
     if qp.cost_factor is not None and qp.n_cost_rows:
         cost = cost + cp.sum_squares(qp.cost_factor @ x - qp.cost_factor @ qp.target)
+    if qp.linear is not None:
+        cost = cost + qp.linear @ x
     constraints: list[cp.Constraint] = []
     eq_constraint = ineq_constraint = upper_constraint = None
     if qp.n_equalities:
@@ -115,6 +117,8 @@ class CompiledQP:
         cost = cp.sum_squares(cp.multiply(np.sqrt(qp.weights), x) - p["weighted_target"])
         if "cost_values" in p:
             cost = cost + cp.sum_squares(p["cost_values"] @ x - p["cost_target"])
+        if "linear" in p:
+            cost = cost + p["linear"] @ x
         constraints: list[cp.Constraint] = []
         eq_constraint = ineq_constraint = upper_constraint = None
         if "eq_values" in p:

@@ -23,9 +23,10 @@ closest-approach rows of a contact add to its impulse).
     subject to  E x = e                 t_n = t + W^-1 G' z / 2
 
 ``t_n`` the unknowns after the contact QP's normal impulses (rods re-solved by ``E x = e``):
-convex, declared in cvxpy, its dual the friction impulse of maximal dissipation in the cone
-``|lambda_t| <= mu lambda_n``, and checked by its own residuals
-(:mod:`wuerfel_cvx.friction_problem`).
+convex, solved as a step QP (a slack per contact, :func:`~wuerfel_cvx.friction_problem.friction_qp`)
+by the contact QPs' own solve function, its multipliers the friction impulse of maximal
+dissipation in the cone ``|lambda_t| <= mu lambda_n``, and checked by its own residuals on
+top of the QP's (:mod:`wuerfel_cvx.friction_problem`).
 
 *Iteration.* From ``lambda_t = 0``, or from the impulses the same contacts had at the end of
 the step before (``coulomb_warm_start``, :class:`FrictionMemory`): contact QP ->
@@ -51,7 +52,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -62,15 +63,18 @@ from .contacts import Contacts
 from .errors import InputError
 from .formulations import Formulation, StepQP
 from .friction import ContactForces
-from .friction_problem import FrictionAnswer, FrictionProblem, friction_problem, normal_impulses
+from .friction_problem import (
+    FrictionAnswer,
+    QPSolve,
+    friction_problem,
+    normal_impulses,
+    solve_friction,
+)
 from .geometry import FloatArray
 from .identity import ContactIndex
 from .model import IntArray, Model, State
 from .solve import StepSolution
 from .trajectory import NULLABLE_COLUMNS
-
-ContactSolve = Callable[[StepQP], tuple[StepSolution, str]]
-"""Solves a contact QP: its solution and the run's own solver's status on it."""
 
 
 @dataclass(frozen=True)
@@ -123,15 +127,15 @@ class CoulombSettings:
 
 
 def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP, dt: float,
-                solve: ContactSolve, solve_friction_problem: Callable[[FrictionProblem],
-                                                                      FrictionAnswer],
-                settings: CoulombSettings, initial: FloatArray | None = None) -> CoulombStep:
+                solve: QPSolve, tol: str | float, settings: CoulombSettings,
+                initial: FloatArray | None = None) -> CoulombStep:
     """Iterate contact QP and friction problem from ``qp`` (see the module docstring).
 
     ``qp`` is the formulation's first pass, with ``qp.cones`` (its contacts with friction);
-    ``solve`` solves a contact QP and ``solve_friction_problem`` a friction problem (each
-    raising :class:`StepFailure` when no solver can).  ``initial`` is the friction impulse
-    (N s) per contact of ``qp`` the first contact QP holds (zero when ``None``).
+    ``solve`` solves the contact QPs and the friction problems' QPs alike (raising
+    :class:`StepFailure` when no solver can), at tolerance ``tol``, which the friction
+    problems' own check takes too.  ``initial`` is the friction impulse (N s) per contact of
+    ``qp`` the first contact QP holds (zero when ``None``).
     """
     target = qp.target
     base = qp
@@ -161,8 +165,8 @@ def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP
             break
         new_impulse = len(answers) < settings.max_iterations
         if new_impulse:
-            answers.append(solve_friction_problem(friction_problem(contact_qp, solution,
-                                                                   target)))
+            answers.append(solve_friction(friction_problem(contact_qp, solution, target),
+                                          solve, tol))
             friction, previous = answers[-1].friction, normal
         # the next contact QP is the first pass of a new impulse, or the next pass of this one
         linearisations = 1 if new_impulse else linearisations + 1

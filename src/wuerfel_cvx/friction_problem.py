@@ -7,38 +7,38 @@ After a contact QP (:mod:`wuerfel_cvx.coulomb`) has given each contact its norma
     subject to  E x = e                 t_n = t + W^-1 G' z / 2
 
 in the step QP's unknowns ``x``, ``t_n`` the unknowns after the contact QP's normal impulses
-(the rods re-solved by ``E x = e``) and ``S`` the contacts' slip rows.  It is declared in
-cvxpy with an auxiliary ``u = S x`` whose multiplier ``nu`` gives the friction impulse:
-stationarity ``2 W (x - t_n) + E' y + S' nu = 0`` and ``nu_c`` in ``2 mu lambda_n ∂|u_c|``
-make ``lambda_t = -nu / 2`` the impulse of maximal dissipation in the cone
-``|lambda_t| <= mu lambda_n``, ``lambda_t = -mu lambda_n sign(s)`` where the contact slips.
-:func:`friction_residuals` checks these conditions from the problem's own numbers.
+(the rods re-solved by ``E x = e``) and ``S`` the contacts' slip rows.  Its optimality
+conditions, stationarity ``2 W (x - t_n) + E' y - 2 S' lambda_t = 0`` with ``-2 lambda_t``
+in ``2 mu lambda_n ∂|S x|``, make ``lambda_t`` the impulse of maximal dissipation in the
+cone ``|lambda_t| <= mu lambda_n``, ``lambda_t = -mu lambda_n sign(s)`` where the contact
+slips.  :func:`friction_residuals` checks these conditions from the problem's own numbers.
 
-A problem whose structure (sizes, weights, sparsity of ``E`` and ``S``) repeats is solved
-through one parametrised (DPP) cvxpy problem per structure (:class:`FrictionCache`), as
-the step QPs are (:mod:`wuerfel_cvx.compiled`): the fixed point solves several friction
-problems of one structure per step.
+It is solved as a step QP (:func:`friction_qp`: a slack per contact bounds ``|S x|``, its
+cost a linear term), by the contact QPs' own solve function: the same solvers, paths,
+scaling, KKT check and fallback (:func:`wuerfel_cvx.solve.solve_with_fallback`), with
+:func:`friction_residuals` checked on top (:func:`solve_friction`).
 """
 
 from __future__ import annotations
 
 import math
-import time
-import warnings
-from collections import OrderedDict
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
 
-import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
+from numpy.typing import NDArray
 
 from .errors import StepFailure
 from .formulations import StepQP
+from .formulations.qp import declare_qp
 from .geometry import FloatArray
-from .scaling import scaled_qp, weights_scale
-from .solve import SOLVED, VERIFY_FACTOR, StepSolution
-from .solvers import get_solver, tolerance_value
+from .solve import VERIFY_FACTOR, StepSolution
+from .solvers import tolerance_value
+
+QPSolve = Callable[[StepQP], tuple[StepSolution, str]]
+"""Solves a step QP: its solution and the run's own solver's status on it (raising
+:class:`StepFailure` when no solver can)."""
 
 
 @dataclass(frozen=True)
@@ -85,7 +85,7 @@ class FrictionAnswer:
     residuals: FrictionResiduals
     verified: bool
     solve_wall_time: float
-    """Wall time (s) of the cvxpy ``solve`` call."""
+    """Wall time (s) of the solve (:attr:`StepSolution.solve_wall_time`)."""
     solver_time: float
     """Time the solver itself reports (s); NaN if it reports none."""
     iterations: int
@@ -139,184 +139,95 @@ def friction_residuals(problem: FrictionProblem, x: FloatArray, friction: FloatA
         / (radius * (1.0 + _inf(slip))))
 
 
-@dataclass(frozen=True)
-class DeclaredFriction:
-    """A friction problem in cvxpy and the handles to read its answer."""
+def rough_contacts(problem: FrictionProblem, eps: float = 0.0) -> NDArray[np.bool_]:
+    """Which contacts have a bound ``b_c = mu_c lambda_n,c`` above ``eps`` times the largest.
 
-    problem: cp.Problem
-    x: cp.Variable
-    slip_constraint: cp.Constraint
-    """``S x - u == 0``: its multiplier is ``-2 lambda_t``."""
-    eq_constraint: cp.Constraint | None
-    parameters: dict[str, cp.Parameter] = field(default_factory=dict)
-    """By name, for a parametrised problem (empty: declared with constants)."""
+    ``eps = 0``: every contact with a positive bound.  With the tolerance ``eps`` the contact
+    QP was solved to, a contact whose normal impulse is below ``eps`` of the largest (a
+    separated contact's solver noise: an interior-point solver gives it about 1e-12 rather
+    than 0) is left without friction.  Its friction impulse, at most ``b_c``, then makes a
+    dissipation residual (:func:`friction_residuals`, checked on every bound) of at most
+    ``eps``, within what the check accepts; a slack whose cost is solver noise would
+    otherwise make the friction problem nearly degenerate (OSQP took up to 150,000
+    iterations on such problems of ``card-house``, 6,000 without those slacks).
+    """
+    largest = float(np.max(problem.bound)) if problem.bound.size else 0.0
+    return np.asarray(problem.bound > max(eps * largest, 0.0))
 
 
-def declare_friction(problem: FrictionProblem, *, parametrised: bool = False,
-                     ) -> DeclaredFriction:
-    """``problem`` in cvxpy; ``parametrised``: its numbers as parameters (DPP), unset."""
+def friction_qp(problem: FrictionProblem, eps: float = 0.0) -> StepQP:
+    """``problem`` as a step QP in ``(x, s)``, one slack ``s_c`` per rough contact.
+
+    The rough contacts are :func:`rough_contacts` ``(problem, eps)``; the others add
+    nothing to the objective and have no friction impulse.  With ``|S_c x| <= s_c`` as two
+    rows the problem is the QP::
+
+        minimise    sum w (x - t_n)^2 + 2 b' s            (weight 0 on s, linear cost 2 b)
+        subject to  E x = e,   S x + s >= 0,   -S x + s >= 0
+
+    whose optimum has ``s_c = |S_c x|`` (``b_c > 0``), so ``x`` is the friction problem's.
+    Its stationarity in ``x``, ``2 W (x - t_n) + E' y - S' (z_+ - z_-) = 0``, and in ``s``,
+    ``2 b = z_+ + z_-`` with ``z_+-`` >= 0, make ``lambda_t = (z_+ - z_-) / 2`` the friction
+    impulse of :func:`friction_residuals`, inside the cone (``|lambda_t| <= b``) and at its
+    edge against the slip (:func:`answer_of`).  The rows are one block per rough contact,
+    ``+`` rows then ``-`` rows, as the closest-approach rows of ``velocity`` are.
+    """
     qp = problem.qp
     assert qp.cones is not None
-    slip_rows = qp.cones.slip
-    numbers: dict[str, object] = {
-        "weighted_target": np.sqrt(qp.weights) * problem.target, "bound": problem.bound,
-        "slip_rows": slip_rows, "eq_matrix": qp.eq_matrix, "eq_rhs": qp.eq_rhs}
-    parameters: dict[str, cp.Parameter] = {}
-    if parametrised:
-        parameters = {
-            "weighted_target": cp.Parameter(qp.n_variables, name="weighted_target"),
-            "bound": cp.Parameter(len(problem.bound), nonneg=True, name="bound"),
-            "slip_rows": _sparse_parameter(slip_rows, "slip_rows")}
-        if qp.n_equalities:
-            parameters |= {"eq_matrix": _sparse_parameter(qp.eq_matrix, "eq_matrix"),
-                           "eq_rhs": cp.Parameter(qp.n_equalities, name="eq_rhs")}
-        numbers |= parameters
-    x = cp.Variable(qp.n_variables, name="x")
-    slip = cp.Variable(len(problem.bound), name="slip")
-    slip_constraint = numbers["slip_rows"] @ x - slip == 0
-    constraints: list[cp.Constraint] = [slip_constraint]
-    eq_constraint = None
-    if qp.n_equalities:
-        eq_constraint = numbers["eq_matrix"] @ x == numbers["eq_rhs"]
-        constraints.append(eq_constraint)
-    cost = (cp.sum_squares(cp.multiply(np.sqrt(qp.weights), x) - numbers["weighted_target"])
-            + 2.0 * cp.sum(cp.multiply(numbers["bound"], cp.abs(slip))))
-    declared = cp.Problem(cp.Minimize(cost), constraints)
-    assert not parametrised or declared.is_dpp(), "a compiled friction problem must be DPP"
-    return DeclaredFriction(declared, x, slip_constraint, eq_constraint, parameters)
+    rough = rough_contacts(problem, eps)
+    count, n = int(np.count_nonzero(rough)), qp.n_variables
+    slip = sp.csr_array(qp.cones.slip[np.flatnonzero(rough)])
+    slack = sp.eye_array(count, format="csr")
+    eq = qp.eq_matrix
+    widened = sp.csr_array((eq.data, eq.indices, eq.indptr), shape=(eq.shape[0], n + count))
+    zeros = np.zeros(count)
+    return declare_qp(
+        np.concatenate([qp.weights, zeros]), np.concatenate([problem.target, zeros]),
+        widened, qp.eq_rhs, sp.csr_array(sp.block_array([[slip, slack], [-slip, slack]])),
+        np.zeros(2 * count), qp.contacts.selected(rough),
+        linear=np.concatenate([np.zeros(n), 2.0 * problem.bound[rough]]))
 
 
-def _sparse_parameter(matrix: sp.csr_array, name: str) -> cp.Parameter:
-    pattern = sp.coo_array(matrix)
-    return cp.Parameter(matrix.shape, name=name, sparsity=(pattern.row, pattern.col))
+def answer_of(problem: FrictionProblem, solution: StepSolution,
+              tol: str | float) -> FrictionAnswer:
+    """The friction answer of ``solution`` of :func:`friction_qp` ``(problem, eps)``, checked.
 
-
-@dataclass
-class FrictionCache:
-    """Parametrised friction problems by structure, compiled when a structure is seen twice.
-
-    As :class:`~wuerfel_cvx.compiled.CompiledQPCache` keeps the step QPs'.
+    ``eps`` is that of ``tol``, the tolerance the QP was solved to.  ``lambda_t = (z_+ -
+    z_-) / 2`` on the rough contacts (0 on the others) and ``y`` are the QP's multipliers;
+    :func:`friction_residuals` checks them on ``problem``, every contact's bound included.
+    The answer is verified when the QP's solution is and the friction residuals are at most
+    ``VERIFY_FACTOR * eps``.
     """
-
-    capacity: int = 64
-    """Most structures kept."""
-    _problems: OrderedDict[tuple[object, ...], DeclaredFriction] = field(
-        default_factory=OrderedDict, repr=False)
-    _sightings: dict[tuple[object, ...], int] = field(default_factory=dict, repr=False)
-
-    def declared_for(self, problem: FrictionProblem) -> DeclaredFriction:
-        """A cvxpy problem holding ``problem``'s numbers."""
-        key = _structure(problem)
-        declared = self._problems.get(key)
-        if declared is None:
-            seen = self._sightings.get(key, 0) + 1
-            if seen < 2:
-                self._sightings[key] = seen
-                if len(self._sightings) > 16 * self.capacity:
-                    self._sightings.clear()
-                return declare_friction(problem)
-            self._sightings.pop(key, None)
-            declared = self._problems[key] = declare_friction(problem, parametrised=True)
-            if len(self._problems) > self.capacity:
-                self._problems.popitem(last=False)
-        self._problems.move_to_end(key)
-        qp = problem.qp
-        assert qp.cones is not None
-        values = {"weighted_target": np.sqrt(qp.weights) * problem.target,
-                  "bound": problem.bound, "eq_rhs": qp.eq_rhs}
-        for name, parameter in declared.parameters.items():
-            if name in values:
-                parameter.value = values[name]
-            else:
-                parameter.value_sparse = sp.coo_array(qp.cones.slip if name == "slip_rows"
-                                                      else qp.eq_matrix)
-        return declared
-
-
-def _structure(problem: FrictionProblem) -> tuple[object, ...]:
-    """What a parametrised friction problem depends on: sizes, weights, sparsity."""
-    qp = problem.qp
-    assert qp.cones is not None
-    key: tuple[object, ...] = (qp.n_variables, qp.weights.tobytes())
-    for matrix in (qp.eq_matrix, qp.cones.slip):
-        key += (matrix.shape, matrix.indptr.tobytes(), matrix.indices.tobytes())
-    return key
-
-
-def solve_friction(problem: FrictionProblem, solver: str, tol: str | float, step: int,
-                   cache: FrictionCache | None = None) -> FrictionAnswer:
-    """Solve ``problem`` with ``solver`` through cvxpy and check it (:func:`friction_residuals`).
-
-    With a ``cache``, a repeated structure is solved through its parametrised problem.
-    Light bodies' problems are solved with their weights and bounds scaled up, as the
-    step QPs are (:func:`~wuerfel_cvx.scaling.weights_scale`), and checked unscaled.
-    Raises :class:`StepFailure` (with ``step``) if the solver raises, reports a status other
-    than optimal, returns non-finite numbers, or claims an inaccurate optimum that fails the
-    check; an optimum that fails the check is returned with ``verified=False``.
-    """
-    spec = get_solver(solver)
     eps = tolerance_value(tol)
-    weight_scale = weights_scale(problem.qp)  # 1 unless the bodies are light
-    seen = problem if weight_scale == 1.0 else FrictionProblem(
-        scaled_qp(problem.qp, 1.0, weight_scale), problem.target, problem.bound * weight_scale)
-    handles = declare_friction(seen) if cache is None else cache.declared_for(seen)
-    declared, x, slip_constraint = handles.problem, handles.x, handles.slip_constraint
-    eq_constraint = handles.eq_constraint
-    started = time.perf_counter()
-    try:
-        with warnings.catch_warnings():  # judged by the residual check, not by a warning
-            warnings.filterwarnings("ignore", "Solution may be inaccurate", UserWarning)
-            # cvxpy reads its own sparse parameters densely while applying them
-            warnings.filterwarnings("ignore", "Reading from a sparse CVXPY expression",
-                                    RuntimeWarning)
-            declared.solve(solver=spec.cvxpy_name, **spec.options(eps))
-    except Exception as exc:  # a solver library raising anything is a failed step
-        raise StepFailure(step, spec.name, "exception",
-                          f"friction problem: {type(exc).__name__}: {exc}") from exc
-    wall = time.perf_counter() - started
-    status = str(declared.status)
-    if status not in SOLVED or x.value is None or slip_constraint.dual_value is None:
-        raise StepFailure(step, spec.name, status, "friction problem")
-    values = np.asarray(x.value, dtype=np.float64)
-    friction = (-0.5 / weight_scale) * np.atleast_1d(np.asarray(slip_constraint.dual_value,
-                                                                 dtype=np.float64))
-    eq_dual = (np.zeros(0) if eq_constraint is None else np.atleast_1d(
-        np.asarray(eq_constraint.dual_value, dtype=np.float64)) / weight_scale)
-    if not (np.all(np.isfinite(values)) and np.all(np.isfinite(friction))
-            and np.all(np.isfinite(eq_dual))):
-        raise StepFailure(step, spec.name, status, "friction problem: non-finite solution")
-    residuals = friction_residuals(problem, values, friction, eq_dual)
-    verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
-    if status == cp.OPTIMAL_INACCURATE and not verified:
-        raise StepFailure(step, spec.name, status, f"friction problem: residuals "
-                          f"{residuals.worst():.2e} above {VERIFY_FACTOR * eps:.1e}")
-    stats = declared.solver_stats
-    iterations = stats.num_iters if stats is not None and stats.num_iters is not None else -1
-    reported = (stats.solve_time if stats is not None and stats.solve_time is not None
-                else np.nan)
-    return FrictionAnswer(values, friction, eq_dual, spec.name, status, residuals, verified,
-                          wall, float(reported), int(iterations))
+    rough = rough_contacts(problem, eps)
+    plus, minus = np.split(np.asarray(solution.ineq_dual, dtype=np.float64), 2)
+    friction = np.zeros(len(problem.bound))
+    friction[rough] = 0.5 * (plus - minus)
+    x = np.asarray(solution.x[:problem.qp.n_variables], dtype=np.float64)
+    residuals = friction_residuals(problem, x, friction, solution.eq_dual)
+    verified = solution.verified and residuals.worst() <= VERIFY_FACTOR * eps
+    return FrictionAnswer(x, friction, solution.eq_dual, solution.solver, solution.status,
+                          residuals, bool(verified), solution.solve_wall_time,
+                          solution.solver_time, solution.iterations)
 
 
-def solve_friction_with_fallback(problem: FrictionProblem, solvers: Sequence[str],
-                                 tol: str | float, step: int,
-                                 cache: FrictionCache | None = None) -> FrictionAnswer:
-    """:func:`solve_friction` with ``solvers[0]``, on failure with the next.
+def solve_friction(problem: FrictionProblem, solve: QPSolve,
+                   tol: str | float) -> FrictionAnswer:
+    """Solve ``problem`` as :func:`friction_qp` with ``solve``, and check it (:func:`answer_of`).
 
-    Raises the first solver's :class:`StepFailure`, naming what each fallback gave, when
-    every solver fails.
+    ``solve`` is the contact QPs' own (:func:`wuerfel_cvx.solve.solve_with_fallback` with
+    the run's solvers, tolerance ``tol``, step and solve path): the same solvers, scaling, KKT
+    check and fallback.  Contacts whose bound is below ``eps`` (of ``tol``) of the largest
+    are left without friction (:func:`rough_contacts`).  A :class:`StepFailure` that
+    ``solve`` raises names the friction problem.
     """
-    failures: list[StepFailure] = []
-    for name in solvers:
-        try:
-            return solve_friction(problem, name, tol, step, cache)
-        except StepFailure as failure:
-            failures.append(failure)
-    first = failures[0]
-    if len(failures) == 1:
-        raise first
-    then = "; ".join(f"then {f.solver} failed with '{f.status}'" for f in failures[1:])
-    raise StepFailure(step, first.solver, first.status, f"{first.detail}; {then}") from first
+    try:
+        solution, _ = solve(friction_qp(problem, tolerance_value(tol)))
+    except StepFailure as failure:
+        raise StepFailure(failure.step, failure.solver, failure.status,
+                          f"friction problem: {failure.detail}" if failure.detail
+                          else "friction problem") from failure
+    return answer_of(problem, solution, tol)
 
 
 def _inf(values: FloatArray) -> float:

@@ -2,11 +2,11 @@
 
 A step QP (:mod:`wuerfel_cvx.formulations.qp`) in unknowns ``x``::
 
-    min sum w (x - t)^2 + |F (x - t)|^2   s.t.  E x = e,  h <= G x <= u
+    min sum w (x - t)^2 + |F (x - t)|^2 + l' x   s.t.  E x = e,  h <= G x <= u
 
 is, with ``x = s y`` for a number ``s > 0``, the QP in ``y``::
 
-    min sum w (y - t/s)^2 + |F (y - t/s)|^2   s.t.  E y = e/s,  h/s <= G y <= u/s
+    min sum w (y - t/s)^2 + |F (y - t/s)|^2 + (l/s)' y   s.t.  E y = e/s,  h/s <= G y <= u/s
 
 (the objective divided by ``s^2``, which leaves the minimiser alone).  Its weights and
 matrices are the original ones, so its structure
@@ -25,7 +25,8 @@ up: below the limit the solvers' absolute tolerances and the KKT check's ``1 + |
 scales already agree.
 
 The objective's weights (masses, kg, and moments of inertia, kg m^2) get the same treatment
-from below.  Multiplying them by ``c`` (and ``F`` by ``sqrt(c)``) leaves the minimiser alone
+from below.  Multiplying them by ``c`` (and ``F`` by ``sqrt(c)``, a linear cost ``l`` by ``c``:
+the whole objective times ``c``) leaves the minimiser alone
 and multiplies every multiplier by ``c``.  A scene of light bodies (a card of 0.8 g) has
 multipliers (impulses, N s) of order ``m g dt``, far below 1, where the solvers' absolute
 tolerances and the ``1 + |data|`` scales let a complementarity product of ``1e-10`` hide a
@@ -114,13 +115,16 @@ def scaled_qp(qp: StepQP, scale: float, weight_scale: float = 1.0) -> StepQP:
     """The QP in unknowns ``y = x / scale``, weights times ``weight_scale``.
 
     ``qp`` itself when both are 1.  ``weight_scale`` must be a power of four (its square
-    root scales ``F``); the multipliers of the result are ``weight_scale / scale`` times
-    those of ``qp``.
+    root scales ``F``; a linear cost ``l`` becomes ``weight_scale l / scale``, the objective
+    being multiplied by ``weight_scale / scale^2``); the multipliers of the result are
+    ``weight_scale / scale`` times those of ``qp``.
     """
     if scale == 1.0 and weight_scale == 1.0:
         return qp
     upper = None if qp.ineq_upper is None else qp.ineq_upper / scale  # +inf stays +inf
     factor = None if qp.cost_factor is None else qp.cost_factor * math.sqrt(weight_scale)
+    linear = None if qp.linear is None else qp.linear * (weight_scale / scale)  # exact
     return dataclasses.replace(qp, weights=qp.weights * weight_scale, cost_factor=factor,
+                               linear=linear,
                                target=qp.target / scale, eq_rhs=qp.eq_rhs / scale,
                                ineq_rhs=qp.ineq_rhs / scale, ineq_upper=upper)

@@ -39,7 +39,6 @@ from .formulations import (
     with_friction_model,
 )
 from .friction import ContactForces
-from .friction_problem import solve_friction_with_fallback
 from .model import IntArray, Model, State
 from .recorder import TrajectoryRecorder, physical_metrics, run_info
 from .scene import Scene
@@ -196,9 +195,7 @@ class Simulation:
         coulomb = None
         if qp.cones is not None and self._coulomb:
             coulomb = fixed_point(
-                self.formulation, model, state, qp, self.dt, solve,
-                lambda problem: solve_friction_with_fallback(problem, self.solvers, self.tol,
-                                                             step, None),
+                self.formulation, model, state, qp, self.dt, solve, self.tol,
                 coulomb_settings(self.formulation),
                 self._friction_memory.initial(qp.contacts, boxes)
                 if self.formulation.friction is not None

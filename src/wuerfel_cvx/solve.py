@@ -4,10 +4,10 @@
 problem per QP, a cvxpy problem compiled per structure, or the solver's own API on the QP's
 numbers) and then recomputes, from the QP's own numeric data, the residuals of the KKT conditions of
 
-    min sum w (x - t)^2 + |F (x - t)|^2
+    min sum w (x - t)^2 + |F (x - t)|^2 + l' x
     s.t.  E x = e  (multiplier y),   h <= G x <= u  (multiplier z = z_lower - z_upper)
 
-which are ``2 W (x - t) + 2 F' F (x - t) + E^T y - G^T z = 0`` (cvxpy's sign convention,
+which are ``2 W (x - t) + 2 F' F (x - t) + l + E^T y - G^T z = 0`` (cvxpy's sign convention,
 see :mod:`wuerfel_cvx.formulations.qp`), primal feasibility, dual feasibility
 (``z >= 0`` on rows without an upper bound) and complementarity
 ``max(z, 0)_i (G x - h)_i = 0``, ``max(-z, 0)_i (u - G x)_i = 0``.  Each residual is made
@@ -103,19 +103,21 @@ class StepSolution:
     iterations: int
     ineq_dual: FloatArray = field(default_factory=lambda: np.zeros(0))
     """Multipliers ``z = z_lower - z_upper`` of ``h <= G x <= u`` (cvxpy's sign):
-    ``2 W (x - t) + 2 F' F (x - t) = G^T z - E^T y``; ``z >= 0`` on one-sided rows."""
+    ``2 W (x - t) + 2 F' F (x - t) + l = G^T z - E^T y``; ``z >= 0`` on one-sided rows."""
     path: str = DECLARED
     """How it was solved: one of :data:`SOLVE_PATHS` (``none``: a step that solved no QP)."""
+    eq_dual: FloatArray = field(default_factory=lambda: np.zeros(0))
+    """Multipliers ``y`` of ``E x = e`` (cvxpy's sign, as :attr:`ineq_dual`)."""
 
 
 def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
                   ineq_dual: FloatArray) -> Residuals:
     """Relative primal, dual and complementarity residuals of ``(x, y, z)``.
 
-    A QP without a coupling cost and without upper bounds (the common one) is checked by the
-    compiled loop of :mod:`wuerfel_cvx.residual_kernel`, others by the general NumPy code.
+    A QP without a coupling cost, linear cost and upper bounds (the common one) is checked by
+    the compiled loop of :mod:`wuerfel_cvx.residual_kernel`, others by the general NumPy code.
     """
-    if qp.cost_factor is None and qp.ineq_upper is None:
+    if qp.cost_factor is None and qp.ineq_upper is None and qp.linear is None:
         eq, ineq = qp.eq_matrix, qp.ineq_matrix
         return Residuals(*residual_kernel.residuals(
             qp.weights, qp.target, x, eq.data, eq.indices, eq.indptr, qp.eq_rhs,
@@ -268,8 +270,9 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
         raise StepFailure(step, spec.name, status, "solution has non-finite entries")
     dual_scale = scale / weight_scale  # exact: a ratio of powers of two
     ineq_dual = dual_scale * np.asarray(answer.ineq_dual, dtype=np.float64)
+    eq_dual = dual_scale * np.asarray(answer.eq_dual, dtype=np.float64)
     # checked on the original QP, whatever units the solver saw
-    residuals = kkt_residuals(qp, x, dual_scale * np.asarray(answer.eq_dual), ineq_dual)
+    residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
     verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
     if status == cp.OPTIMAL_INACCURATE and not verified:
         raise StepFailure(step, spec.name, status,
@@ -280,7 +283,8 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
                         verified=verified, solve_wall_time=wall,
                         solver_time=spec.timing.solver_time(answer.reported_time,
                                                             answer.native_time),
-                        iterations=int(answer.iterations), ineq_dual=ineq_dual, path=taken)
+                        iterations=int(answer.iterations), ineq_dual=ineq_dual, path=taken,
+                        eq_dual=eq_dual)
 
 
 def _solve_with_cvxpy(qp: StepQP, declared: DeclaredQP, solver: str,
@@ -333,10 +337,10 @@ def _checked_scales(qp: StepQP, step: int, solver: str) -> tuple[float, float]:
 
     Raises :class:`StepFailure` (status ``invalid_data``) if its data are not all finite: no
     solver is handed NaN or inf (some would panic or return garbage).  A QP without upper
-    bounds or coupling cost is checked in one compiled pass
+    bounds, coupling cost or linear cost is checked in one compiled pass
     (:func:`wuerfel_cvx.residual_kernel.data_summary`), others by the general NumPy code.
     """
-    if qp.ineq_upper is None and qp.cost_factor is None:
+    if qp.ineq_upper is None and qp.cost_factor is None and qp.linear is None:
         finite, magnitude, largest = residual_kernel.data_summary(
             qp.weights, qp.target, qp.eq_matrix.data, qp.eq_rhs, qp.ineq_matrix.data,
             qp.ineq_rhs)
@@ -354,6 +358,8 @@ def _non_finite_data(qp: StepQP) -> str:
               "eq_rhs": qp.eq_rhs, "ineq_matrix": qp.ineq_matrix.data, "ineq_rhs": qp.ineq_rhs}
     if qp.cost_factor is not None:
         arrays["cost_factor"] = qp.cost_factor.data
+    if qp.linear is not None:
+        arrays["linear"] = qp.linear
     # a NaN or an infinity makes the arrays' sum non-finite, so a finite sum clears them
     # all at one reduction; a non-finite sum (possibly an overflow) is looked at closely
     if qp.ineq_upper is None and math.isfinite(np.add.reduce(np.concatenate(

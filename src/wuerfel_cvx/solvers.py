@@ -165,7 +165,10 @@ SOLVERS: dict[str, SolverSpec] = {
             ("#9467bd", "v")),
         # Native on every path (backends/daqp.py), on the step QP's own positive-definite
         # Hessian: through cvxpy it sees auxiliary variables without cost and regularises.
-        SolverSpec("DAQP", "DAQP", lambda eps: {"primal_tol": eps, "iter_limit": 10_000},
+        # The friction problem's slacks have no weight: DAQP's proximal-point iterations
+        # then solve it, to eps (eta_prox, default 1e-6, left friction impulses 1e-4 off).
+        SolverSpec("DAQP", "DAQP", lambda eps: {"primal_tol": eps, "iter_limit": 10_000,
+                                                "eta_prox": eps},
                    "dual active-set (dense)", "daqp", ("#8c564b", "P"), adapter="daqp",
                    native_only=True, takes_warm_start=True,
                    timing=Timing(note="its setup_time plus solve_time (dense form built before)")),

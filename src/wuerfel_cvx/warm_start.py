@@ -17,7 +17,10 @@ contacts is its contact ``k``'s row of that block (:func:`row_blocks`).  The nex
 A warm start changes where a solver starts, never the problem: an iterative solver
 (PROXQP) stops at the same tolerance, an active-set solver (DAQP) at the same optimum, and
 every answer is checked by the same KKT residuals as a cold one.  QPs whose rows are not one
-block per contact (friction cones) get the unknowns and rod multipliers only.  Only the
+block per contact (friction cones) get the unknowns and rod multipliers only.  A QP with a
+linear cost (the Coulomb fixed point's friction problem, :mod:`wuerfel_cvx.friction_problem`)
+starts from the last such QP, and a step QP from the last step QP, so that the two problems
+the fixed point alternates do not take each other's place.  Only the
 solvers that take such a start (:attr:`~wuerfel_cvx.solvers.SolverSpec.takes_warm_start`)
 have guesses made and solutions kept; OSQP starts from its structure's own last solution
 (:mod:`wuerfel_cvx.backends.osqp`).
@@ -78,7 +81,8 @@ class _Solved:
 class WarmStarts:
     """Each solver's last verified solution and how to map it onto the next QP."""
 
-    _last: dict[str, _Solved] = field(default_factory=dict, repr=False)
+    _last: dict[tuple[str, bool], _Solved] = field(default_factory=dict, repr=False)
+    """By solver and whether the QP has a linear cost."""
     guesses: int = 0
     """QPs given a warm start so far."""
 
@@ -86,7 +90,7 @@ class WarmStarts:
                  ineq_dual: FloatArray, scale: float) -> None:
         """Keep ``solver``'s solution of ``qp`` (solver units, unknowns scaled by ``scale``)."""
         blocks = row_blocks(qp)
-        self._last[solver] = _Solved(
+        self._last[solver, qp.linear is not None] = _Solved(
             x=np.array(x, dtype=np.float64), eq_dual=np.array(eq_dual, dtype=np.float64),
             ineq_dual=np.array(ineq_dual, dtype=np.float64),
             contacts=None if blocks is None else ContactIndex.of(qp.contacts.ids()),
@@ -98,7 +102,7 @@ class WarmStarts:
         None fits when there is no last solution, it has other unknowns, or the solver sees
         the QP in other units (:mod:`wuerfel_cvx.scaling`).
         """
-        last = self._last.get(solver)
+        last = self._last.get((solver, qp.linear is not None))
         if last is None or last.x.shape[0] != qp.n_variables or last.scale != scale:
             return None
         eq_dual = (last.eq_dual if last.eq_dual.shape[0] == qp.n_equalities

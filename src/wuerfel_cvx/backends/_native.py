@@ -3,10 +3,13 @@
 The adapters (:mod:`wuerfel_cvx.backends`) hand a solver the step QP in its own numbers,
 in the unknowns' deviation ``d = x - t`` from the target::
 
-    min  1/2 d' P d,   P = 2 W + 2 F' F,
+    min  1/2 d' P d + l' d,   P = 2 W + 2 F' F,
     s.t. E d = e - E t,   h - G t <= G d <= u - G t   (u = +inf where a row has no upper bound).
 
-Its objective is the step QP's, constant included (``sum w (x - t)^2 + |F (x - t)|^2``).
+Its objective is the step QP's, constant included (``sum w (x - t)^2 + |F (x - t)|^2``);
+a linear cost ``l' x`` (:attr:`~wuerfel_cvx.formulations.qp.StepQP.linear`) is ``l' d``
+plus the constant ``l' t``, which is dropped (the friction problem's ``l`` is zero where
+its ``t`` is not, so the constant is zero there).
 The constant matters: without it (``1/2 x' P x - (P t)' x``) the objective is of the size
 of ``w t^2``, and a solver's duality gap, relative to it, let Clarabel stop with a
 complementarity residual of 9e-6 on a step of a generated scene (the KKT check failed it).
@@ -138,8 +141,9 @@ class NativeData:
 
     @property
     def linear(self) -> FloatArray:
-        """``q = 0``: the objective has no linear term in ``d``."""
-        return np.zeros(self.qp.n_variables)
+        """``q = l``: the objective's linear term in ``d`` (zero without a linear cost)."""
+        linear = self.qp.linear
+        return np.zeros(self.qp.n_variables) if linear is None else linear
 
     @cached_property
     def upper_triangle(self) -> sp.csc_matrix:

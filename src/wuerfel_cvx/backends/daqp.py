@@ -6,11 +6,15 @@ positive-definite ``H``, by a dual active-set method on dense data.  cvxpy's DAQ
 singular and cvxpy switches on DAQP's proximal regularisation, whose answers failed the
 KKT check on step QPs of the solver bank.  The step QP's own Hessian is positive definite::
 
-    H = 2 W + 2 F' F,   f = -H t,   A = [E; G],
+    H = 2 W + 2 F' F,   f = -H t + l,   A = [E; G],
 
 with the equalities marked as such (``sense`` 5) and ``h <= G x <= u`` as two-sided rows
 (``u = +inf`` where there is none), so this backend takes it as it is, on every path
-(:attr:`~wuerfel_cvx.solvers.SolverSpec.native`).  DAQP's multipliers ``lam`` enter its
+(:attr:`~wuerfel_cvx.solvers.SolverSpec.native`).  The friction problem's QP
+(:mod:`wuerfel_cvx.friction_problem`) has slacks without weight (``H`` singular, a linear
+cost ``l`` on them): DAQP (0.11) detects the singular ``H`` and solves by proximal-point
+iterations, which converge to the QP's own optimum, stopped at ``eta_prox`` (the registry
+sets it to ``eps``); the answer is checked as any other.  DAQP's multipliers ``lam`` enter its
 Lagrangian as ``H x + f + A' lam = 0``, so the package's ``y`` is ``lam`` on the equalities
 and its ``z = z_lower - z_upper`` is ``-lam`` on the inequalities.
 
@@ -69,8 +73,11 @@ def daqp_form(qp: StepQP) -> tuple[FloatArray, FloatArray, FloatArray, FloatArra
     dense_rows(qp.ineq_matrix, out=rows[n_eq:])
     sense = np.zeros(n_eq + n_ineq, dtype=np.intc)  # C int, as ctypes.c_int
     sense[:n_eq] = EQUALITY
-    return (dense_hessian, -(dense_hessian @ qp.target), rows, upper,
-            np.concatenate([qp.eq_rhs, qp.ineq_rhs]), sense)
+    linear = -(dense_hessian @ qp.target)
+    if qp.linear is not None:  # a linear cost l' x (its unknowns may have no weight)
+        linear = linear + qp.linear
+    return (dense_hessian, linear, rows, upper, np.concatenate([qp.eq_rhs, qp.ineq_rhs]),
+            sense)
 
 
 def _solve(qp: StepQP, options: dict[str, Any], warm: WarmStart | None = None) -> Answer:

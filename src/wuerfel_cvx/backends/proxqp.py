@@ -9,7 +9,7 @@ on compiled structures and with ``compiled=False`` alike
 tolerances (:data:`~wuerfel_cvx.solvers.CERTIFICATE_TOLERANCE`).  It hands proxsuite's dense
 backend the QP in proxsuite's form ``min x' H x / 2 + g' x``, ``A x = b``, ``l <= C x <= u`` with
 
-    H = 2 W + 2 F' F,   g = -H t,   A = E,   b = e,
+    H = 2 W + 2 F' F,   g = -H t + l,   A = E,   b = e,
 
 and, per row of ``G``: ``-G_i x <= -h_i`` (``l_i = -inf``) for a one-sided row, as cvxpy
 passes it, and ``h_i <= G_i x <= u_i`` for a row with a finite upper bound.  One-sided rows
@@ -69,6 +69,8 @@ def proxsuite_form(qp: StepQP) -> tuple[dict[str, Any], FloatArray]:
     else:  # 2 W: the sparse product's sums of one term each, 0.0 + 2 w t
         diagonal = 2.0 * qp.weights
         dense_hessian, linear = np.diag(diagonal), -(0.0 + diagonal * qp.target)
+    if qp.linear is not None:  # a linear cost l' x
+        linear = linear + qp.linear
     sign = np.ones(qp.n_inequalities)
     sign[qp.upper_rows] = -1.0
     lower = np.where(sign > 0, -np.inf, qp.ineq_rhs)

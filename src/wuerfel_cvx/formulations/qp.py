@@ -4,7 +4,8 @@ Every formulation builds the same shape of problem in its unknowns ``x`` (corner
 accelerations or velocities, flattened ``(x_0, y_0, x_1, y_1, ...)``, and any extra
 unknowns a formulation adds)::
 
-    minimise    sum_i w_i (x_i - t_i)^2  +  |F (x - t)|^2     (F optional: P = F' F)
+    minimise    sum_i w_i (x_i - t_i)^2  +  |F (x - t)|^2  +  l' x
+                                         (F optional: P = F' F; l optional)
     subject to  E x == e                 (rods, and held table corners)
                 h <= G x <= u            (sides: point versus edge; u = +inf by default)
 
@@ -17,11 +18,16 @@ The coupling cost is given by a sparse factor ``F`` rather than by ``P`` itself:
 (as the weighted term does), and stays disciplined-parametrised with ``F`` and ``F t`` as
 parameters, which ``(x - t)' P (x - t)`` with a parametrised ``t`` is not in cvxpy.
 
+The linear term ``l' x`` (optional, ``None`` in every step QP) serves problems whose
+objective has one, as the Coulomb fixed point's friction problem
+(:mod:`wuerfel_cvx.friction_problem`): its slack unknowns carry a cost ``l`` and a weight
+of zero.
+
 Multipliers (the signs every solve path returns and the KKT check tests): ``y`` of
 ``E x == e`` and ``z = z_lower - z_upper`` of ``h <= G x <= u``, with ``z_lower >= 0``
 for ``G x >= h`` and ``z_upper >= 0`` for ``G x <= u``, so that
 
-    2 W (x - t) + 2 F' F (x - t) + E' y - G' z = 0.
+    2 W (x - t) + 2 F' F (x - t) + l + E' y - G' z = 0.
 
 A row with ``u = +inf`` has ``z >= 0``; a two-sided row's ``z`` takes the sign of the bound
 it rests on.  :data:`PARAMETER_SLOTS` names the numbers a compiled problem takes as
@@ -71,6 +77,9 @@ class StepQP:
     them in further passes (``None``: not recorded)."""
     cones: ConeRows | None = None
     """Where the contacts' friction cones are among the rows (``None``: no friction)."""
+    linear: FloatArray | None = None
+    """The linear cost ``l`` of the objective's term ``l' x`` (objective units per unit of
+    the unknown; ``None``: none).  An unknown may then have weight 0."""
 
     @property
     def n_variables(self) -> int:
@@ -100,11 +109,13 @@ class StepQP:
         return 0 if self.cost_factor is None else int(self.cost_factor.shape[0])
 
     def objective_gradient(self, x: FloatArray) -> FloatArray:
-        """``2 W (x - t) + 2 F' F (x - t)``: the objective's gradient at ``x``."""
+        """``2 W (x - t) + 2 F' F (x - t) + l``: the objective's gradient at ``x``."""
         gradient = 2.0 * self.weights * (x - self.target)
         if self.cost_factor is not None and self.n_cost_rows:
             gradient = gradient + 2.0 * (self.cost_factor.T @ (self.cost_factor
                                                                @ (x - self.target)))
+        if self.linear is not None:
+            gradient = gradient + self.linear
         return gradient
 
     def slots(self) -> tuple[str, ...]:
@@ -112,7 +123,8 @@ class StepQP:
         present = {"weighted_target": True, "eq_values": self.n_equalities > 0,
                    "eq_rhs": self.n_equalities > 0, "ineq_values": self.n_inequalities > 0,
                    "ineq_rhs": self.n_inequalities > 0, "ineq_upper": self.upper_rows.size > 0,
-                   "cost_values": self.n_cost_rows > 0, "cost_target": self.n_cost_rows > 0}
+                   "cost_values": self.n_cost_rows > 0, "cost_target": self.n_cost_rows > 0,
+                   "linear": self.linear is not None}
         return tuple(name for name in PARAMETER_SLOTS if present[name])
 
     def structure(self) -> tuple[object, ...]:
@@ -130,6 +142,8 @@ class StepQP:
         if self.cost_factor is not None:
             factor = self.cost_factor
             key += (factor.shape, factor.indptr.tobytes(), factor.indices.tobytes())
+        if self.linear is not None:
+            key += ("linear",)
         return key
 
 
@@ -156,6 +170,11 @@ def _factor(qp: StepQP) -> sp.csr_array:
     return qp.cost_factor
 
 
+def _linear(qp: StepQP) -> FloatArray:
+    assert qp.linear is not None
+    return qp.linear
+
+
 PARAMETER_SLOTS: dict[str, ParameterSlot] = {
     "weighted_target": ParameterSlot(lambda qp: np.sqrt(qp.weights) * qp.target),
     "eq_values": ParameterSlot(lambda qp: qp.eq_matrix.data, matrix=lambda qp: qp.eq_matrix),
@@ -166,10 +185,11 @@ PARAMETER_SLOTS: dict[str, ParameterSlot] = {
     "ineq_upper": ParameterSlot(upper_bounds, multiplier="upper"),
     "cost_values": ParameterSlot(lambda qp: _factor(qp).data, matrix=_factor),
     "cost_target": ParameterSlot(lambda qp: _factor(qp) @ qp.target),
+    "linear": ParameterSlot(_linear),
 }
 """Every parameter slot, by name, in the order a compiled problem declares them:
 ``sqrt(w) t``; the nonzeros of ``E`` and ``e``; of ``G`` and ``h``; the finite ``u``;
-the nonzeros of ``F`` and ``F t``."""
+the nonzeros of ``F`` and ``F t``; the linear cost ``l``."""
 
 
 def declare_qp(
@@ -185,16 +205,18 @@ def declare_qp(
     cost_factor: sp.csr_array | None = None,
     linearised_about: FloatArray | None = None,
     cones: ConeRows | None = None,
+    linear: FloatArray | None = None,
 ) -> StepQP:
-    """The QP ``min sum w (x - t)^2 + |F (x - t)|^2  s.t.  E x == e, h <= G x <= u``.
+    """The QP ``min sum w (x - t)^2 + |F (x - t)|^2 + l' x  s.t.  E x == e, h <= G x <= u``.
 
-    ``ineq_rhs`` is ``h``; ``ineq_upper`` (``u``, ``+inf`` entries for one-sided rows) and
-    ``cost_factor`` (``F``) are optional, as is ``linearised_about`` (the unknowns the rows
-    were linearised about, for further passes) and ``cones`` (where the friction cones' rows
-    are).  ``E``, ``G`` and
+    ``ineq_rhs`` is ``h``; ``ineq_upper`` (``u``, ``+inf`` entries for one-sided rows),
+    ``cost_factor`` (``F``) and ``linear`` (``l``) are optional, as is ``linearised_about``
+    (the unknowns the rows were linearised about, for further passes) and ``cones`` (where
+    the friction cones' rows are).  ``E``, ``G`` and
     ``F`` are stored in canonical CSR form (sorted indices, no duplicates), so equal
     sparsity patterns have equal index arrays.  Raises ``ValueError`` if ``ineq_upper`` does
-    not have one entry per row of ``G`` or ``F`` not one column per unknown.
+    not have one entry per row of ``G``, ``F`` not one column per unknown, or ``linear``
+    not one entry per unknown.
     """
     if ineq_upper is not None and np.shape(ineq_upper) != np.shape(ineq_rhs):
         raise ValueError(f"ineq_upper has shape {np.shape(ineq_upper)}, the rows of G "
@@ -202,12 +224,16 @@ def declare_qp(
     if cost_factor is not None and cost_factor.shape[1] != np.shape(weights)[0]:
         raise ValueError(f"cost_factor has {cost_factor.shape[1]} columns for "
                          f"{np.shape(weights)[0]} unknowns")
+    if linear is not None and np.shape(linear) != np.shape(weights):
+        raise ValueError(f"linear has shape {np.shape(linear)}, the unknowns "
+                         f"{np.shape(weights)}")
     return StepQP(weights=weights, target=target, eq_matrix=_canonical(eq_matrix),
                   eq_rhs=eq_rhs, ineq_matrix=_canonical(ineq_matrix), ineq_rhs=ineq_rhs,
                   contacts=contacts,
                   ineq_upper=None if ineq_upper is None else np.asarray(ineq_upper, float),
                   cost_factor=None if cost_factor is None else _canonical(cost_factor),
-                  linearised_about=linearised_about, cones=cones)
+                  linearised_about=linearised_about, cones=cones,
+                  linear=None if linear is None else np.asarray(linear, dtype=np.float64))
 
 
 def _canonical(matrix: sp.csr_array) -> sp.csr_array:
