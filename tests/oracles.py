@@ -4,7 +4,7 @@ They are slow, obvious forms of what the package computes in a faster or more sp
 way.
 
 * :func:`penetration_depth`: depth of points inside a convex polygon, from the package's
-  :func:`~wuerfel_cvx.geometry.edge_distances`.
+  :func:`~wuerfel_cvx.scenes.geometry.edge_distances`.
 * :func:`corner_velocity_map` and :func:`structural_product`: the rigid formulation's
   contact rows as the sparse product ``corner_rows @ corner_velocity_map(points)``, which
   :func:`wuerfel_cvx.formulations.rigid.body_rows` and
@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from wuerfel_cvx.geometry import FloatArray, edge_distances, rot90
+from wuerfel_cvx.scenes.geometry import FloatArray, edge_distances, rot90
 
 
 def penetration_depth(points: FloatArray, polygon: FloatArray) -> FloatArray:

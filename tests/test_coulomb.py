@@ -1,4 +1,4 @@
-"""The Coulomb friction model (:mod:`wuerfel_cvx.coulomb`).
+"""The Coulomb friction model (:mod:`wuerfel_cvx.friction.coulomb`).
 
 Its two problems checked on their own, and the fixed point against the analytic slides of
 a box on a slope and on a flat table.
@@ -14,11 +14,10 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx import simulate
-from wuerfel_cvx.contacts import find_contacts
-from wuerfel_cvx.coulomb import CoulombNotConverged, FrictionMemory, with_friction_impulse
 from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations import VelocityFormulation, get_formulation
-from wuerfel_cvx.friction_problem import (
+from wuerfel_cvx.friction.coulomb import CoulombNotConverged, FrictionMemory, with_friction_impulse
+from wuerfel_cvx.friction.problem import (
     FrictionCache,
     FrictionProblem,
     friction_problem,
@@ -27,12 +26,13 @@ from wuerfel_cvx.friction_problem import (
     solve_friction,
     solve_friction_with_fallback,
 )
-from wuerfel_cvx.identity import ContactIndex
-from wuerfel_cvx.model import Model, State
-from wuerfel_cvx.scene import Scene, Square, Table
-from wuerfel_cvx.simulation import Simulation
-from wuerfel_cvx.solve import VERIFY_FACTOR, solve_step_qp
-from wuerfel_cvx.solvers import tolerance_value
+from wuerfel_cvx.scenes.scene import Scene, Square, Table
+from wuerfel_cvx.solve.paths import VERIFY_FACTOR, solve_step_qp
+from wuerfel_cvx.solve.registry import tolerance_value
+from wuerfel_cvx.step.contacts import find_contacts
+from wuerfel_cvx.step.identity import ContactIndex
+from wuerfel_cvx.step.model import Model, State
+from wuerfel_cvx.step.simulation import Simulation
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.unit

@@ -9,8 +9,8 @@ from importlib.metadata import version
 import pytest
 
 from wuerfel_cvx import versions
-from wuerfel_cvx.bench import plots
-from wuerfel_cvx.solvers import SOLVERS, Timing, available_solvers
+from wuerfel_cvx.lab.bench import plots
+from wuerfel_cvx.solve.registry import SOLVERS, Timing, available_solvers
 
 pytestmark = pytest.mark.unit
 
@@ -35,10 +35,10 @@ def test_plots_take_each_solver_style_from_its_spec() -> None:
 def test_each_direct_backend_is_a_module_with_a_builder() -> None:
     for spec in SOLVERS.values():
         if spec.backend is not None:
-            module = importlib.import_module(f"wuerfel_cvx.backends.{spec.backend}")
+            module = importlib.import_module(f"wuerfel_cvx.solve.adapters.{spec.backend}")
             assert callable(module.build)
         if spec.native is not None:  # a native backend solves a step QP itself
-            module = importlib.import_module(f"wuerfel_cvx.backends.{spec.native}")
+            module = importlib.import_module(f"wuerfel_cvx.solve.adapters.{spec.native}")
             assert callable(module.solve)
     assert SOLVERS["PROXQP"].native == "proxqp"
 
