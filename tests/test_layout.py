@@ -18,8 +18,10 @@ pytestmark = pytest.mark.unit
 SRC = Path(__file__).resolve().parents[1] / "src"
 PACKAGE = SRC / "wuerfel_cvx"
 
-MAX_CORE_MODULES = 0  # set below
-"""Modules outside ``wuerfel_cvx.lab`` (``__init__`` files included)."""
+MAX_CORE_MODULES = 62
+"""Most modules outside ``wuerfel_cvx.lab`` (``__init__`` files included): 62 when the
+layout of issue 23 was made (55 modules and 7 package ``__init__`` files).  A new module
+in the core is a decision: raise this number in the same change, or put it in ``lab/``."""
 
 
 def module_names() -> dict[str, Path]:
@@ -102,3 +104,26 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
         if node not in state and (cycle := visit(node)):
             return cycle
     return None
+
+
+def test_the_graph_sees_the_package() -> None:
+    graph = import_graph()
+    assert "wuerfel_cvx.step.simulation" in graph
+    assert "wuerfel_cvx.step.model" in graph["wuerfel_cvx.step.simulation"]
+
+
+def test_a_cycle_is_found() -> None:
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert find_cycle(graph) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": set()}) is None
+
+
+def test_module_level_imports_have_no_cycle() -> None:
+    cycle = find_cycle(import_graph())
+    assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
+
+
+def test_the_core_stays_small() -> None:
+    core = [name for name in module_names() if not name.startswith("wuerfel_cvx.lab")]
+    assert len(core) <= MAX_CORE_MODULES, (
+        f"{len(core)} modules outside wuerfel_cvx.lab (at most {MAX_CORE_MODULES})")
