@@ -361,7 +361,7 @@ def test_each_completed_grid_point_has_its_own_timing_row(readme: str) -> None:
     assert 0 < len(done) <= 60  # the fixture is a small suite: the table is shown
     table = table_after(readme, "### Each grid point")
     assert len(table) == len(done)
-    shown = {tuple(cells[:7]): cells for cells in table}
+    shown = {tuple(cells[:7]): cells for cells in table}  # the fixture has one path
     assert len(shown) == len(done)  # the key tells every grid point apart
     for row in done:
         mass = f"{float(row['table_mass']):.3g}" if row["table_mass"] else "fixed"
@@ -418,8 +418,9 @@ def test_a_results_csv_with_a_wrong_header_still_lists_the_columns(tmp_path: Pat
         writer.writerows(rows)
     # the fixture is of schema version 3, so the version-4 to -6 columns are missing too
     with pytest.raises(InputError,
-                       match=r"missing \['islands', 'solve_path', 'max_overlap_depth', "
-                             r"'energy_gain', 'friction_model', "):
+                       match=r"missing \['islands', 'solve_path', 'call_wall_time_per_step', "
+                             r"'call_over_solver_mean', 'max_overlap_depth', 'energy_gain', "
+                             r"'friction_model', "):
         write_report(broken, tmp_path / "reports")
 
 

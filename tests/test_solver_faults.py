@@ -346,7 +346,8 @@ def test_cli_saves_a_loadable_partial_run_for_every_fault(
     assert "Traceback" not in err
     first, second = err.strip().splitlines()
     assert f"step {step}: solver CLARABEL failed with status '{status}'" in first
-    assert f"saved the {step - 1} steps before it" in second
+    kept = step - 1
+    assert f"saved the {kept} {'step' if kept == 1 else 'steps'} before it" in second
     loaded = Trajectory.load(tmp_path / "partial.npz")
     assert loaded.n_steps == step - 1 == len(loaded.metrics)
     assert np.all(np.isfinite(loaded.points))

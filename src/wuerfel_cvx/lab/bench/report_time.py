@@ -154,22 +154,30 @@ def point_time_table(results: pd.DataFrame) -> str:
     rows = completed_rows(results)
     if rows.empty or len(rows) > POINT_TABLE_LIMIT:
         return ""
-    rows = rows.sort_values(["scene", "formulation", "solver", "tol", "dt", "table_mass",
-                             "sleep", "islands", "friction_model"], kind="stable",
-                            na_position="first")
+    rows = rows.sort_values(["scene", "formulation", "solver", "solve_path", "tol", "dt",
+                             "table_mass", "sleep", "islands", "friction_model"],
+                            kind="stable", na_position="first")
     table = markdown_table(
         ["scene", "formulation", "solver", "tol", "dt (s)", "table mass (kg)", "sleep",
-         "wall (ms)", "solver (ms)", "step / solver", "islands", "friction model"],
+         "wall (ms)", "solver (ms)", "step / solver", "call (ms)", "call / solver",
+         "islands", "friction model", "path"],
         ([row.scene, row.formulation, row.solver, row.tol, format_number(row.dt),
           table_mass_text(row.table_mass), "yes" if bool(row.sleep) else "no",
           format_ms(row.wall_time_per_step_median),
           format_ms(row.solver_time_per_step_median),
           format_ratio(plots.as_float(row.step_over_solver_median)),
-          "yes" if bool(row.islands) else "no", cell_text(row.friction_model)]
+          format_ms(plots.as_float(row.call_wall_time_per_step)),
+          format_ratio(plots.as_float(row.call_over_solver_mean)),
+          "yes" if bool(row.islands) else "no", cell_text(row.friction_model),
+          cell_text(row.solve_path)]
          for row in rows.itertuples()),
-        align="llllllrrrrll")
+        align="lllllllrrrrrlll")
     return ("### Each grid point\n\nMedian whole-step and solver time per step of every "
-            "completed grid point, and the median of their per-step ratio (*step / solver*).  "
+            "completed grid point, and the median of their per-step ratio (*step / solver*); "
+            "*call*: the wall time of the whole `simulate()` call (set-up, every contact "
+            "search, solve, metrics and recording) per step, what a user waits for, and its "
+            "ratio to the solver's own mean time per step.  *Path*: how the QPs reached the "
+            "solver (native, compiled, declared).  "
             "*Table mass*: the seed's heavy-table variant (table corners as variables of "
             "that mass per corner), *fixed* for constant tables.  "
             "Peer engines' *solver* is their own stepping function.\n\n" + table)

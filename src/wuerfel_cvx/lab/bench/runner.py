@@ -153,10 +153,13 @@ def measure_point(point: GridPoint, reference: Reference | None,
     try:
         scene = resolve_scene(point.scene_input if scene is None else scene)  # loaded once
         base["n_squares"] = scene.n_boxes
+        started = time.perf_counter()
         trajectory, failure, disagreement = _simulate(point, scene)
+        call_seconds = time.perf_counter() - started
     except Exception as exc:  # any configuration error becomes an error row
         return PointResult(error_row(point, exc, base), None)
     row = {**base, **_outcome(trajectory, failure), **_timing(trajectory, point),
+           **_call_timing(trajectory, call_seconds),
            **_accuracy(trajectory, point, reference),
            **friction_summary(trajectory, peer=point.engine != "wuerfel_cvx"),
            "reference_disagreement": disagreement}
@@ -249,6 +252,22 @@ def _outcome(trajectory: Trajectory, failure: StepFailure | None) -> dict[str, A
     if failure is not None:
         outcome |= {"error": _message(failure), "failed_step": failure.step}
     return outcome
+
+
+def _call_timing(trajectory: Trajectory, seconds: float) -> dict[str, Any]:
+    """What a user waits for: the whole ``simulate`` call's wall time per step (s).
+
+    Set-up, every step's contact search, build, solve, check and update, the metrics and
+    the recording; beside it, its ratio to the solver's own mean time per step.
+    """
+    steps = len(trajectory.metrics)
+    if steps == 0:
+        return {}
+    per_step = seconds / steps
+    solver = trajectory.metrics["solver_time_s"].to_numpy(dtype=float)
+    own = float(np.nanmean(solver)) if np.isfinite(solver).any() else np.nan
+    return {"call_wall_time_per_step": per_step,
+            "call_over_solver_mean": per_step / own if own > 0 else np.nan}
 
 
 def _timing(trajectory: Trajectory, point: GridPoint) -> dict[str, Any]:

@@ -32,17 +32,6 @@ FRICTION_FORMULATIONS: frozenset[str] = frozenset(
 """Formulations that take a friction model (the others, ``seed``, have no friction)."""
 
 
-def _old_solve_path(frame: pd.DataFrame) -> pd.Series:
-    """``solve_path`` of the rows of a file older than version 7: no setting then.
-
-    Those runs solved repeated structures on a direct path (cvxpy's parameter map applied
-    by hand) that no longer exists; the column is left empty for ours, ``native`` for peers.
-    """
-    peers = frame["formulation"].astype("string") == "peer"
-    return pd.Series(["native" if flag else None for flag in peers.fillna(False)],
-                     index=frame.index, dtype="string")
-
-
 def _old_friction_model(frame: pd.DataFrame) -> pd.Series:
     """``friction_model`` of the rows of a file older than version 6.
 
@@ -63,14 +52,16 @@ ADDED_COLUMNS: dict[int, dict[str, Any]] = {
         "max_dissipation_violation": None, "friction_work": None,
         "coulomb_iterations_mean": None, "coulomb_iterations_max": None,
         "coulomb_converged_fraction": None, "coulomb_unconverged_steps": None},
-    7: {"solve_path": _old_solve_path},
+    7: {"solve_path": None, "call_wall_time_per_step": None, "call_over_solver_mean": None},
 }
 """Per schema version, the columns it added and their value in the rows of older files:
 a constant, ``None`` (not measured then: missing), or a function of the older frame giving
 one value per row.  Version 3 had no ``islands`` column: its runs solved one joint QP;
 version 4 did not measure ``max_overlap_depth``; version 5 had no friction, so its
 criteria and fixed-point columns are missing and its ``friction_model`` is that of
-:func:`_old_friction_model`; version 6 had no ``solve_path`` (:func:`_old_solve_path`)."""
+:func:`_old_friction_model`; version 6 had no ``solve_path`` (its runs solved repeated
+structures on a direct path that no longer exists: left empty) and did not time the whole
+``simulate`` call."""
 
 ColumnType = Literal["str", "int", "float", "bool"]
 
@@ -127,6 +118,11 @@ COLUMNS: tuple[Column, ...] = (
     _c("verified_fraction", "float", "1", "fraction of completed steps that were verified"),
     # timing
     _c("wall_time_per_step_median", "float", "s", "median wall time of a whole step"),
+    _c("call_wall_time_per_step", "float", "s",
+       "wall time of the whole simulate() call (set-up, search, solve, metrics, recording) "
+       "over the steps completed: what a user waits for"),
+    _c("call_over_solver_mean", "float", "1",
+       "call_wall_time_per_step over the solver's own mean time per step"),
     _c("wall_time_per_step_p90", "float", "s", "90th percentile wall time of a step"),
     _c("solver_time_per_step_median", "float", "s", "median of the solver's own time"),
     _c("modelling_time_per_step_median", "float", "s",
@@ -374,7 +370,7 @@ CLOCK_COLUMNS: frozenset[str] = frozenset({
     "finished_at", "wall_time_per_step_median", "wall_time_per_step_p90",
     "solver_time_per_step_median", "modelling_time_per_step_median",
     "step_over_solver_median", "wall_time_per_simulated_second", "total_wall_time",
-    "step_time_s", "solver_time_s"})
+    "call_wall_time_per_step", "call_over_solver_mean", "step_time_s", "solver_time_s"})
 """The results and series columns read off a clock.  They differ from run to run; the
 others are physics, the same bits on every run of a deterministic solver."""
 
