@@ -5,7 +5,7 @@
 
 Library scene ``stack-20`` (unit squares of 1 kg on the floor) with ``friction = mu`` on
 every square and on the floor, dt = 1/60 s, 10 s.  Each engine runs with the matched
-settings of :mod:`wuerfel_cvx.peers`; the Box2D engines also with sleep turned off.
+settings of :mod:`wuerfel_cvx.lab.peers`; the Box2D engines also with sleep turned off.
 Printed per run (one Markdown table row):
 
 * drift: the largest horizontal displacement (m) of any square's centre from its start;
@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 
 from wuerfel_cvx import Scene
-from wuerfel_cvx.peers import available_peers, peer_version, simulate_peer
-from wuerfel_cvx.peers._common import run_peer
+from wuerfel_cvx.lab.peers import available_peers, peer_version, simulate_peer
+from wuerfel_cvx.lab.peers._common import run_peer
 from wuerfel_cvx.trajectory import Trajectory
 
 DT = 1.0 / 60.0
@@ -102,9 +102,9 @@ def run(engine: str, mu: float, sleep: bool | None) -> tuple[Trajectory, float |
     if engine not in ("BOX2D", "PYBOX2D"):
         return simulate_peer(engine, scene, DT, steps), None
     if engine == "BOX2D":
-        from wuerfel_cvx.peers import box2d_peer as module
+        from wuerfel_cvx.lab.peers import box2d_peer as module
     else:
-        from wuerfel_cvx.peers import pybox2d_peer as module  # type: ignore[no-redef]
+        from wuerfel_cvx.lab.peers import pybox2d_peer as module  # type: ignore[no-redef]
     world = _Watched(module.build_world(scene, DT, sleep=sleep is None))
     return run_peer(engine, module.PACKAGE, scene, world, DT, steps), world.asleep_from
 
@@ -132,7 +132,7 @@ def main() -> None:
             toppled = "no" if row["toppled_s"] is None else f"{row['toppled_s']:.2f}"
             version = peer_version(engine)
             if engine == "BOX2D":
-                from wuerfel_cvx.peers.box2d_peer import engine_version
+                from wuerfel_cvx.lab.peers.box2d_peer import engine_version
 
                 version = f"box2d-python {version}, Box2D {engine_version()}"
             print(f"| {engine} ({version}) | {label} | {row['drift_m']:.3g} "

@@ -19,7 +19,7 @@ from __future__ import annotations
 import pytest
 
 from wuerfel_cvx import Scene, Square
-from wuerfel_cvx.library import FLOOR
+from wuerfel_cvx.scenes.library import FLOOR
 
 TEST_KINDS = ("unit", "integration", "subprocess")
 """The markers of which every test needs at least one."""

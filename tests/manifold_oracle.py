@@ -1,8 +1,8 @@
-"""The per-pair contact manifold rule of :mod:`wuerfel_cvx.contacts`, one pair at a time.
+"""The per-pair contact manifold rule of :mod:`wuerfel_cvx.step.contacts`, one pair at a time.
 
 An independent reference for the batched search: plain loops over body pairs and
-corners, :func:`~wuerfel_cvx.geometry.edge_distances` for the distances and
-:func:`~wuerfel_cvx.geometry.edge_parameter` for a corner's place along a face.
+corners, :func:`~wuerfel_cvx.scenes.geometry.edge_distances` for the distances and
+:func:`~wuerfel_cvx.scenes.geometry.edge_parameter` for a corner's place along a face.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 
-from wuerfel_cvx.contacts import TIE_TOLERANCE
-from wuerfel_cvx.geometry import FloatArray, edge_distances, edge_parameter
+from wuerfel_cvx.scenes.geometry import FloatArray, edge_distances, edge_parameter
+from wuerfel_cvx.step.contacts import TIE_TOLERANCE
 
 Row = tuple[int, int, int, int, int, float, float]
 """(point, edge_i, edge_j, point_body, edge_body, distance (m), clearance (m)), as in

@@ -4,14 +4,14 @@ They are slow, obvious forms of what the package computes in a faster or more sp
 way.
 
 * :func:`penetration_depth`: depth of points inside a convex polygon, from the package's
-  :func:`~wuerfel_cvx.geometry.edge_distances`.
+  :func:`~wuerfel_cvx.scenes.geometry.edge_distances`.
 * :func:`corner_velocity_map` and :func:`structural_product`: the rigid formulation's
   contact rows as the sparse product ``corner_rows @ corner_velocity_map(points)``, which
   :func:`wuerfel_cvx.formulations.rigid.body_rows` and
   :meth:`~wuerfel_cvx.formulations.RigidFormulation.new_velocities` write directly and
   must reproduce bit for bit.
 * :func:`declared_friction`: the Coulomb fixed point's friction problem declared in cvxpy
-  with ``|S x|`` as it is, which :func:`wuerfel_cvx.friction_problem.friction_qp` must
+  with ``|S x|`` as it is, which :func:`wuerfel_cvx.friction.problem.friction_qp` must
   solve to the solver's tolerance.
 
 This is a plain helper module (not a test module); tests import it by name, as pytest puts
@@ -24,9 +24,9 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
-from wuerfel_cvx.friction_problem import FrictionProblem
-from wuerfel_cvx.geometry import FloatArray, edge_distances, rot90
-from wuerfel_cvx.solvers import get_solver, tolerance_value
+from wuerfel_cvx.friction.problem import FrictionProblem
+from wuerfel_cvx.scenes.geometry import FloatArray, edge_distances, rot90
+from wuerfel_cvx.solve.registry import get_solver, tolerance_value
 
 
 def penetration_depth(points: FloatArray, polygon: FloatArray) -> FloatArray:

@@ -14,9 +14,9 @@ from functools import cache
 
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.formulations import StepQP, get_formulation, step_qp
-from wuerfel_cvx.model import Model, State
-from wuerfel_cvx.solve import VERIFY_FACTOR
-from wuerfel_cvx.solvers import TOLERANCE_PRESETS
+from wuerfel_cvx.solve.paths import VERIFY_FACTOR
+from wuerfel_cvx.solve.registry import TOLERANCE_PRESETS
+from wuerfel_cvx.step.model import Model, State
 
 DT = 0.01
 

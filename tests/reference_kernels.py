@@ -15,17 +15,17 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from wuerfel_cvx import contact_kernel
-from wuerfel_cvx.contacts import TIE_TOLERANCE, Contacts, pair_distances
 from wuerfel_cvx.formulations.motion import _fit, _rotated
 from wuerfel_cvx.formulations.qp import StepQP
 from wuerfel_cvx.formulations.rigid import body_velocities
 from wuerfel_cvx.formulations.rows import n_unknown_points, unknown_index
-from wuerfel_cvx.geometry import FloatArray, corner_mean, rot90, side_gradients
-from wuerfel_cvx.model import IntArray, Model, State
+from wuerfel_cvx.scenes.geometry import FloatArray, corner_mean, rot90, side_gradients
+from wuerfel_cvx.step import contact_kernel
+from wuerfel_cvx.step.contacts import TIE_TOLERANCE, Contacts, pair_distances
+from wuerfel_cvx.step.model import IntArray, Model, State
 
 # --------------------------------------------------------------------------------------
-# Contact search (wuerfel_cvx.contacts; compiled: wuerfel_cvx.contact_kernel)
+# Contact search (wuerfel_cvx.step.contacts; compiled: wuerfel_cvx.step.contact_kernel)
 # --------------------------------------------------------------------------------------
 
 
@@ -90,7 +90,7 @@ def choose_edges(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
                  ) -> tuple[IntArray, NDArray[np.bool_], FloatArray]:
     """Edge index, whether it holds, and how far (m) it projects past the face's end.
 
-    Each ``(4, P)``, per corner of each pair; the manifold rule of ``wuerfel_cvx.contacts``.
+    Each ``(4, P)``, per corner of each pair; the manifold rule of ``wuerfel_cvx.step.contacts``.
     """
     n_pairs = edge_body.shape[0]
     half = n_pairs // 2
@@ -144,7 +144,7 @@ def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
 
 
 # --------------------------------------------------------------------------------------
-# Rows (wuerfel_cvx.formulations.qp, .rows, .rigid; compiled: wuerfel_cvx.row_kernel)
+# Rows (wuerfel_cvx.formulations.qp, .rows, .rigid; compiled: wuerfel_cvx.formulations.row_kernel)
 # --------------------------------------------------------------------------------------
 
 
@@ -261,7 +261,7 @@ def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
 
 # --------------------------------------------------------------------------------------
 # Rigid motion (wuerfel_cvx.formulations.motion, .rigid, .velocity;
-# compiled: wuerfel_cvx.motion_kernel)
+# compiled: wuerfel_cvx.formulations.motion_kernel)
 # --------------------------------------------------------------------------------------
 
 
@@ -303,7 +303,7 @@ def body_reach(model: Model, state: State, dt: float, contact_margin: float) -> 
 
 
 # --------------------------------------------------------------------------------------
-# KKT check (wuerfel_cvx.solve; compiled: wuerfel_cvx.residual_kernel)
+# KKT check (wuerfel_cvx.solve.paths; compiled: wuerfel_cvx.solve.residual_kernel)
 # --------------------------------------------------------------------------------------
 
 

@@ -21,9 +21,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from wuerfel_cvx import Scene
-from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations import StepQP, declare_qp, get_formulation, step_qp
-from wuerfel_cvx.model import Model, State
+from wuerfel_cvx.step.contacts import Contacts
+from wuerfel_cvx.step.model import Model, State
 
 STALLED_DIR = Path(__file__).resolve().parent / "fixtures" / "stalled"
 

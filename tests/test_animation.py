@@ -29,8 +29,8 @@ from wuerfel_cvx.animation import (  # noqa: E402
     view_limits,
 )
 from wuerfel_cvx.cli import main  # noqa: E402
-from wuerfel_cvx.geometry import FloatArray, rectangle_corners  # noqa: E402
-from wuerfel_cvx.scene import Table  # noqa: E402
+from wuerfel_cvx.scenes.geometry import FloatArray, rectangle_corners  # noqa: E402
+from wuerfel_cvx.scenes.scene import Table  # noqa: E402
 
 pytestmark = pytest.mark.integration
 

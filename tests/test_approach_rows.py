@@ -15,7 +15,6 @@ import pandas as pd
 import pytest
 
 from wuerfel_cvx import Scene, Simulation
-from wuerfel_cvx.contacts import Contacts, find_contacts
 from wuerfel_cvx.formulations import VelocityFormulation, rigid_step
 from wuerfel_cvx.formulations.approach import (
     Approach,
@@ -26,9 +25,10 @@ from wuerfel_cvx.formulations.approach import (
     rows_along,
 )
 from wuerfel_cvx.formulations.motion import body_motion
-from wuerfel_cvx.geometry import FloatArray
-from wuerfel_cvx.model import Model, State
-from wuerfel_cvx.scene import Square, Table
+from wuerfel_cvx.scenes.geometry import FloatArray
+from wuerfel_cvx.scenes.scene import Square, Table
+from wuerfel_cvx.step.contacts import Contacts, find_contacts
+from wuerfel_cvx.step.model import Model, State
 
 pytestmark = pytest.mark.unit
 

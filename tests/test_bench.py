@@ -16,12 +16,12 @@ import pandas as pd
 import pytest
 
 from wuerfel_cvx import simulate
-from wuerfel_cvx.bench import runner, schema
-from wuerfel_cvx.bench.suite import REFERENCE_REFINEMENT, Suite, suite_names
-from wuerfel_cvx.bench.sweep import RESULTS_FILE, run_sweep
 from wuerfel_cvx.errors import InputError, StepFailure
-from wuerfel_cvx.peers import PEER_ENGINES
-from wuerfel_cvx.solvers import available_solvers
+from wuerfel_cvx.lab.bench import runner, schema
+from wuerfel_cvx.lab.bench.suite import REFERENCE_REFINEMENT, Suite, suite_names
+from wuerfel_cvx.lab.bench.sweep import RESULTS_FILE, run_sweep
+from wuerfel_cvx.lab.peers import PEER_ENGINES
+from wuerfel_cvx.solve.registry import available_solvers
 
 pytestmark = pytest.mark.integration
 
@@ -320,7 +320,7 @@ def test_a_grid_point_over_its_time_limit_is_stopped_and_reported(tmp_path: Path
 
 def test_a_failed_reference_is_named_in_the_row_and_the_report(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.bench.report import write_report
+    from wuerfel_cvx.lab.bench.report import write_report
 
     real_simulate = runner.simulate
 

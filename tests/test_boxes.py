@@ -22,14 +22,14 @@ from wuerfel_cvx.cli import main
 from wuerfel_cvx.errors import InputError
 from wuerfel_cvx.formulations import VelocityFormulation
 from wuerfel_cvx.formulations.rigid import body_velocities
-from wuerfel_cvx.library import DOMINO_COUNT, FLOOR, PLANK_SIZE
-from wuerfel_cvx.metrics import kinetic_energy
-from wuerfel_cvx.model import BOX_RODS, Model, State
-from wuerfel_cvx.robustness.fuzz import run_fuzz, seed_files
-from wuerfel_cvx.robustness.properties import ASPECT_RANGE, random_scene
-from wuerfel_cvx.scene import LIMITS, Box, Square, Table
-from wuerfel_cvx.solve import VERIFY_FACTOR
-from wuerfel_cvx.solvers import TOLERANCE_PRESETS
+from wuerfel_cvx.lab.robustness.fuzz import run_fuzz, seed_files
+from wuerfel_cvx.lab.robustness.properties import ASPECT_RANGE, random_scene
+from wuerfel_cvx.scenes.library import DOMINO_COUNT, FLOOR, PLANK_SIZE
+from wuerfel_cvx.scenes.scene import LIMITS, Box, Square, Table
+from wuerfel_cvx.solve.paths import VERIFY_FACTOR
+from wuerfel_cvx.solve.registry import TOLERANCE_PRESETS
+from wuerfel_cvx.step.metrics import kinetic_energy
+from wuerfel_cvx.step.model import BOX_RODS, Model, State
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration
@@ -185,7 +185,7 @@ def rest_tolerance(mass: float) -> float:
     Both from the residual check, relative residuals at most ``VERIFY_FACTOR * eps``
     (eps = 1e-9, ``high``), with the primal scale ``S = 1 + margin / dt + 2 dt g``
     (right-hand sides ``|d| / dt <= margin / dt``, rows ``|G v+| ~ 0`` at rest, gravity's
-    share; see :func:`wuerfel_cvx.solve.kkt_residuals`):
+    share; see :func:`wuerfel_cvx.solve.paths.kkt_residuals`):
 
     * below (Baumgarte): the rate error ``r S`` lets a corner sink ``dt r S`` per step
       while ``beta`` of the depth is removed, a fixed point of ``dt r S / beta``;

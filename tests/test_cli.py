@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx.cli import main
-from wuerfel_cvx.library import ENTRIES
-from wuerfel_cvx.solvers import available_solvers
+from wuerfel_cvx.scenes.library import ENTRIES
+from wuerfel_cvx.solve.registry import available_solvers
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration
@@ -435,7 +435,7 @@ def test_friction_model_on_a_scene_with_friction_is_no_note(
 
 def test_help_lists_what_the_checks_accept_without_markup(
         capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.bench.suite import suite_names
+    from wuerfel_cvx.lab.bench.suite import suite_names
 
     monkeypatch.setenv("COLUMNS", "1000")  # argparse wraps help at the terminal's width
     helps = {}
@@ -495,7 +495,7 @@ def test_a_warning_during_a_run_is_one_line(monkeypatch: pytest.MonkeyPatch,
     import warnings
 
     import wuerfel_cvx.cli as cli
-    from wuerfel_cvx.coulomb import CoulombNotConverged
+    from wuerfel_cvx.friction.coulomb import CoulombNotConverged
     from wuerfel_cvx.simulate import simulate
 
     def warning(*args: object, **kwargs: object) -> Trajectory:

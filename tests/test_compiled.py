@@ -7,8 +7,8 @@ import pytest
 
 from qp_bank import AGREEMENT, qp_bank
 from wuerfel_cvx import simulate
-from wuerfel_cvx.compiled import structure_key
-from wuerfel_cvx.solve import SolvePath, solve_step_qp
+from wuerfel_cvx.solve.cvxpy_forms import structure_key
+from wuerfel_cvx.solve.paths import SolvePath, solve_step_qp
 
 pytestmark = pytest.mark.integration
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from wuerfel_cvx.contacts import find_contacts
 from wuerfel_cvx.formulations.cone import slip_rows, with_cones
-from wuerfel_cvx.model import Model
-from wuerfel_cvx.scene import Scene, Square, Table
+from wuerfel_cvx.scenes.scene import Scene, Square, Table
+from wuerfel_cvx.step.contacts import find_contacts
+from wuerfel_cvx.step.model import Model
 
 pytestmark = pytest.mark.unit
 

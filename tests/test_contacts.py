@@ -13,10 +13,10 @@ import pytest
 
 from manifold_oracle import manifold_rows
 from wuerfel_cvx import Scene, simulate
-from wuerfel_cvx.contacts import Contacts, find_contacts
 from wuerfel_cvx.formulations import get_formulation, step_qp
-from wuerfel_cvx.geometry import edge_distances, polygon_overlap_depth, square_corners
-from wuerfel_cvx.model import Model, State
+from wuerfel_cvx.scenes.geometry import edge_distances, polygon_overlap_depth, square_corners
+from wuerfel_cvx.step.contacts import Contacts, find_contacts
+from wuerfel_cvx.step.model import Model, State
 
 pytestmark = pytest.mark.integration
 

@@ -22,10 +22,7 @@ from scipy.spatial import cKDTree
 from manifold_oracle import manifold_rows
 from reference_kernels import rod_blocks
 from wuerfel_cvx import Scene, simulate
-from wuerfel_cvx import contacts as new_contacts
 from wuerfel_cvx import formulations as formulations_package
-from wuerfel_cvx import simulation as simulation_module
-from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations import get_formulation, step_qp
 from wuerfel_cvx.formulations import qp as new_qp
 from wuerfel_cvx.formulations import rows as new_rows
@@ -38,10 +35,13 @@ from wuerfel_cvx.formulations.rows import (
     unknown_index,
 )
 from wuerfel_cvx.formulations.velocity import VelocityFormulation
-from wuerfel_cvx.geometry import FloatArray, side_gradients, square_corners
-from wuerfel_cvx.metrics import deepest_penetration
-from wuerfel_cvx.model import IntArray, Model, State
-from wuerfel_cvx.scene import Square, Table
+from wuerfel_cvx.scenes.geometry import FloatArray, side_gradients, square_corners
+from wuerfel_cvx.scenes.scene import Square, Table
+from wuerfel_cvx.step import contacts as new_contacts
+from wuerfel_cvx.step import simulation as simulation_module
+from wuerfel_cvx.step.contacts import Contacts
+from wuerfel_cvx.step.metrics import deepest_penetration
+from wuerfel_cvx.step.model import IntArray, Model, State
 
 pytestmark = pytest.mark.integration
 

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx import Scene
-from wuerfel_cvx.contacts import Contacts, find_contacts
-from wuerfel_cvx.geometry import FloatArray, square_corners
-from wuerfel_cvx.model import Model
-from wuerfel_cvx.scene import Box, Square, Table
+from wuerfel_cvx.scenes.geometry import FloatArray, square_corners
+from wuerfel_cvx.scenes.scene import Box, Square, Table
+from wuerfel_cvx.step.contacts import Contacts, find_contacts
+from wuerfel_cvx.step.model import Model
 
 pytestmark = pytest.mark.unit
 

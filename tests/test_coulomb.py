@@ -1,4 +1,4 @@
-"""The Coulomb friction model (:mod:`wuerfel_cvx.coulomb`).
+"""The Coulomb friction model (:mod:`wuerfel_cvx.friction.coulomb`).
 
 Its two problems checked on their own, and the fixed point against the analytic slides of
 a box on a slope and on a flat table.
@@ -16,11 +16,10 @@ import scipy.sparse as sp
 
 from oracles import declared_friction
 from wuerfel_cvx import simulate
-from wuerfel_cvx.contacts import find_contacts
-from wuerfel_cvx.coulomb import CoulombNotConverged, FrictionMemory, with_friction_impulse
 from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations import VelocityFormulation, get_formulation
-from wuerfel_cvx.friction_problem import (
+from wuerfel_cvx.friction.coulomb import CoulombNotConverged, FrictionMemory, with_friction_impulse
+from wuerfel_cvx.friction.problem import (
     FrictionProblem,
     QPSolve,
     friction_problem,
@@ -28,11 +27,8 @@ from wuerfel_cvx.friction_problem import (
     normal_impulses,
     solve_friction,
 )
-from wuerfel_cvx.identity import ContactIndex
-from wuerfel_cvx.model import Model, State
-from wuerfel_cvx.scene import Scene, Square, Table
-from wuerfel_cvx.simulation import Simulation
-from wuerfel_cvx.solve import (
+from wuerfel_cvx.scenes.scene import Scene, Square, Table
+from wuerfel_cvx.solve.paths import (
     INVALID_DATA,
     SOLVE_PATHS,
     VERIFY_FACTOR,
@@ -40,7 +36,11 @@ from wuerfel_cvx.solve import (
     solve_step_qp,
     solve_with_fallback,
 )
-from wuerfel_cvx.solvers import tolerance_value
+from wuerfel_cvx.solve.registry import tolerance_value
+from wuerfel_cvx.step.contacts import find_contacts
+from wuerfel_cvx.step.identity import ContactIndex
+from wuerfel_cvx.step.model import Model, State
+from wuerfel_cvx.step.simulation import Simulation
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.unit

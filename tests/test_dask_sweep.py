@@ -15,13 +15,13 @@ import pandas as pd
 import pytest
 
 from wuerfel_cvx import Scene
-from wuerfel_cvx.bench import schema
-from wuerfel_cvx.bench.dask_sweep import DaskCluster
-from wuerfel_cvx.bench.runner import PointResult
-from wuerfel_cvx.bench.suite import GridPoint, Suite
-from wuerfel_cvx.bench.sweep import RESULTS_FILE, run_sweep
 from wuerfel_cvx.cli import main
 from wuerfel_cvx.errors import InputError
+from wuerfel_cvx.lab.bench import schema
+from wuerfel_cvx.lab.bench.dask_sweep import DaskCluster
+from wuerfel_cvx.lab.bench.runner import PointResult
+from wuerfel_cvx.lab.bench.suite import GridPoint, Suite
+from wuerfel_cvx.lab.bench.sweep import RESULTS_FILE, run_sweep
 
 pytestmark = pytest.mark.integration
 
@@ -71,7 +71,7 @@ def cluster() -> Iterator[Any]:
     Its client, and the notes it gave (the workers, the dashboard).
     """
     pytest.importorskip("distributed")
-    from wuerfel_cvx.bench.dask_sweep import dask_executor
+    from wuerfel_cvx.lab.bench.dask_sweep import dask_executor
 
     notes: list[str] = []
     with dask_executor(DaskCluster(workers=2), notes.append) as executor:
@@ -239,7 +239,7 @@ class _FailedTask:
 def test_a_point_that_kills_its_workers_becomes_an_error_row_and_other_failures_stop(
 ) -> None:
     distributed = pytest.importorskip("distributed")
-    from wuerfel_cvx.bench.dask_sweep import _point_result
+    from wuerfel_cvx.lab.bench.dask_sweep import _point_result
 
     point = GridPoint("s", "stack-2", "velocity", "OSQP", "default", 0.01, 0.1)
     died = distributed.KilledWorker("point-1", SimpleNamespace(address="tcp://127.0.0.1:1"), 3)

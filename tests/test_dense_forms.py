@@ -11,9 +11,9 @@ import pytest
 import scipy.sparse as sp
 
 from wuerfel_cvx import Scene, Simulation
-from wuerfel_cvx.backends.daqp import EQUALITY, INFINITE_BOUND, daqp_form
-from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations.qp import StepQP, declare_qp
+from wuerfel_cvx.solve.adapters.daqp import EQUALITY, INFINITE_BOUND, daqp_form
+from wuerfel_cvx.step.contacts import Contacts
 
 pytestmark = pytest.mark.integration
 
@@ -86,7 +86,7 @@ def scipy_proxsuite_form(qp: StepQP) -> dict[str, np.ndarray | None]:
 @pytest.mark.parametrize("source", ["wide", "stack-10 rigid", "card-house velocity",
                                     "tilted-drop velocity"])
 def test_proxsuites_dense_form_is_scipys_bit_for_bit(source: str) -> None:
-    from wuerfel_cvx.backends.proxqp import proxsuite_form
+    from wuerfel_cvx.solve.adapters.proxqp import proxsuite_form
 
     if source == "wide":
         qps = [wide_qp()]

@@ -5,7 +5,7 @@ every step) is run twice in this process and once in a fresh interpreter, and mu
 bit-identical each time.  Its positions rounded to 1e-9 m must match the digest pinned in
 ``tests/golden/trajectory_hashes.toml`` when the installed versions are those recorded
 there.  To regenerate that file deliberately (never automatically), print it with
-``python -m wuerfel_cvx.robustness.determinism`` and check why the trajectory changed.
+``python -m wuerfel_cvx.lab.robustness.determinism`` and check why the trajectory changed.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 
 from wuerfel_cvx import Scene, simulate
-from wuerfel_cvx.robustness.determinism import (
+from wuerfel_cvx.lab.robustness.determinism import (
     GOLDEN_DECIMALS,
     GOLDEN_RUN,
     GOLDEN_SOLVERS,
@@ -60,7 +60,7 @@ def test_two_runs_in_one_process_are_bit_identical(solver: str) -> None:
 def fresh_interpreter_digests() -> dict[str, str]:
     """Exact digests of the reference runs computed in one fresh interpreter."""
     code = ("import json\n"
-            "from wuerfel_cvx.robustness.determinism import GOLDEN_RUN, GOLDEN_SOLVERS, "
+            "from wuerfel_cvx.lab.robustness.determinism import GOLDEN_RUN, GOLDEN_SOLVERS, "
             "exact_digest\n"
             "print(json.dumps({s: exact_digest(GOLDEN_RUN.run(s)) for s in GOLDEN_SOLVERS}))\n")
     # Another hash seed: no result may depend on the iteration order of sets or dicts.

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx import Scene, simulate
-from wuerfel_cvx.bench.friction_targets import displacement
-from wuerfel_cvx.contacts import TIE_TOLERANCE, Contacts, find_contacts
 from wuerfel_cvx.formulations import get_formulation
-from wuerfel_cvx.geometry import FloatArray
-from wuerfel_cvx.model import Model, State
+from wuerfel_cvx.lab.bench.friction_targets import displacement
+from wuerfel_cvx.scenes.geometry import FloatArray
+from wuerfel_cvx.step.contacts import TIE_TOLERANCE, Contacts, find_contacts
+from wuerfel_cvx.step.model import Model, State
 
 ROUND_OFF = 1e-12
 """Agreement (m) of two computations of one distance of at most a metre: a few ulps."""

@@ -4,8 +4,8 @@ The QPs are saved in ``tests/fixtures/false-infeasible/`` (see its README and
 ``docs/false-infeasible.md``).  Facts about the saved data that no solver fix can change:
 HiGHS finds a strictly feasible point, and a solver other than the one that failed solves
 each QP with residuals that the package's own KKT check verifies.  Then the project's
-fixes: CLARABEL solves the extreme cases in scaled units (:mod:`wuerfel_cvx.scaling`) and
-PROXQP, called natively (:mod:`wuerfel_cvx.backends.proxqp`), solves the stack, on every
+fixes: CLARABEL solves the extreme cases in scaled units (:mod:`wuerfel_cvx.solve.scaling`) and
+PROXQP, called natively (:mod:`wuerfel_cvx.solve.adapters.proxqp`), solves the stack, on every
 solve path, verified.  No test asserts that a solver fails.
 """
 
@@ -20,11 +20,9 @@ import scipy.sparse as sp
 from scipy.optimize import linprog
 
 from wuerfel_cvx import simulate
-from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations import StepQP, declare_qp
-from wuerfel_cvx.geometry import FloatArray
-from wuerfel_cvx.scaling import unknowns_scale
-from wuerfel_cvx.solve import (
+from wuerfel_cvx.scenes.geometry import FloatArray
+from wuerfel_cvx.solve.paths import (
     SOLVE_PATHS,
     VERIFY_FACTOR,
     SolvePath,
@@ -32,7 +30,9 @@ from wuerfel_cvx.solve import (
     kkt_residuals,
     solve_step_qp,
 )
-from wuerfel_cvx.solvers import TOLERANCE_PRESETS, available_solvers
+from wuerfel_cvx.solve.registry import TOLERANCE_PRESETS, available_solvers
+from wuerfel_cvx.solve.scaling import unknowns_scale
+from wuerfel_cvx.step.contacts import Contacts
 
 pytestmark = [pytest.mark.integration, pytest.mark.filterwarnings(  # cvxpy reading its own
     "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")]  # sparse parameters

@@ -22,7 +22,7 @@ import pytest
 
 from test_properties import DT, WEDGED_CORNER, energy_identity_terms
 from wuerfel_cvx import simulate
-from wuerfel_cvx.analytic_scenes import (
+from wuerfel_cvx.scenes.analytic import (
     GRAVITY,
     ladder_scene,
     ladder_static_friction,
@@ -31,11 +31,11 @@ from wuerfel_cvx.analytic_scenes import (
     slope_origin,
     slope_scene,
 )
-from wuerfel_cvx.criteria import ccp_forces
-from wuerfel_cvx.library import named_scene
-from wuerfel_cvx.scene import Scene
-from wuerfel_cvx.solve import VERIFY_FACTOR, solve_step_qp
-from wuerfel_cvx.solvers import TOLERANCE_PRESETS
+from wuerfel_cvx.scenes.library import named_scene
+from wuerfel_cvx.scenes.scene import Scene
+from wuerfel_cvx.solve.paths import VERIFY_FACTOR, solve_step_qp
+from wuerfel_cvx.solve.registry import TOLERANCE_PRESETS
+from wuerfel_cvx.step.criteria import ccp_forces
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration
@@ -227,7 +227,7 @@ def test_energy_identity_holds_with_the_friction_cones() -> None:
     """``E+ - E = nu . h - |v+ - v|_M^2 / 2`` with the cone rows among the rows.
 
     The cone rows keep their normal rows' right-hand sides, so the identity (and with it
-    the energy bound of :mod:`wuerfel_cvx.robustness.bounds`) is the frictionless one:
+    the energy bound of :mod:`wuerfel_cvx.lab.robustness.bounds`) is the frictionless one:
     friction's work is in ``nu . h`` and never positive.  Checked as in
     ``tests/test_properties.py``, with an independent high-accuracy solve.
     """

@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 
 from wuerfel_cvx import simulate
-from wuerfel_cvx.analytic_scenes import slope_scene
 from wuerfel_cvx.cli import main
 from wuerfel_cvx.errors import InputError
+from wuerfel_cvx.scenes.analytic import slope_scene
 
 pytestmark = pytest.mark.unit
 

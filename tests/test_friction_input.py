@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx import InputError, Scene, simulate
-from wuerfel_cvx.contacts import find_contacts
-from wuerfel_cvx.friction import body_friction, contact_friction, is_frictionless
-from wuerfel_cvx.model import Model
+from wuerfel_cvx.friction.forces import body_friction, contact_friction, is_frictionless
+from wuerfel_cvx.step.contacts import find_contacts
+from wuerfel_cvx.step.model import Model
 
 pytestmark = pytest.mark.unit
 

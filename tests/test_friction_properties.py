@@ -1,6 +1,6 @@
 """Generated scenes with friction keep every invariant of the property checks.
 
-The checks (:func:`wuerfel_cvx.robustness.properties.check_run`) are the frictionless
+The checks (:func:`wuerfel_cvx.lab.robustness.properties.check_run`) are the frictionless
 ones: the cone rows keep their normal rows' right-hand sides, and ``coulomb``'s state is
 its last contact QP's, accepted by the same gap test (``docs/friction.md``,
 ``docs/coulomb.md``), so the penetration and energy bounds are unchanged.  Friction must
@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wuerfel_cvx.robustness.properties import random_scene, run_property_sweep
+from wuerfel_cvx.lab.robustness.properties import random_scene, run_property_sweep
 
 pytestmark = pytest.mark.integration
 

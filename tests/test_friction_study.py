@@ -19,14 +19,14 @@ import pandas as pd
 import pytest
 
 from wuerfel_cvx import simulate
-from wuerfel_cvx.bench import runner, schema
-from wuerfel_cvx.bench.friction_summary import FRICTION_COLUMNS, friction_summary
-from wuerfel_cvx.bench.report import write_report
-from wuerfel_cvx.bench.report_friction import friction_section
-from wuerfel_cvx.bench.suite import GridPoint, Suite
-from wuerfel_cvx.bench.sweep import RESULTS_FILE, run_sweep
-from wuerfel_cvx.criteria import CRITERIA_COLUMNS, combine_criteria
 from wuerfel_cvx.errors import InputError
+from wuerfel_cvx.lab.bench import runner, schema
+from wuerfel_cvx.lab.bench.friction_summary import FRICTION_COLUMNS, friction_summary
+from wuerfel_cvx.lab.bench.report import write_report
+from wuerfel_cvx.lab.bench.report_friction import friction_section
+from wuerfel_cvx.lab.bench.suite import GridPoint, Suite
+from wuerfel_cvx.lab.bench.sweep import RESULTS_FILE, run_sweep
+from wuerfel_cvx.step.criteria import CRITERIA_COLUMNS, combine_criteria
 
 pytestmark = pytest.mark.integration
 

@@ -7,14 +7,14 @@ import pandas as pd
 import pytest
 
 from wuerfel_cvx import simulate
-from wuerfel_cvx.analytic_scenes import slope_acceleration, slope_scene
-from wuerfel_cvx.bench.friction_targets import (
+from wuerfel_cvx.lab.bench.friction_targets import (
     RAMP_TOLERANCE,
     _longest_run,
     displacement,
     ramp_rows,
     render,
 )
+from wuerfel_cvx.scenes.analytic import slope_acceleration, slope_scene
 
 pytestmark = pytest.mark.integration
 
@@ -46,7 +46,7 @@ def test_ramp_fit_of_a_box_sliding_down_a_slope_is_g_sin_minus_mu_cos() -> None:
 
 
 def test_measure_runs_only_the_scenes_asked_for(monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.bench import friction_targets
+    from wuerfel_cvx.lab.bench import friction_targets
 
     ran: list[str] = []
     monkeypatch.setattr(friction_targets, "_run",
@@ -59,7 +59,7 @@ def test_measure_runs_only_the_scenes_asked_for(monkeypatch: pytest.MonkeyPatch)
 
 
 def test_a_run_that_stopped_is_reported_failed_not_standing() -> None:
-    from wuerfel_cvx.bench.friction_targets import _verdict
+    from wuerfel_cvx.lab.bench.friction_targets import _verdict
 
     record = {"outcome": "step 4: solver OSQP failed with status 'user_limit'", "moved": 0.0}
     assert _verdict(record) == "failed"

@@ -1,4 +1,4 @@
-"""Independent checks of every constraint formula in :mod:`wuerfel_cvx.geometry`.
+"""Independent checks of every constraint formula in :mod:`wuerfel_cvx.scenes.geometry`.
 
 The reference values never come from the package itself: they come from
 
@@ -29,7 +29,7 @@ import sympy as sp
 from numpy.typing import NDArray
 
 from oracles import penetration_depth
-from wuerfel_cvx.geometry import (
+from wuerfel_cvx.scenes.geometry import (
     cross,
     edge_distances,
     edge_parameter,

@@ -10,13 +10,13 @@ import pytest
 
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.formulations.rigid import body_velocities
-from wuerfel_cvx.geometry import edge_distances, polygon_overlap_depth
-from wuerfel_cvx.library import SPIN_RANGE, SPINNING_PILE_SIZES
-from wuerfel_cvx.metrics import deepest_penetration
-from wuerfel_cvx.model import Model
-from wuerfel_cvx.robustness.properties import ROD_DRIFT_LIMIT
-from wuerfel_cvx.scene import Table
-from wuerfel_cvx.solvers import TOLERANCE_PRESETS
+from wuerfel_cvx.lab.robustness.properties import ROD_DRIFT_LIMIT
+from wuerfel_cvx.scenes.geometry import edge_distances, polygon_overlap_depth
+from wuerfel_cvx.scenes.library import SPIN_RANGE, SPINNING_PILE_SIZES
+from wuerfel_cvx.scenes.scene import Table
+from wuerfel_cvx.solve.registry import TOLERANCE_PRESETS
+from wuerfel_cvx.step.metrics import deepest_penetration
+from wuerfel_cvx.step.model import Model
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration

@@ -11,9 +11,9 @@ import pandas as pd
 import pytest
 
 from wuerfel_cvx import simulate
-from wuerfel_cvx.bench import schema
-from wuerfel_cvx.bench.suite import Suite
-from wuerfel_cvx.bench.targets import (
+from wuerfel_cvx.lab.bench import schema
+from wuerfel_cvx.lab.bench.suite import Suite
+from wuerfel_cvx.lab.bench.targets import (
     ENERGY_RISE,
     GENERATED_COLUMNS,
     PENETRATION,
@@ -25,9 +25,9 @@ from wuerfel_cvx.bench.targets import (
     target_rows,
     verdicts,
 )
-from wuerfel_cvx.metrics import total_energy
-from wuerfel_cvx.model import Model, State
-from wuerfel_cvx.robustness.properties import random_scene
+from wuerfel_cvx.lab.robustness.properties import random_scene
+from wuerfel_cvx.step.metrics import total_energy
+from wuerfel_cvx.step.model import Model, State
 
 pytestmark = pytest.mark.integration
 
@@ -148,7 +148,7 @@ def test_report_shows_before_and_after_and_how_to_regenerate(results: pd.DataFra
     both = render(results, generated, after, generated)
     assert "| rain-20 | CLARABEL | 400/400 (ok) → 400/400 (ok) | 100.0 % → 100.0 % | " \
            "6e-05 → 1e-05 | 0.00012 → 0.00012 |" in both
-    assert "python -m wuerfel_cvx.bench.targets report" in both
+    assert "python -m wuerfel_cvx.lab.bench.targets report" in both
     # the command line writes the same report from the files
     results_csv, generated_csv = tmp_path / "results.csv", tmp_path / "generated.csv"
     generated.to_csv(generated_csv, index=False)

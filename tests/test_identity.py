@@ -1,4 +1,4 @@
-"""One contact identity across steps (:mod:`wuerfel_cvx.identity`).
+"""One contact identity across steps (:mod:`wuerfel_cvx.step.identity`).
 
 The matcher, exact at any index, and the two uses it carries: the warm starts and the
 Coulomb friction memory.
@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx import Scene
-from wuerfel_cvx.coulomb import CoulombStep, FrictionMemory
 from wuerfel_cvx.formulations import StepQP, get_formulation, step_qp
-from wuerfel_cvx.friction import ContactForces
-from wuerfel_cvx.identity import ContactIndex
-from wuerfel_cvx.model import Model, State
-from wuerfel_cvx.warm_start import WarmStarts
+from wuerfel_cvx.friction.coulomb import CoulombStep, FrictionMemory
+from wuerfel_cvx.friction.forces import ContactForces
+from wuerfel_cvx.solve.warm_start import WarmStarts
+from wuerfel_cvx.step.identity import ContactIndex
+from wuerfel_cvx.step.model import Model, State
 
 pytestmark = pytest.mark.unit
 

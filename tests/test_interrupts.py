@@ -22,10 +22,10 @@ from pathlib import Path
 
 import pytest
 
-from wuerfel_cvx.bench import runner, schema
-from wuerfel_cvx.bench.suite import Suite
-from wuerfel_cvx.bench.sweep import RESULTS_FILE
 from wuerfel_cvx.errors import Interrupted, WuerfelError
+from wuerfel_cvx.lab.bench import runner, schema
+from wuerfel_cvx.lab.bench.suite import Suite
+from wuerfel_cvx.lab.bench.sweep import RESULTS_FILE
 from wuerfel_cvx.trajectory import Trajectory
 
 LINUX = pytest.mark.skipif(not Path("/proc/self/stat").exists(),
@@ -156,7 +156,7 @@ def test_a_grid_point_cut_short_by_ctrl_c_becomes_no_row(monkeypatch: pytest.Mon
 def test_the_package_imports_cvxpy_only_when_a_name_needs_it() -> None:
     code = ("import sys, wuerfel_cvx, wuerfel_cvx._entry\n"
             "assert 'cvxpy' not in sys.modules and 'numpy' not in sys.modules\n"
-            "import wuerfel_cvx.bench.runner  # imports the module wuerfel_cvx.simulate\n"
+            "import wuerfel_cvx.lab.bench.runner  # imports the module wuerfel_cvx.simulate\n"
             "from wuerfel_cvx import Scene, simulate\n"
             "assert callable(simulate) and wuerfel_cvx.simulate is simulate\n"
             "print(simulate(Scene.named('tilted-drop'), steps=2).n_steps)\n")

@@ -27,8 +27,7 @@ from test_contacts_fast import (
     random_model,
     random_points,
 )
-from wuerfel_cvx import contact_kernel, contacts, residual_kernel, simulate
-from wuerfel_cvx.contacts import find_contacts
+from wuerfel_cvx import simulate
 from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations.motion import rigid_step
 from wuerfel_cvx.formulations.qp import StepQP, point_rows
@@ -41,10 +40,13 @@ from wuerfel_cvx.formulations.rows import (
     side_rows,
 )
 from wuerfel_cvx.formulations.velocity import VelocityFormulation
-from wuerfel_cvx.geometry import FloatArray, rectangle_corners
-from wuerfel_cvx.model import Model, State
-from wuerfel_cvx.scaling import data_magnitude
-from wuerfel_cvx.solve import Residuals, StepSolution, _checked_scales, kkt_residuals
+from wuerfel_cvx.scenes.geometry import FloatArray, rectangle_corners
+from wuerfel_cvx.solve import residual_kernel
+from wuerfel_cvx.solve.paths import Residuals, StepSolution, _checked_scales, kkt_residuals
+from wuerfel_cvx.solve.scaling import data_magnitude
+from wuerfel_cvx.step import contact_kernel, contacts
+from wuerfel_cvx.step.contacts import find_contacts
+from wuerfel_cvx.step.model import Model, State
 
 pytestmark = pytest.mark.integration
 

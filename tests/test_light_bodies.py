@@ -4,7 +4,7 @@ A scene whose masses are all ``4^-k`` times another's has, in the velocity formu
 same trajectory (the minimiser of ``sum m |v - v_free|^2`` does not depend on the masses'
 common scale).  The solvers' tolerances are partly absolute, so a QP of light bodies was
 solved less accurately than its heavy twin; with the weights scaled up by a power of four
-(:func:`wuerfel_cvx.scaling.weights_scale`) the light QP the solver sees is the heavy one,
+(:func:`wuerfel_cvx.solve.scaling.weights_scale`) the light QP the solver sees is the heavy one,
 bit for bit, and so is the trajectory.
 """
 
@@ -18,9 +18,9 @@ import pytest
 
 from qp_bank import qp_bank
 from wuerfel_cvx import simulate
-from wuerfel_cvx.library import named_scene
-from wuerfel_cvx.scaling import WEIGHT_FLOOR, scaled_qp, weights_scale
-from wuerfel_cvx.scene import Scene
+from wuerfel_cvx.scenes.library import named_scene
+from wuerfel_cvx.scenes.scene import Scene
+from wuerfel_cvx.solve.scaling import WEIGHT_FLOOR, scaled_qp, weights_scale
 
 pytestmark = pytest.mark.integration
 

@@ -1,7 +1,7 @@
 """Long runs: a resting stack over 10 000 steps keeps its rods and uses constant memory.
 
 Memory is traced with :mod:`tracemalloc` over windows of the run, opened and closed
-between steps of a :class:`~wuerfel_cvx.simulation.Simulation`: what was allocated in a
+between steps of a :class:`~wuerfel_cvx.step.simulation.Simulation`: what was allocated in a
 window and is still held at its end must be what the trajectory stored in that window (a
 positions and a velocities array, a time and a metrics row per step), measured from the
 recorder's own lists.  Anything else (caches,
@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx import Scene
-from wuerfel_cvx.recorder import TrajectoryRecorder
-from wuerfel_cvx.robustness.properties import ROD_DRIFT_LIMIT
-from wuerfel_cvx.simulation import Simulation
+from wuerfel_cvx.lab.robustness.properties import ROD_DRIFT_LIMIT
+from wuerfel_cvx.step.recorder import TrajectoryRecorder
+from wuerfel_cvx.step.simulation import Simulation
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration

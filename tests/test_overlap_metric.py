@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx import Scene
-from wuerfel_cvx.bench import schema
-from wuerfel_cvx.bench.runner import run_point
-from wuerfel_cvx.bench.suite import GridPoint
-from wuerfel_cvx.geometry import polygon_overlap_depth, rectangle_corners
-from wuerfel_cvx.library import FLOOR
-from wuerfel_cvx.metrics import deepest_overlap, deepest_penetration
-from wuerfel_cvx.model import Model
-from wuerfel_cvx.scene import Box, Square
+from wuerfel_cvx.lab.bench import schema
+from wuerfel_cvx.lab.bench.runner import run_point
+from wuerfel_cvx.lab.bench.suite import GridPoint
+from wuerfel_cvx.scenes.geometry import polygon_overlap_depth, rectangle_corners
+from wuerfel_cvx.scenes.library import FLOOR
+from wuerfel_cvx.scenes.scene import Box, Square
+from wuerfel_cvx.step.metrics import deepest_overlap, deepest_penetration
+from wuerfel_cvx.step.model import Model
 
 pytestmark = pytest.mark.unit
 

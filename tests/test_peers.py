@@ -17,15 +17,15 @@ import pytest
 
 from wuerfel_cvx import Box, Scene, Square, StepFailure, simulate
 from wuerfel_cvx.errors import InputError
-from wuerfel_cvx.geometry import FloatArray, rectangle_corners, rot90, square_corners
-from wuerfel_cvx.peers import (
+from wuerfel_cvx.lab.peers import (
     PEER_ENGINES,
     PEER_MODULES,
     available_peers,
     peer_version,
     simulate_peer,
 )
-from wuerfel_cvx.peers._common import initial_poses, matched_moment, run_peer
+from wuerfel_cvx.lab.peers._common import initial_poses, matched_moment, run_peer
+from wuerfel_cvx.scenes.geometry import FloatArray, rectangle_corners, rot90, square_corners
 from wuerfel_cvx.simulate import METRIC_COLUMNS
 from wuerfel_cvx.trajectory import Trajectory
 
@@ -123,7 +123,7 @@ def test_mass_inertia_and_settings_are_matched(engine: str) -> None:
     scene = _odd_square()
     m, s = scene.squares[0].mass, scene.squares[0].size
     if engine == "PYMUNK":
-        from wuerfel_cvx.peers.pymunk_peer import build_world as build_pymunk
+        from wuerfel_cvx.lab.peers.pymunk_peer import build_world as build_pymunk
 
         world = build_pymunk(scene, DT)
         body = world.bodies[0]
@@ -134,7 +134,7 @@ def test_mass_inertia_and_settings_are_matched(engine: str) -> None:
     else:
         import mujoco
 
-        from wuerfel_cvx.peers.mujoco_peer import build_world as build_mujoco
+        from wuerfel_cvx.lab.peers.mujoco_peer import build_world as build_mujoco
 
         world = build_mujoco(scene, DT)
         mass_matrix = np.zeros((3, 3))
@@ -151,7 +151,7 @@ def test_engine_geometry_matches_the_corner_layout(engine: str) -> None:
     h = sq.size / 2
     local = [(-h, -h), (h, -h), (h, h), (-h, h)]  # lower-left first, CCW, at angle 0
     if engine == "PYMUNK":
-        from wuerfel_cvx.peers.pymunk_peer import build_world as build_pymunk
+        from wuerfel_cvx.lab.peers.pymunk_peer import build_world as build_pymunk
 
         body = build_pymunk(scene, DT).bodies[0]
         theirs = np.array([tuple(body.local_to_world(p)) for p in local])
@@ -164,7 +164,7 @@ def test_engine_geometry_matches_the_corner_layout(engine: str) -> None:
         np.testing.assert_allclose(np.sort(vertices, axis=0), np.sort(ours, axis=0),
                                    atol=1e-12)
     else:
-        from wuerfel_cvx.peers.mujoco_peer import build_world as build_mujoco
+        from wuerfel_cvx.lab.peers.mujoco_peer import build_world as build_mujoco
 
         world = build_mujoco(scene, DT)
         frame = world.data.geom_xmat[0].reshape(3, 3)
@@ -196,7 +196,7 @@ def test_a_plank_has_matched_mass_moment_and_shape(engine: str) -> None:
     ours = rectangle_corners(plank.center, w, h, plank.angle)
     local = [(-w / 2, -h / 2), (w / 2, -h / 2), (w / 2, h / 2), (-w / 2, h / 2)]
     if engine == "PYMUNK":
-        from wuerfel_cvx.peers.pymunk_peer import build_world as build_pymunk
+        from wuerfel_cvx.lab.peers.pymunk_peer import build_world as build_pymunk
 
         body = build_pymunk(scene, DT).bodies[0]
         assert body.mass == pytest.approx(m, rel=1e-12)
@@ -208,7 +208,7 @@ def test_a_plank_has_matched_mass_moment_and_shape(engine: str) -> None:
     else:
         import mujoco
 
-        from wuerfel_cvx.peers.mujoco_peer import build_world as build_mujoco
+        from wuerfel_cvx.lab.peers.mujoco_peer import build_world as build_mujoco
 
         world = build_mujoco(scene, DT)
         mass_matrix = np.zeros((3, 3))

@@ -15,9 +15,9 @@ import pytest
 
 from wuerfel_cvx import Box, Scene, Square
 from wuerfel_cvx.errors import InputError
-from wuerfel_cvx.geometry import FloatArray, rectangle_corners, square_corners
-from wuerfel_cvx.peers import PEER_MODULES, available_peers, simulate_peer
-from wuerfel_cvx.peers.box2d_peer import SUBSTEPS
+from wuerfel_cvx.lab.peers import PEER_MODULES, available_peers, simulate_peer
+from wuerfel_cvx.lab.peers.box2d_peer import SUBSTEPS
+from wuerfel_cvx.scenes.geometry import FloatArray, rectangle_corners, square_corners
 
 pytestmark = pytest.mark.integration
 
@@ -38,10 +38,10 @@ def engine(request: pytest.FixtureRequest) -> str:
 
 def _build(engine: str, scene: Scene, *, sleep: bool = True) -> object:
     if engine == "BOX2D":
-        from wuerfel_cvx.peers.box2d_peer import build_world as build_box2d
+        from wuerfel_cvx.lab.peers.box2d_peer import build_world as build_box2d
 
         return build_box2d(scene, DT, sleep=sleep)
-    from wuerfel_cvx.peers.pybox2d_peer import build_world as build_pybox2d
+    from wuerfel_cvx.lab.peers.pybox2d_peer import build_world as build_pybox2d
 
     return build_pybox2d(scene, DT, sleep=sleep)
 

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx import Scene, Square
-from wuerfel_cvx.bodies import Table
-from wuerfel_cvx.geometry import FloatArray
-from wuerfel_cvx.peers import PEER_ENGINES, PEER_MODULES, simulate_peer
+from wuerfel_cvx.lab.peers import PEER_ENGINES, PEER_MODULES, simulate_peer
+from wuerfel_cvx.scenes.bodies import Table
+from wuerfel_cvx.scenes.geometry import FloatArray
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration
@@ -124,7 +124,7 @@ def test_engines_mix_coefficients_as_sqrt_of_the_product(engine: str) -> None:
     """Where the engine tells a contact's coefficient, it is sqrt(mu_a mu_b)."""
     scene = slope_scene(0.09, 0.64)  # sqrt = 0.24
     if engine == "PYMUNK":
-        from wuerfel_cvx.peers.pymunk_peer import build_world as build_pymunk
+        from wuerfel_cvx.lab.peers.pymunk_peer import build_world as build_pymunk
 
         world = build_pymunk(scene, DT)
         for _ in range(10):  # the box starts exactly in touch: it sinks into contact
@@ -133,7 +133,7 @@ def test_engines_mix_coefficients_as_sqrt_of_the_product(engine: str) -> None:
         world.bodies[0].each_arbiter(lambda arbiter: frictions.append(arbiter.friction))
         assert frictions == [pytest.approx(0.24, rel=1e-12)]
     elif engine == "MUJOCO":
-        from wuerfel_cvx.peers.mujoco_peer import build_world as build_mujoco
+        from wuerfel_cvx.lab.peers.mujoco_peer import build_world as build_mujoco
 
         world = build_mujoco(scene, DT)
         world.step()
@@ -143,7 +143,7 @@ def test_engines_mix_coefficients_as_sqrt_of_the_product(engine: str) -> None:
             assert contact.dim == 3
             np.testing.assert_allclose(contact.friction[:2], [0.24, 0.24], rtol=1e-12)
     elif engine == "PYBOX2D":
-        from wuerfel_cvx.peers.pybox2d_peer import build_world as build_pybox2d
+        from wuerfel_cvx.lab.peers.pybox2d_peer import build_world as build_pybox2d
 
         world = build_pybox2d(scene, DT)
         world.step()
@@ -156,7 +156,7 @@ def test_engines_mix_coefficients_as_sqrt_of_the_product(engine: str) -> None:
 
 
 def test_mujoco_writes_pairs_only_where_the_maximum_would_differ() -> None:
-    from wuerfel_cvx.peers.mujoco_peer import scene_mjcf
+    from wuerfel_cvx.lab.peers.mujoco_peer import scene_mjcf
 
     uniform = Scene("uniform", (Square(center=(0.0, 0.5), friction=0.6),
                                 Square(center=(0.0, 1.5), friction=0.6)),
@@ -178,7 +178,7 @@ def test_frictionless_scenes_keep_the_frictionless_model(engine: str) -> None:
     scene = Scene.named("stack-2")
     assert all(body.friction == 0.0 for body in (*scene.bodies, *scene.tables))
     if engine == "MUJOCO":
-        from wuerfel_cvx.peers.mujoco_peer import scene_mjcf
+        from wuerfel_cvx.lab.peers.mujoco_peer import scene_mjcf
 
         text = scene_mjcf(scene, DT)
         assert "friction" not in text and "<contact>" not in text

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx import Scene, Square, simulate
-from wuerfel_cvx.geometry import polygon_overlap_depth
-from wuerfel_cvx.library import FLOOR
-from wuerfel_cvx.solve import VERIFY_FACTOR
-from wuerfel_cvx.solvers import TOLERANCE_PRESETS
+from wuerfel_cvx.scenes.geometry import polygon_overlap_depth
+from wuerfel_cvx.scenes.library import FLOOR
+from wuerfel_cvx.solve.paths import VERIFY_FACTOR
+from wuerfel_cvx.solve.registry import TOLERANCE_PRESETS
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration

@@ -1,7 +1,7 @@
 """Property-based tests: generated scenes keep the physical invariants over 200 steps.
 
 Scenes: 1 to 8 squares of random size, angle, mass (ratio up to 100), velocity and spin,
-placed without overlap above a table (:mod:`wuerfel_cvx.robustness.properties`, whose
+placed without overlap above a table (:mod:`wuerfel_cvx.lab.robustness.properties`, whose
 docstring derives every bound).  Hypothesis draws the same numbers as
 :func:`random_scene` and calls the same builder.
 
@@ -23,12 +23,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from wuerfel_cvx import Scene, simulate
-from wuerfel_cvx.compiled import declare
 from wuerfel_cvx.formulations import StepQP, VelocityFormulation, step_qp
-from wuerfel_cvx.geometry import rotation, square_corners
-from wuerfel_cvx.metrics import kinetic_energy, potential_energy
-from wuerfel_cvx.model import Model, State
-from wuerfel_cvx.robustness.properties import (
+from wuerfel_cvx.lab.robustness.properties import (
     GAP_RANGE,
     MASS_RANGE,
     MAX_SQUARES,
@@ -44,6 +40,10 @@ from wuerfel_cvx.robustness.properties import (
     run_property_sweep,
     scene_from_draws,
 )
+from wuerfel_cvx.scenes.geometry import rotation, square_corners
+from wuerfel_cvx.solve.cvxpy_forms import declare
+from wuerfel_cvx.step.metrics import kinetic_energy, potential_energy
+from wuerfel_cvx.step.model import Model, State
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration
@@ -161,7 +161,7 @@ def test_no_energy_leak_at_overlapping_corners(scene: Scene, formulation: str) -
     injected 4e-5 to 2e-3 J per step.  With one contact normal per body pair the rows no
     longer oppose each other, and with the closest-approach rows no active row does
     positive work beyond pushing out depths of ``gap_tolerance``
-    (:mod:`wuerfel_cvx.robustness.bounds`): either change alone removes the leak.
+    (:mod:`wuerfel_cvx.lab.robustness.bounds`): either change alone removes the leak.
     """
     trajectory = simulate(scene, dt=DT, steps=STEPS, formulation=formulation)
     assert check_run(trajectory, scene) == []

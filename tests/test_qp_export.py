@@ -10,9 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from wuerfel_cvx.bench.suite import Suite
 from wuerfel_cvx.cli import main
-from wuerfel_cvx.qp_export import (
+from wuerfel_cvx.lab.bench.suite import Suite
+from wuerfel_cvx.lab.qp_export import (
     capture_run,
     export_qps,
     features,
@@ -21,7 +21,7 @@ from wuerfel_cvx.qp_export import (
     qpsolvers_form,
     run_settings,
 )
-from wuerfel_cvx.qp_export.compare import (
+from wuerfel_cvx.lab.qp_export.compare import (
     ours_table,
     paired_table,
     qpbenchmark_tables,

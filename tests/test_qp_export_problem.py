@@ -8,10 +8,9 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations import StepQP, declare_qp
-from wuerfel_cvx.qp_export.features import active_rows, kkt_matrix
-from wuerfel_cvx.qp_export.problem import (
+from wuerfel_cvx.lab.qp_export.features import active_rows, kkt_matrix
+from wuerfel_cvx.lab.qp_export.problem import (
     PROBLEM_KEYS,
     QPData,
     load_problem,
@@ -19,6 +18,7 @@ from wuerfel_cvx.qp_export.problem import (
     qpsolvers_form,
     save_problem,
 )
+from wuerfel_cvx.step.contacts import Contacts
 
 pytestmark = pytest.mark.unit
 

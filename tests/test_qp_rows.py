@@ -11,8 +11,8 @@ import pytest
 
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.formulations import get_formulation, step_qp
-from wuerfel_cvx.geometry import side_acceleration, side_value
-from wuerfel_cvx.model import Model, State
+from wuerfel_cvx.scenes.geometry import side_acceleration, side_value
+from wuerfel_cvx.step.model import Model, State
 
 pytestmark = pytest.mark.integration
 

@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from wuerfel_cvx.bench import plots, schema
-from wuerfel_cvx.bench.report import markdown_table, write_report
-from wuerfel_cvx.bench.shgeom import DEFAULT_TIME_SHIFT, shifted_geometric_mean
 from wuerfel_cvx.errors import InputError
+from wuerfel_cvx.lab.bench import plots, schema
+from wuerfel_cvx.lab.bench.report import markdown_table, write_report
+from wuerfel_cvx.lab.bench.shgeom import DEFAULT_TIME_SHIFT, shifted_geometric_mean
 
 pytestmark = pytest.mark.integration
 
@@ -431,7 +431,7 @@ Drawn = dict[str, Figure]
 @pytest.fixture
 def drawn(monkeypatch: pytest.MonkeyPatch) -> Drawn:
     """The figures the plot functions would save, by stem (nothing is written)."""
-    from wuerfel_cvx.bench import plots_accuracy, plots_cost
+    from wuerfel_cvx.lab.bench import plots_accuracy, plots_cost
 
     figures: Drawn = {}
 

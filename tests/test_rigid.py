@@ -11,8 +11,8 @@ from wuerfel_cvx import simulate
 from wuerfel_cvx.errors import InputError
 from wuerfel_cvx.formulations import RigidFormulation, get_formulation, step_qp
 from wuerfel_cvx.formulations.rigid import body_rows, body_velocities
-from wuerfel_cvx.model import Model
-from wuerfel_cvx.solve import solve_step_qp
+from wuerfel_cvx.solve.paths import solve_step_qp
+from wuerfel_cvx.step.model import Model
 
 pytestmark = pytest.mark.integration
 
@@ -73,7 +73,7 @@ def test_rigid_and_velocity_trajectories_agree(scene: str) -> None:
 
 def test_rigid_formulation_refuses_the_heavy_table() -> None:
     from wuerfel_cvx import Scene
-    from wuerfel_cvx.model import State
+    from wuerfel_cvx.step.model import State
 
     scene = Scene.named("tilted-drop")
     model = Model.from_scene(scene, table_mass=1e6)
@@ -96,9 +96,9 @@ def test_body_rows_and_velocities_equal_the_corner_map_products(scene: str) -> N
     # The rigid build writes G's rows and the corner velocities directly; they must be the
     # sparse products with corner_velocity_map bit for bit (pattern, order and values), so
     # that trajectories do not change.
-    from wuerfel_cvx.contacts import find_contacts
-    from wuerfel_cvx.model import State
-    from wuerfel_cvx.scene import Scene
+    from wuerfel_cvx.scenes.scene import Scene
+    from wuerfel_cvx.step.contacts import find_contacts
+    from wuerfel_cvx.step.model import State
 
     velocity = get_formulation("velocity")
     traj = simulate(scene, steps=60, formulation="rigid")

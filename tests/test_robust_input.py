@@ -28,8 +28,8 @@ from hypothesis import strategies as st
 
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.errors import InputError
-from wuerfel_cvx.robustness.faults import SQUEEZED_SCENE
-from wuerfel_cvx.robustness.fuzz import (
+from wuerfel_cvx.lab.robustness.faults import SQUEEZED_SCENE
+from wuerfel_cvx.lab.robustness.fuzz import (
     _cross_check,
     check_input,
     generate_inputs,
@@ -37,8 +37,8 @@ from wuerfel_cvx.robustness.fuzz import (
     run_fuzz,
     seed_files,
 )
-from wuerfel_cvx.robustness.properties import FRICTION_RANGE, random_scene
-from wuerfel_cvx.scene import LIMITS, Square, Table
+from wuerfel_cvx.lab.robustness.properties import FRICTION_RANGE, random_scene
+from wuerfel_cvx.scenes.scene import LIMITS, Square, Table
 
 pytestmark = pytest.mark.integration
 

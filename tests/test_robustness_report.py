@@ -8,10 +8,10 @@ from pathlib import Path
 import pytest
 
 from wuerfel_cvx.cli import main
-from wuerfel_cvx.robustness.faults import run_fault_injections
-from wuerfel_cvx.robustness.fuzz import Crash, FuzzResult
-from wuerfel_cvx.robustness.properties import PropertyFailure, PropertySweepResult
-from wuerfel_cvx.robustness.report import (
+from wuerfel_cvx.lab.robustness.faults import run_fault_injections
+from wuerfel_cvx.lab.robustness.fuzz import Crash, FuzzResult
+from wuerfel_cvx.lab.robustness.properties import PropertyFailure, PropertySweepResult
+from wuerfel_cvx.lab.robustness.report import (
     FIXED_BUGS,
     KNOWN_LIMITS,
     FixedBug,

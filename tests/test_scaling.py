@@ -1,4 +1,4 @@
-"""Step QPs with large data are solved in scaled units (:mod:`wuerfel_cvx.scaling`).
+"""Step QPs with large data are solved in scaled units (:mod:`wuerfel_cvx.solve.scaling`).
 
 The scaled QP's answer, mapped back, is measured against the exact solution of the large
 QP itself (its KKT system at the known active set, solved by numpy), on every solver and
@@ -14,9 +14,9 @@ import pytest
 
 from test_step_qp_general import agreement, exact_solution, wide_qp
 from wuerfel_cvx.formulations.qp import StepQP
-from wuerfel_cvx.scaling import SCALE_LIMIT, data_magnitude, scaled_qp, unknowns_scale
-from wuerfel_cvx.solve import SolvePath, solve_step_qp
-from wuerfel_cvx.solvers import SOLVERS, available_solvers
+from wuerfel_cvx.solve.paths import SolvePath, solve_step_qp
+from wuerfel_cvx.solve.registry import SOLVERS, available_solvers
+from wuerfel_cvx.solve.scaling import SCALE_LIMIT, data_magnitude, scaled_qp, unknowns_scale
 
 pytestmark = [pytest.mark.integration, pytest.mark.filterwarnings(
     "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")]

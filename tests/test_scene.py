@@ -1,9 +1,9 @@
-"""Tests of scene loading (:mod:`wuerfel_cvx.scene`) and the named-scene library.
+"""Tests of scene loading (:mod:`wuerfel_cvx.scenes.scene`) and the named-scene library.
 
 Covers the TOML schema (the example file, defaults, the ``to_dict``/``from_dict``
 round trip), the corner arrays a scene hands to the simulator, every way a scene
 file can be wrong (each must raise :class:`~wuerfel_cvx.errors.InputError` naming
-the file and the dotted field), and the scenes of :mod:`wuerfel_cvx.library`.
+the file and the dotted field), and the scenes of :mod:`wuerfel_cvx.scenes.library`.
 """
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx.errors import InputError
-from wuerfel_cvx.geometry import FloatArray, polygon_overlap_depth, square_corners
-from wuerfel_cvx.library import FLOOR, scene_names
-from wuerfel_cvx.metrics import deepest_overlap
-from wuerfel_cvx.model import Model
-from wuerfel_cvx.scene import DEFAULT_GRAVITY, OVERLAP_TOLERANCE, Scene, Square, Table
+from wuerfel_cvx.scenes.geometry import FloatArray, polygon_overlap_depth, square_corners
+from wuerfel_cvx.scenes.library import FLOOR, scene_names
+from wuerfel_cvx.scenes.scene import DEFAULT_GRAVITY, OVERLAP_TOLERANCE, Scene, Square, Table
+from wuerfel_cvx.step.metrics import deepest_overlap
+from wuerfel_cvx.step.model import Model
 
 pytestmark = pytest.mark.unit
 

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx import Scene, simulate
-from wuerfel_cvx.contacts import TIE_TOLERANCE, Contacts, find_contacts
 from wuerfel_cvx.formulations import SEED_BAUMGARTE_RATE, SeedFormulation, get_formulation, step_qp
-from wuerfel_cvx.geometry import side_value
-from wuerfel_cvx.model import Model, State
-from wuerfel_cvx.scene import Square
-from wuerfel_cvx.solve import VERIFY_FACTOR, solve_step_qp
-from wuerfel_cvx.solvers import tolerance_value
+from wuerfel_cvx.scenes.geometry import side_value
+from wuerfel_cvx.scenes.scene import Square
+from wuerfel_cvx.solve.paths import VERIFY_FACTOR, solve_step_qp
+from wuerfel_cvx.solve.registry import tolerance_value
+from wuerfel_cvx.step.contacts import TIE_TOLERANCE, Contacts, find_contacts
+from wuerfel_cvx.step.model import Model, State
 
 pytestmark = pytest.mark.integration
 

@@ -7,13 +7,13 @@ import pytest
 
 from qp_bank import AGREEMENT
 from wuerfel_cvx import Scene, Square, simulate
-from wuerfel_cvx.contacts import find_contacts
 from wuerfel_cvx.formulations import get_formulation, step_qp
-from wuerfel_cvx.library import FLOOR
-from wuerfel_cvx.model import Model, State
+from wuerfel_cvx.scenes.library import FLOOR
 from wuerfel_cvx.simulate import ASLEEP
-from wuerfel_cvx.sleep import SleepSettings, island_labels, island_members
-from wuerfel_cvx.solve import solve_step_qp
+from wuerfel_cvx.solve.paths import solve_step_qp
+from wuerfel_cvx.step.contacts import find_contacts
+from wuerfel_cvx.step.model import Model, State
+from wuerfel_cvx.step.sleep import SleepSettings, island_labels, island_members
 
 pytestmark = pytest.mark.integration
 

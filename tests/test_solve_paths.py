@@ -1,6 +1,6 @@
 """The three solve paths: native adapters, compiled cvxpy problems, declared cvxpy problems.
 
-A run chooses its path once (:class:`~wuerfel_cvx.solve.SolvePath`); every path poses the
+A run chooses its path once (:class:`~wuerfel_cvx.solve.paths.SolvePath`); every path poses the
 same QP, so trajectories agree to the solver's tolerance, and every answer is checked by
 the same KKT residuals.
 """
@@ -16,12 +16,12 @@ import pytest
 import scipy.sparse as sp
 
 from wuerfel_cvx import Scene, Settings, Simulation, simulate
-from wuerfel_cvx import compiled as compiled_module
-from wuerfel_cvx.backends._native import RowStack, stacked
 from wuerfel_cvx.errors import InputError
-from wuerfel_cvx.robustness.determinism import GOLDEN_RUN, largest_difference
-from wuerfel_cvx.solve import SOLVE_PATHS
-from wuerfel_cvx.solvers import SOLVERS, TOLERANCE_PRESETS, available_solvers
+from wuerfel_cvx.lab.robustness.determinism import GOLDEN_RUN, largest_difference
+from wuerfel_cvx.solve import cvxpy_forms as compiled_module
+from wuerfel_cvx.solve.adapters._native import RowStack, stacked
+from wuerfel_cvx.solve.paths import SOLVE_PATHS
+from wuerfel_cvx.solve.registry import SOLVERS, TOLERANCE_PRESETS, available_solvers
 
 pytestmark = pytest.mark.integration
 

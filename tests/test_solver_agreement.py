@@ -7,8 +7,8 @@ import pytest
 
 from qp_bank import AGREEMENT, BANK_CASES, qp_bank
 from wuerfel_cvx.errors import StepFailure
-from wuerfel_cvx.solve import solve_step_qp
-from wuerfel_cvx.solvers import available_solvers
+from wuerfel_cvx.solve.paths import solve_step_qp
+from wuerfel_cvx.solve.registry import available_solvers
 
 pytestmark = pytest.mark.integration
 

@@ -18,15 +18,16 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from wuerfel_cvx import simulate, solvers
+from wuerfel_cvx import simulate
 from wuerfel_cvx.cli import main
-from wuerfel_cvx.compiled import declare
-from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations import StepQP, declare_qp
 from wuerfel_cvx.simulate import METRIC_COLUMNS
-from wuerfel_cvx.solve import SolvePath, kkt_residuals, solve_step_qp
-from wuerfel_cvx.solvers import _osqp_polish_option
+from wuerfel_cvx.solve import registry as solvers
+from wuerfel_cvx.solve.cvxpy_forms import declare
+from wuerfel_cvx.solve.paths import SolvePath, kkt_residuals, solve_step_qp
+from wuerfel_cvx.solve.registry import _osqp_polish_option
+from wuerfel_cvx.step.contacts import Contacts
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration
@@ -156,7 +157,7 @@ def test_native_solve_raising_becomes_a_step_failure(monkeypatch: pytest.MonkeyP
                                                       failing_call: int) -> None:
     # call 1 sets a structure's solver up; call 3 updates it in place (the scene at rest
     # keeps one structure)
-    from wuerfel_cvx.backends.clarabel import ClarabelAdapter
+    from wuerfel_cvx.solve.adapters.clarabel import ClarabelAdapter
 
     original, calls = ClarabelAdapter.solve, [0]
 

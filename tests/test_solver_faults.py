@@ -20,23 +20,24 @@ import pytest
 import scipy.sparse as sp
 from scipy.optimize import linprog
 
-import wuerfel_cvx.solve as solve_module
-from wuerfel_cvx import Scene, simulate, solvers
+import wuerfel_cvx.solve.paths as solve_module
+from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.cli import main
 from wuerfel_cvx.errors import InputError, StepFailure
 from wuerfel_cvx.formulations import StepQP, step_qp
 from wuerfel_cvx.formulations.velocity import VelocityFormulation
-from wuerfel_cvx.model import Model, State
-from wuerfel_cvx.robustness.faults import SQUEEZED_SCENE, NaNInQP, clarabel_raises
-from wuerfel_cvx.scene import Square, Table
-from wuerfel_cvx.solve import VERIFY_FACTOR, Residuals, SolvePath, solve_step_qp
-from wuerfel_cvx.solvers import TOLERANCE_PRESETS, available_solvers
+from wuerfel_cvx.lab.robustness.faults import SQUEEZED_SCENE, NaNInQP, clarabel_raises
+from wuerfel_cvx.scenes.scene import Square, Table
+from wuerfel_cvx.solve import registry as solvers
+from wuerfel_cvx.solve.paths import VERIFY_FACTOR, Residuals, SolvePath, solve_step_qp
+from wuerfel_cvx.solve.registry import TOLERANCE_PRESETS, available_solvers
+from wuerfel_cvx.step.model import Model, State
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration
 
 # the package exports the function simulate, which shadows the module's attribute name
-simulation_module = importlib.import_module("wuerfel_cvx.simulation")
+simulation_module = importlib.import_module("wuerfel_cvx.step.simulation")
 
 SCENE = "stack-3"  # every square touches its neighbour or the floor from step 1
 
@@ -193,7 +194,7 @@ def test_no_false_infeasible_at_extreme_speed() -> None:
     """A unit square at 1e6 m/s (the speed limit) over a table: no false 'infeasible'.
 
     CLARABEL called such a step infeasible; solved in scaled units it returns an optimum
-    (``wuerfel_cvx.scaling``), so the fallback is not needed.  Its multipliers on the
+    (``wuerfel_cvx.solve.scaling``), so the fallback is not needed.  Its multipliers on the
     inactive rows (slack of order 1e2 m/s beside targets of 1e6 m/s) leave a relative
     complementarity residual of 3e-4 at ``default``, above the check's bound: that step is
     recorded as unverified, not hidden.  OSQP verifies the same QP.
@@ -270,7 +271,7 @@ def test_nan_multipliers_make_a_step_unverified(monkeypatch: pytest.MonkeyPatch)
 # ------------------------------------------------------------------ exceptions
 def test_exception_while_applying_compiled_parameters_is_a_step_failure(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.compiled import CompiledQP
+    from wuerfel_cvx.solve.cvxpy_forms import CompiledQP
 
     original = CompiledQP.load
     calls = {"n": 0}
@@ -303,7 +304,7 @@ def _inject_nan(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def _inject_exception(monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.backends.clarabel import ClarabelAdapter
+    from wuerfel_cvx.solve.adapters.clarabel import ClarabelAdapter
 
     original = ClarabelAdapter.solve
 

@@ -9,8 +9,8 @@ from importlib.metadata import version
 import pytest
 
 from wuerfel_cvx import versions
-from wuerfel_cvx.bench import plots
-from wuerfel_cvx.solvers import SOLVERS, Timing, available_solvers
+from wuerfel_cvx.lab.bench import plots
+from wuerfel_cvx.solve.registry import SOLVERS, Timing, available_solvers
 
 pytestmark = pytest.mark.unit
 
@@ -37,7 +37,7 @@ def test_each_adapter_is_a_module_with_a_setup() -> None:
     assert adapted == {"CLARABEL", "OSQP", "PIQP", "PROXQP", "DAQP"}  # SCS, HiGHS: cvxpy
     for spec in SOLVERS.values():
         if spec.adapter is not None:
-            module = importlib.import_module(f"wuerfel_cvx.backends.{spec.adapter}")
+            module = importlib.import_module(f"wuerfel_cvx.solve.adapters.{spec.adapter}")
             assert callable(module.setup)
     # cvxpy's interfaces to these pose another problem: their adapters serve every path
     assert {name for name, spec in SOLVERS.items() if spec.native_only} == {"PROXQP", "DAQP"}

@@ -91,7 +91,7 @@ def test_csc_without_a_known_layout_goes_through_the_constructor(
 
 
 def test_stacked_blocks_are_scipys_stack() -> None:
-    from wuerfel_cvx.backends._native import stacked
+    from wuerfel_cvx.solve.adapters._native import stacked
 
     rng = np.random.default_rng(3)
     blocks = [sp.csr_array(rng.normal(size=(rows, 7)) * (rng.random((rows, 7)) < 0.4))

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import pytest
 
-from wuerfel_cvx.bench.suite import Suite
-from wuerfel_cvx.scene import Scene
-from wuerfel_cvx.solve import SOLVE_PATHS
+from wuerfel_cvx.lab.bench.suite import Suite
+from wuerfel_cvx.scenes.scene import Scene
+from wuerfel_cvx.solve.paths import SOLVE_PATHS
 
 pytestmark = pytest.mark.unit
 

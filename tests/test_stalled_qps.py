@@ -26,7 +26,7 @@ from stalled_qps import (
     rebuilt_step_qp,
     rigid_basis,
 )
-from wuerfel_cvx.solve import solve_step_qp
+from wuerfel_cvx.solve.paths import solve_step_qp
 
 pytestmark = pytest.mark.integration
 

@@ -13,18 +13,18 @@ import pytest
 
 from qp_bank import AGREEMENT
 from wuerfel_cvx import Scene, simulate
-from wuerfel_cvx import contacts as contacts_module
-from wuerfel_cvx import simulation as simulation_module
-from wuerfel_cvx.bench.schema import read_results
-from wuerfel_cvx.bench.suite import Suite
-from wuerfel_cvx.bench.sweep import run_sweep
-from wuerfel_cvx.contacts import Contacts, find_contacts
 from wuerfel_cvx.errors import Interrupted, StepFailure
 from wuerfel_cvx.formulations import StepQP, VelocityFormulation
-from wuerfel_cvx.metrics import deepest_penetration
-from wuerfel_cvx.model import Model, State
-from wuerfel_cvx.simulation import Simulation
-from wuerfel_cvx.sleep import SleepSettings
+from wuerfel_cvx.lab.bench.schema import read_results
+from wuerfel_cvx.lab.bench.suite import Suite
+from wuerfel_cvx.lab.bench.sweep import run_sweep
+from wuerfel_cvx.step import contacts as contacts_module
+from wuerfel_cvx.step import simulation as simulation_module
+from wuerfel_cvx.step.contacts import Contacts, find_contacts
+from wuerfel_cvx.step.metrics import deepest_penetration
+from wuerfel_cvx.step.model import Model, State
+from wuerfel_cvx.step.simulation import Simulation
+from wuerfel_cvx.step.sleep import SleepSettings
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration

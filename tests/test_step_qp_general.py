@@ -15,16 +15,16 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations.qp import PARAMETER_SLOTS, StepQP, declare_qp
-from wuerfel_cvx.solve import (
+from wuerfel_cvx.solve.paths import (
     SOLVE_PATHS,
     VERIFY_FACTOR,
     SolvePath,
     kkt_residuals,
     solve_step_qp,
 )
-from wuerfel_cvx.solvers import SOLVERS, TOLERANCE_PRESETS, available_solvers
+from wuerfel_cvx.solve.registry import SOLVERS, TOLERANCE_PRESETS, available_solvers
+from wuerfel_cvx.step.contacts import Contacts
 
 HIGH = TOLERANCE_PRESETS["high"]
 ADAPTED = [name for name in available_solvers() if SOLVERS[name].adapter is not None]
@@ -256,7 +256,7 @@ def test_a_new_structure_without_rows_is_solved_natively() -> None:
 
 def test_a_coupled_hessian_is_not_taken_as_diagonal() -> None:
     # a Hessian with one entry per column, off the diagonal in two: not taken as diagonal
-    from wuerfel_cvx.backends import NativeData
+    from wuerfel_cvx.solve.adapters import NativeData
 
     coupled = dataclasses.replace(wide_qp(), weights=np.zeros(4),
                                   cost_factor=sp.csr_array(np.array([[1.0, 1.0, 0.0, 0.0],

@@ -6,12 +6,9 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.errors import InputError
 from wuerfel_cvx.formulations import declare_qp
-from wuerfel_cvx.solve import VERIFY_FACTOR
-from wuerfel_cvx.solvers import TOLERANCE_PRESETS
-from wuerfel_cvx.study import (
+from wuerfel_cvx.lab.study import (
     FORMULATION_VARIANTS,
     RESOLVE_COLUMNS,
     STEP_COLUMNS,
@@ -23,6 +20,9 @@ from wuerfel_cvx.study import (
     run_variants,
     trajectory_distance,
 )
+from wuerfel_cvx.solve.paths import VERIFY_FACTOR
+from wuerfel_cvx.solve.registry import TOLERANCE_PRESETS
+from wuerfel_cvx.step.contacts import Contacts
 
 pytestmark = pytest.mark.integration
 
@@ -81,7 +81,7 @@ def test_a_failing_variant_is_a_row_with_its_step_and_status() -> None:
 
 
 def test_a_variant_failing_its_first_step_has_no_error(monkeypatch: pytest.MonkeyPatch) -> None:
-    from wuerfel_cvx.backends import osqp
+    from wuerfel_cvx.solve.adapters import osqp
 
     def explode(*args: object, **kwargs: object) -> object:
         raise RuntimeError("OSQP exploded")

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import pytest
 
-from wuerfel_cvx.bench.runner import reference_file_name
-from wuerfel_cvx.bench.suite import Suite
 from wuerfel_cvx.cli import main
 from wuerfel_cvx.errors import InputError
-from wuerfel_cvx.scene import Scene
+from wuerfel_cvx.lab.bench.runner import reference_file_name
+from wuerfel_cvx.lab.bench.suite import Suite
+from wuerfel_cvx.scenes.scene import Scene
 
 pytestmark = pytest.mark.unit
 

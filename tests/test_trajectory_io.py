@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 
 from wuerfel_cvx import Scene, Square, simulate
-from wuerfel_cvx.library import FLOOR
+from wuerfel_cvx.scenes.library import FLOOR
 from wuerfel_cvx.simulate import METRIC_COLUMNS
 from wuerfel_cvx.trajectory import Trajectory
 

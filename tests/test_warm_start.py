@@ -10,11 +10,11 @@ import scipy.sparse as sp
 
 from qp_bank import AGREEMENT
 from wuerfel_cvx import Scene, Simulation, simulate
-from wuerfel_cvx.contacts import Contacts
 from wuerfel_cvx.formulations import StepQP, get_formulation, step_qp
-from wuerfel_cvx.model import Model, State
-from wuerfel_cvx.solvers import available_solvers
-from wuerfel_cvx.warm_start import WarmStarts, row_blocks
+from wuerfel_cvx.solve.registry import available_solvers
+from wuerfel_cvx.solve.warm_start import WarmStarts, row_blocks
+from wuerfel_cvx.step.contacts import Contacts
+from wuerfel_cvx.step.model import Model, State
 
 pytestmark = pytest.mark.integration
 

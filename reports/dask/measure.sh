@@ -53,7 +53,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from wuerfel_cvx.bench.schema import CLOCK_COLUMNS
+from wuerfel_cvx.lab.bench.schema import CLOCK_COLUMNS
 
 here = Path(sys.argv[1])
 frames = [pd.read_csv(here / f"results-{name}.csv", dtype=str, keep_default_na=False)

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from wuerfel_cvx.bench import schema
-from wuerfel_cvx.bench.runner import run_point, run_reference
-from wuerfel_cvx.bench.suite import Suite
+from wuerfel_cvx.lab.bench import schema
+from wuerfel_cvx.lab.bench.runner import run_point, run_reference
+from wuerfel_cvx.lab.bench.suite import Suite
 
 HERE = Path(__file__).parent
 

@@ -22,11 +22,11 @@ from typing import TYPE_CHECKING, Any
 from .errors import InputError, Interrupted, StepFailure, WuerfelError
 
 if TYPE_CHECKING:
-    from .scene import Box, Scene, Square, Table
+    from .scenes.scene import Box, Scene, Square, Table
     from .settings import Settings
     from .simulate import simulate
-    from .simulation import Simulation
-    from .solvers import available_solvers
+    from .solve.registry import available_solvers
+    from .step.simulation import Simulation
     from .trajectory import Trajectory
 
 __version__ = "0.1.0"
@@ -34,9 +34,10 @@ __version__ = "0.1.0"
 __all__ = ["Box", "InputError", "Interrupted", "Scene", "Settings", "Simulation", "Square",
            "StepFailure", "Table", "Trajectory", "WuerfelError", "available_solvers", "simulate"]
 
-_LAZY = {"Box": "scene", "Scene": "scene", "Square": "scene", "Table": "scene",
-         "Settings": "settings", "simulate": "simulate", "Simulation": "simulation",
-         "available_solvers": "solvers", "Trajectory": "trajectory"}
+_LAZY = {"Box": "scenes.scene", "Scene": "scenes.scene", "Square": "scenes.scene",
+         "Table": "scenes.scene", "Settings": "settings", "simulate": "simulate",
+         "Simulation": "step.simulation", "available_solvers": "solve.registry",
+         "Trajectory": "trajectory"}
 """Each public name imported on first use, and its module."""
 
 

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 from ._entry import PROG
 from .formulations import FORMULATIONS, FRICTION_MODELS
-from .solvers import TOLERANCE_PRESETS, available_solvers
+from .solve.registry import TOLERANCE_PRESETS, available_solvers
 
 DEFAULT_SOLVER = "CLARABEL"
 """The solver of ``simulate`` when ``--solver`` is not given (as :func:`simulate`'s)."""
@@ -93,7 +93,7 @@ def _add_simulate_parser(commands: Commands) -> None:
 
 def _add_bench_parser(commands: Commands) -> None:
     """The ``bench`` subcommand's arguments."""
-    from .bench.suite import suite_names
+    from .lab.bench.suite import suite_names
 
     bench = commands.add_parser("bench", help="run a benchmark suite (rows append; resumes)")
     bench.add_argument("--suite", required=True,

@@ -10,7 +10,7 @@ Two things happen here before anything heavy is imported (cvxpy takes seconds):
   the Ctrl-C and return a failed status, and the run would end as a solver failure; now
   the solve finishes and the run stops as interrupted.  Threads and processes started
   later inherit the blocked signal: the workers of a sweep leave Ctrl-C to this process,
-  which stops them (:mod:`wuerfel_cvx.bench.sweep`).
+  which stops them (:mod:`wuerfel_cvx.lab.bench.sweep`).
 
 The commands themselves are in :mod:`wuerfel_cvx.cli`.
 """
@@ -67,7 +67,7 @@ def relay_ctrl_c() -> bool:
 def relayed_presses() -> int | None:
     """How many Ctrl-C the relay has taken so far; ``None`` without a relay.
 
-    Counted even while Ctrl-C is ignored: :func:`wuerfel_cvx.bench.ctrl_c.held_ctrl_c`
+    Counted even while Ctrl-C is ignored: :func:`wuerfel_cvx.lab.bench.ctrl_c.held_ctrl_c`
     ignores it while the processes of a Dask cluster start (so that they inherit the
     ignoring) and still learns that it was pressed.
     """

@@ -2,8 +2,8 @@
 
 ``scipy.sparse.csr_array((data, indices, indptr), shape=...)`` checks and converts its
 input on every call: 15 to 25 us, more than the compiled loops that wrote the arrays on a
-small scene (:mod:`wuerfel_cvx.row_kernel`).  The step path's rows are written in canonical
-form by construction (each row's columns sorted, one entry per cell), so
+small scene (:mod:`wuerfel_cvx.formulations.row_kernel`).  The step path's rows are written in
+canonical form by construction (each row's columns sorted, one entry per cell), so
 :func:`canonical_csr` hands the arrays to a new ``csr_array`` directly, with the index
 dtype the constructor would choose (int64 if either index array is int64, else int32).
 The result is the constructor's, attribute for attribute (``tests/test_sparse.py``).
@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from . import map_kernel
-from .geometry import FloatArray
+from .scenes.geometry import FloatArray
+from .solve import map_kernel
 
 _LAYOUT = frozenset({"_shape", "maxprint", "data", "indices", "indptr"})
 """The instance attributes of a freshly constructed ``csr_array`` (scipy 1.11 to 1.17)."""
@@ -39,7 +39,8 @@ def _template(kind: type = sp.csr_array) -> dict[str, object] | None:
 
 _TEMPLATE = _template()
 _CSC_TEMPLATE = _template(sp.csc_matrix)
-"""The same for scipy's ``csc_matrix``, the solvers' input (:mod:`wuerfel_cvx.backends._native`)."""
+"""The same for scipy's ``csc_matrix``, the solvers' input
+(:mod:`wuerfel_cvx.solve.adapters._native`)."""
 
 
 def canonical_csr(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
@@ -122,7 +123,7 @@ def dense_rows(rows: sp.csr_array, row_factor: FloatArray | None = None,
     As ``toarray()`` of ``rows`` (of ``diags(row_factor) @ rows``): each stored entry, after
     its exact sign flip, is added to 0.0, so a stored ``-0.0`` becomes ``0.0``.  Written
     into ``out`` (zeros, the rows' shape) if given.  By a compiled loop
-    (:func:`wuerfel_cvx.map_kernel.add_rows`).
+    (:func:`wuerfel_cvx.solve.map_kernel.add_rows`).
     """
     out = np.zeros(rows.shape) if out is None else out
     if not rows.nnz:

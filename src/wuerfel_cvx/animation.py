@@ -2,7 +2,7 @@
 
 A frame shows the moving bodies as polygons, the tables filled, the *active contacts*
 (corners within :data:`CONTACT_MARGIN` of a foreign body's edge, found by the package's
-own contact search :func:`~wuerfel_cvx.contacts.find_contacts`) as dots, and the time and
+own contact search :func:`~wuerfel_cvx.step.contacts.find_contacts`) as dots, and the time and
 step in a band above the axes.  Axes are in metres with equal aspect, fixed over an
 animation, and hold every body and table (:func:`view_limits`).
 
@@ -22,11 +22,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .contacts import find_contacts
 from .errors import InputError
-from .geometry import FloatArray
-from .model import IntArray, Model
-from .scene import Scene
+from .scenes.geometry import FloatArray
+from .scenes.scene import Scene
+from .step.contacts import find_contacts
+from .step.model import IntArray, Model
 
 if TYPE_CHECKING:  # matplotlib is imported when a picture is drawn, not with the package
     from matplotlib.artist import Artist

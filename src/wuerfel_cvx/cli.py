@@ -26,13 +26,13 @@ from tqdm.auto import tqdm
 from ._cli_parser import build_parser
 from ._entry import INTERRUPTED, PROG
 from .errors import InputError, Interrupted, StepFailure
-from .friction import body_friction
-from .library import ENTRIES
-from .scene import Scene
+from .friction.forces import body_friction
+from .scenes.library import ENTRIES
+from .scenes.scene import Scene
 from .settings import Settings
 from .simulate import resolve_scene, simulate
-from .sleep import SleepSettings
-from .solvers import SOLVERS, available_solvers
+from .solve.registry import SOLVERS, available_solvers
+from .step.sleep import SleepSettings
 from .trajectory import Trajectory
 
 
@@ -232,12 +232,12 @@ def _animate(trajectory: Trajectory, args: argparse.Namespace, progress: bool) -
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from .bench.suite import Suite
-    from .bench.sweep import RESULTS_FILE, run_sweep
+    from .lab.bench.suite import Suite
+    from .lab.bench.sweep import RESULTS_FILE, run_sweep
 
     dask = None
     if args.dask is not None or args.scheduler is not None:
-        from .bench.dask_sweep import DaskCluster, require_distributed
+        from .lab.bench.dask_sweep import DaskCluster, require_distributed
 
         dask = DaskCluster(workers=args.dask, scheduler=args.scheduler)
         require_distributed(dask.option)  # before the suite is read
@@ -258,7 +258,7 @@ def _bench(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from .bench.report import write_report
+    from .lab.bench.report import write_report
 
     path = write_report(args.results, args.root, headline=args.headline)
     print(f"wrote {path}")
@@ -266,7 +266,7 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _robustness(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
-    from .robustness.report import write_robustness_report
+    from .lab.robustness.report import write_robustness_report
 
     for name in ("scenes", "fuzz", "steps"):
         if getattr(args, name) < 0:
@@ -286,8 +286,8 @@ def _robustness(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
 
 
 def _export_qps(args: argparse.Namespace) -> int:
-    from .bench.suite import Suite
-    from .qp_export import export_qps
+    from .lab.bench.suite import Suite
+    from .lab.qp_export import export_qps
 
     if args.steps is not None and args.steps < 1:
         raise InputError(f"must be a positive integer, got {args.steps}", field="--steps")

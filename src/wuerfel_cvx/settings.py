@@ -13,12 +13,12 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from .compiled import NATIVE
 from .errors import InputError
 from .formulations import FRICTION_MODELS, Formulation, get_formulation
-from .sleep import SleepSettings
-from .solve import SOLVE_PATHS
-from .solvers import get_solver, tolerance_value
+from .solve.cvxpy_forms import NATIVE
+from .solve.paths import SOLVE_PATHS
+from .solve.registry import get_solver, tolerance_value
+from .step.sleep import SleepSettings
 
 DT_RANGE = (1e-6, 100.0)
 """Accepted time steps (s).  Baumgarte's ``beta / dt`` turns round-off in rod lengths
@@ -36,14 +36,14 @@ class Settings:
     dt: float = 0.01
     """Time step (s), within :data:`DT_RANGE`."""
     solver: str = "CLARABEL"
-    """Solver registry name, case-insensitive (:func:`~wuerfel_cvx.solvers.available_solvers`);
-    stored upper case."""
+    """Solver registry name, case-insensitive
+    (:func:`~wuerfel_cvx.solve.registry.available_solvers`); stored upper case."""
     formulation: str | Formulation = "velocity"
     """A registry name (:data:`~wuerfel_cvx.formulations.FORMULATIONS`) or a formulation object."""
     tol: str | float = "default"
     """Solver tolerance: a preset (``low``, ``default``, ``high``) or a number in (0, 1)."""
     solve_path: str = NATIVE
-    """How the QPs reach the solver (:class:`~wuerfel_cvx.solve.SolvePath`): ``native``
+    """How the QPs reach the solver (:class:`~wuerfel_cvx.solve.paths.SolvePath`): ``native``
     (the solver's own API, one persistent solver per structure), ``compiled`` (a cvxpy DPP
     problem per structure) or ``declared`` (a cvxpy problem per step)."""
     friction_model: str | None = None
@@ -62,7 +62,7 @@ class Settings:
     fallback: tuple[str, ...] = ()
     """Solvers to try, in order, on a QP the solver fails."""
     warm_start: bool = True
-    """Start each solve from the last step's solution (see :mod:`wuerfel_cvx.warm_start`)."""
+    """Start each solve from the last step's solution (see :mod:`wuerfel_cvx.solve.warm_start`)."""
 
     def __post_init__(self) -> None:
         set_field = object.__setattr__  # normalised once, on a frozen object

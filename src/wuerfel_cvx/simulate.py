@@ -1,4 +1,4 @@
-"""Simulating a scene: :func:`simulate` runs a :class:`~wuerfel_cvx.simulation.Simulation`."""
+"""Simulating a scene: :func:`simulate` runs a :class:`~wuerfel_cvx.step.simulation.Simulation`."""
 
 from __future__ import annotations
 
@@ -14,11 +14,11 @@ from tqdm.auto import tqdm
 
 from .errors import InputError, Interrupted, StepFailure
 from .formulations import Formulation, StepQP
-from .recorder import METRIC_COLUMNS
-from .scene import Scene
+from .scenes.scene import Scene
 from .settings import DT_RANGE, Settings
-from .simulation import ASLEEP, Simulation, checked_steps
-from .solve import StepSolution
+from .solve.paths import StepSolution
+from .step.recorder import METRIC_COLUMNS
+from .step.simulation import ASLEEP, Simulation, checked_steps
 from .trajectory import Trajectory
 
 __all__ = ["ASLEEP", "DT_RANGE", "METRIC_COLUMNS", "StepObserver", "resolve_scene",
@@ -58,7 +58,7 @@ def simulate(
 ) -> Trajectory:
     """Simulate ``steps`` steps of ``dt`` seconds, one QP per step; the trajectory.
 
-    A loop over :meth:`Simulation.step <wuerfel_cvx.simulation.Simulation.step>`.
+    A loop over :meth:`Simulation.step <wuerfel_cvx.step.simulation.Simulation.step>`.
 
     Parameters
     ----------

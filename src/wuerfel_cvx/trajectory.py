@@ -10,17 +10,17 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from .geometry import FloatArray
+from .scenes.geometry import FloatArray
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-    from .model import Model
-    from .scene import Scene
+    from .scenes.scene import Scene
+    from .step.model import Model
 
 NULLABLE_COLUMNS = {"coulomb_iterations": "Int64", "coulomb_converged": "boolean"}
 """Metrics columns that may be empty (``NA``), with their dtypes: the Coulomb fixed point's
-(:data:`wuerfel_cvx.coulomb.COULOMB_COLUMNS`), empty in runs without it; kept by
+(:data:`wuerfel_cvx.friction.coulomb.COULOMB_COLUMNS`), empty in runs without it; kept by
 :meth:`Trajectory.load`."""
 
 
@@ -54,7 +54,7 @@ class Trajectory:
         data = self.info.get("scene_data")
         if data is None:
             return None
-        from .scene import Scene
+        from .scenes.scene import Scene
 
         return Scene.from_dict(data, source=str(self.info.get("scene", "<trajectory>")))
 
@@ -63,7 +63,7 @@ class Trajectory:
         scene = self.scene
         if scene is None:
             return None
-        from .model import Model
+        from .step.model import Model
 
         return Model.from_scene(scene, table_mass=self.info.get("table_mass"),
                                 extra_rod=bool(self.info.get("extra_rod", False)))

@@ -6,9 +6,9 @@ import dataclasses
 from collections.abc import Callable
 from functools import partial
 
-from ..contacts import find_contacts
 from ..errors import InputError
-from ..model import Model, State
+from ..step.contacts import find_contacts
+from ..step.model import Model, State
 from .base import Formulation
 from .motion import rigid_step
 from .qp import StepQP, declare_qp
@@ -45,7 +45,7 @@ def get_formulation(name: str | Formulation) -> Formulation:
 
 FRICTION_MODELS: tuple[str, ...] = ("ccp", "coulomb")
 """Friction models (the first is the default): Anitescu's cone complementarity, and
-exact Coulomb friction by staggered projections (:mod:`wuerfel_cvx.coulomb`)."""
+exact Coulomb friction by staggered projections (:mod:`wuerfel_cvx.friction.coulomb`)."""
 
 
 def with_friction_model(formulation: Formulation, friction_model: str | None,

@@ -34,7 +34,7 @@ at ``tau* = dt`` it is at most ``r'``; the minimum with ``r'`` keeps it there wh
 sampled minimiser is inexact.  Every active row therefore has ``G v+ <= r'``, which is
 ``<= 0`` for a point outside: such rows do no work, and the step dissipates energy as a
 first-order contact with restitution 0 does (the bounds are derived in
-:mod:`wuerfel_cvx.robustness.bounds`).
+:mod:`wuerfel_cvx.lab.robustness.bounds`).
 """
 
 from __future__ import annotations
@@ -44,9 +44,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..contacts import Contacts
-from ..geometry import FloatArray, cross, rot90, side_gradients
-from ..model import IntArray, Model
+from ..scenes.geometry import FloatArray, cross, rot90, side_gradients
+from ..step.contacts import Contacts
+from ..step.model import IntArray, Model
 from .motion import BodyMotion, body_motion
 from .qp import point_rows
 from .rows import n_unknown_points
@@ -120,7 +120,7 @@ def face_gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> Flo
     """The rows' gaps (m) at times ``tau``: the points' distances from their faces.
 
     :func:`gaps_at` for a contact whose point starts on its face.  A point that starts past
-    its face's end (:attr:`~wuerfel_cvx.contacts.Contacts.clearance` above 0) is held off
+    its face's end (:attr:`~wuerfel_cvx.step.contacts.Contacts.clearance` above 0) is held off
     the face, not off the line past the end: while it is past the end its gap is its
     distance from the face (the segment), ``hypot(beyond, line distance)``, and once it
     has moved over the face, its line distance.

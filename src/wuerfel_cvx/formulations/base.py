@@ -5,9 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
-from ..contacts import Contacts
-from ..geometry import FloatArray
-from ..model import Model, State
+from ..scenes.geometry import FloatArray
+from ..step.contacts import Contacts
+from ..step.model import Model, State
 from .qp import StepQP
 
 
@@ -16,7 +16,7 @@ class Formulation(Protocol):
 
     A step is a pipeline over one contact set: the caller searches a state's contacts
     once, with the formulation's own :meth:`body_reach`
-    (:func:`~wuerfel_cvx.contacts.find_contacts`), and hands them to :meth:`build`, to
+    (:func:`~wuerfel_cvx.step.contacts.find_contacts`), and hands them to :meth:`build`, to
     the island planning and to the penetration diagnostic.  ``build`` is pure: the same
     model, state, contacts and ``dt`` give the same QP.  ``refine`` may ask for further
     passes (QPs of the same structure, linearised about the last solution) before
@@ -84,8 +84,8 @@ class FrictionSettings:
     """How contacts with friction are modelled (:mod:`~wuerfel_cvx.formulations.cone`)."""
     coulomb_max_iterations: int = 50
     """``friction_model="coulomb"``: most friction problems per step QP
-    (:mod:`wuerfel_cvx.coulomb`); a step that reaches it goes on with its last iterate and is
-    reported as not converged."""
+    (:mod:`wuerfel_cvx.friction.coulomb`); a step that reaches it goes on with its last iterate and
+    is reported as not converged."""
     coulomb_tolerance: float = 1e-4
     """``friction_model="coulomb"``: the fixed point is converged when two successive contact
     QPs' normal impulses differ by at most this fraction of the largest (1).  Ten times the

@@ -35,10 +35,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..contacts import Contacts
-from ..friction import contact_friction
-from ..geometry import FloatArray, edge_parameter
-from ..model import IntArray, Model
+from ..friction.forces import contact_friction
+from ..scenes.geometry import FloatArray, edge_parameter
+from ..step.contacts import Contacts
+from ..step.model import IntArray, Model
 from .qp import point_rows
 from .rows import n_unknown_points, unknown_index
 

@@ -21,9 +21,9 @@ from functools import cached_property
 
 import numpy as np
 
-from .. import motion_kernel
-from ..geometry import FloatArray, corner_mean
-from ..model import IntArray, Model, State
+from ..scenes.geometry import FloatArray, corner_mean
+from ..step.model import IntArray, Model, State
+from . import motion_kernel
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,7 @@ def rigid_step(reference: FloatArray, points: FloatArray, velocities: FloatArray
     ``reference`` ``(n, 4, 2)``: corners at angle 0 about the origin (m).  The motion is
     that of the module docstring at ``tau = dt`` (s).  Returns corners and their rigid
     velocities at the new positions.  The arithmetic runs in the compiled loops of
-    :mod:`wuerfel_cvx.motion_kernel`; the trigonometry between them stays NumPy's.
+    :mod:`wuerfel_cvx.formulations.motion_kernel`; the trigonometry between them stays NumPy's.
     """
     center, cross_sum, dot_sum = motion_kernel.fit_sums(reference, points)
     angle = np.arctan2(cross_sum, dot_sum)

@@ -9,9 +9,9 @@ unknowns a formulation adds)::
     subject to  E x == e                 (rods, and held table corners)
                 h <= G x <= u            (sides: point versus edge; u = +inf by default)
 
-held as numbers: :mod:`wuerfel_cvx.compiled` declares it in cvxpy, the adapters of
-:mod:`wuerfel_cvx.backends` hand it to the solvers, and a solution is checked against these
-numbers independently of the solver (:func:`wuerfel_cvx.solve.kkt_residuals`).
+held as numbers: :mod:`wuerfel_cvx.solve.cvxpy_forms` declares it in cvxpy, the adapters of
+:mod:`wuerfel_cvx.solve.adapters` hand it to the solvers, and a solution is checked against these
+numbers independently of the solver (:func:`wuerfel_cvx.solve.paths.kkt_residuals`).
 
 The coupling cost is given by a sparse factor ``F`` rather than by ``P`` itself: the term
 ``|F (x - t)|^2`` is positive semidefinite by construction, keeps the objective's constant
@@ -20,7 +20,7 @@ parameters, which ``(x - t)' P (x - t)`` with a parametrised ``t`` is not in cvx
 
 The linear term ``l' x`` (optional, ``None`` in every step QP) serves problems whose
 objective has one, as the Coulomb fixed point's friction problem
-(:mod:`wuerfel_cvx.friction_problem`): its slack unknowns carry a cost ``l`` and a weight
+(:mod:`wuerfel_cvx.friction.problem`): its slack unknowns carry a cost ``l`` and a weight
 of zero.
 
 Multipliers (the signs every solve path returns and the KKT check tests): ``y`` of
@@ -43,10 +43,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
-from .. import row_kernel
 from .._sparse import canonical_csr
-from ..contacts import Contacts
-from ..geometry import FloatArray
+from ..scenes.geometry import FloatArray
+from ..step.contacts import Contacts
+from . import row_kernel
 
 if TYPE_CHECKING:
     from .cone import ConeRows
@@ -271,7 +271,7 @@ def point_rows(
 def stacked_point_rows(index: np.ndarray, grad: FloatArray, n_points: int) -> sp.csr_array:
     """:func:`point_rows` of the blocks stacked: ``index`` ``(R, B)``, ``grad`` ``(R, B, 2)``.
 
-    Written by a compiled loop (:func:`wuerfel_cvx.row_kernel.point_rows`), each row's
+    Written by a compiled loop (:func:`wuerfel_cvx.formulations.row_kernel.point_rows`), each row's
     entries sorted by column, stably; a row holding a point twice is then summed by scipy.
     """
     shape = (index.shape[0], 2 * n_points)

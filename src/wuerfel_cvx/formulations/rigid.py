@@ -25,12 +25,12 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from .. import motion_kernel, row_kernel
 from .._sparse import canonical_csr, empty_rows
-from ..contacts import Contacts
 from ..errors import InputError
-from ..geometry import FloatArray, corner_mean, cross
-from ..model import Model, State
+from ..scenes.geometry import FloatArray, corner_mean, cross
+from ..step.contacts import Contacts
+from ..step.model import Model, State
+from . import motion_kernel, row_kernel
 from .base import FrictionSettings, SinglePass
 from .cone import contact_cones
 from .motion import rigid_step
@@ -86,7 +86,7 @@ class RigidFormulation(SinglePass, FrictionSettings):
         """The corner velocities ``(4 n, 2)`` (m/s) of the new body velocities.
 
         ``u + omega rot90(r)`` per corner, ``r`` its offset from its box's centroid, by a
-        compiled loop (:func:`wuerfel_cvx.motion_kernel.corner_velocities`).
+        compiled loop (:func:`wuerfel_cvx.formulations.motion_kernel.corner_velocities`).
         """
         return motion_kernel.corner_velocities(state.points, solution.reshape(-1, 3))
 
@@ -101,7 +101,7 @@ def rigid_objective(model: Model, state: State, dt: float) -> tuple[FloatArray, 
 
     ``I`` from the exact squares, not the current corners: constant weights keep the
     compiled-problem cache's key constant.  ``u0`` and ``omega0`` as :func:`body_velocities`
-    gives them; by a compiled loop (:func:`wuerfel_cvx.motion_kernel.rigid_objective`).
+    gives them; by a compiled loop (:func:`wuerfel_cvx.formulations.motion_kernel.rigid_objective`).
     """
     return motion_kernel.rigid_objective(state.points, state.velocities,
                                          model.point_masses.reshape(-1, 4),
@@ -120,7 +120,7 @@ def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
     product, no entry that cancels to 0.0 is dropped (a contact normal through a square's
     centre has no torque): the sparsity pattern, and with it the compiled-problem cache's
     key, stays the same from step to step.  Written by compiled loops
-    (:func:`wuerfel_cvx.row_kernel.body_rows`).
+    (:func:`wuerfel_cvx.formulations.row_kernel.body_rows`).
     """
     n_rows = corner_rows.shape[0]
     n_cols = 3 * (corner_rows.shape[1] // 8)

@@ -1,8 +1,8 @@
 """Constraint rows shared by the formulations: rods, sides and held table corners.
 
 The rod and side rows come as sparse matrices, their gradient blocks computed by compiled
-loops (:mod:`wuerfel_cvx.row_kernel`); the seed's side rows and the held table corners as
-gradient blocks for :func:`~.qp.point_rows`, where a point's column index is its row in
+loops (:mod:`wuerfel_cvx.formulations.row_kernel`); the seed's side rows and the held table corners
+as gradient blocks for :func:`~.qp.point_rows`, where a point's column index is its row in
 the all-points array, or ``-1`` if it is a fixed constant.
 Rows are scaled to be dimensionally uniform: rod rows are divided by the rod length
 and side rows by the edge length, so an equality residual is a velocity (m/s) in
@@ -14,10 +14,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .. import row_kernel
-from ..contacts import Contacts
-from ..geometry import FloatArray, edge_parameter, rot90
-from ..model import IntArray, Model
+from ..scenes.geometry import FloatArray, edge_parameter, rot90
+from ..step.contacts import Contacts
+from ..step.model import IntArray, Model
+from . import row_kernel
 from .qp import stacked_point_rows
 
 
@@ -45,7 +45,8 @@ def rod_rows(model: Model, points: FloatArray) -> tuple[sp.csr_array, FloatArray
     """Rod rows ``(d/l, -d/l)``, ``d = p_i - p_j``, in the unknown points' columns, and ``C/l``.
 
     One row per rod; ``C = (|p_i - p_j|^2 - l^2) / 2`` (m^2) is the rod's position error,
-    ``dC/dp_i = d``.  The blocks by a compiled loop (:func:`wuerfel_cvx.row_kernel.rod_blocks`).
+    ``dC/dp_i = d``.  The blocks by a compiled loop
+    (:func:`wuerfel_cvx.formulations.row_kernel.rod_blocks`).
     """
     index, gradient, error = row_kernel.rod_blocks(points, model.rods, model.rod_lengths)
     return stacked_point_rows(index, gradient, n_unknown_points(model)), error
@@ -57,7 +58,7 @@ def side_rows(all_points: FloatArray, contacts: Contacts, model: Model) -> sp.cs
     The exact gradient of ``A / |p_j - p_i|`` (edge length fixed): ``dA/dp_i = rot90(p_k -
     p_j)``, ``dA/dp_j = rot90(p_i - p_k)``, ``dA/dp_k = rot90(p_j - p_i)``; fixed table
     corners have no column.  The blocks by a compiled loop
-    (:func:`wuerfel_cvx.row_kernel.side_blocks`).
+    (:func:`wuerfel_cvx.formulations.row_kernel.side_blocks`).
     """
     n_moving = model.n_points if model.table_mass is None else -1
     index, gradient = row_kernel.side_blocks(all_points, contacts.point, contacts.edge_i,

@@ -27,7 +27,7 @@ point approaches or leaves: the feedback, not the rate rule, decides how it leav
 Two contact rules change with it, because the feedback lets points sink in by
 centimetres (``docs/seed-baumgarte-infeasible.md``):
 
-* A point within :data:`~wuerfel_cvx.contacts.TIE_TOLERANCE` (m) of an edge counts as
+* A point within :data:`~wuerfel_cvx.step.contacts.TIE_TOLERANCE` (m) of an edge counts as
   touching it, so that a resting contact left a round-off gap by the solver still holds.
 * All points of one body inside another are pushed out through the same face: the face
   of the edge body along whose normal the pair is best separated (the separating-axis
@@ -42,9 +42,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..contacts import TIE_TOLERANCE, Contacts, pair_distances
-from ..geometry import FloatArray, side_rate, side_value, side_velocity_product
-from ..model import Model, State
+from ..scenes.geometry import FloatArray, side_rate, side_value, side_velocity_product
+from ..step.contacts import TIE_TOLERANCE, Contacts, pair_distances
+from ..step.model import Model, State
 from .base import SinglePass
 from .qp import StepQP, declare_qp, point_rows
 from .rows import held_table_blocks, n_unknown_points, seed_side_blocks, unknown_masses
@@ -159,7 +159,7 @@ def _pair_faces(contacts: Contacts, all_points: FloatArray) -> Contacts:
     For each (edge body, point body) pair the face is the edge whose outward normal
     separates the pair best: the largest, over the edge body's four edges, of the
     smallest signed distance (m) of the point body's corners (the separating-axis test,
-    as :func:`~wuerfel_cvx.contacts.choose_edges` uses it to break ties).  For a point on
+    as :func:`~wuerfel_cvx.step.contacts.choose_edges` uses it to break ties).  For a point on
     the boundary this is the sector rule's edge unless the point is at a corner.
     """
     if len(contacts) == 0:

@@ -48,10 +48,10 @@ from typing import Literal
 import numpy as np
 import scipy.sparse as sp
 
-from .. import motion_kernel
-from ..contacts import Contacts, find_contacts
-from ..geometry import FloatArray
-from ..model import Model, State
+from ..scenes.geometry import FloatArray
+from ..step.contacts import Contacts, find_contacts
+from ..step.model import Model, State
+from . import motion_kernel
 from .approach import closest_approach, rows_along
 from .base import FrictionSettings
 from .cone import ConeRows, contact_cones
@@ -98,7 +98,7 @@ class VelocityFormulation(FrictionSettings):
 
         Half the margin plus ``dt`` times the body's fastest corner speed plus ``dt |g|``
         (a table: half the margin), by a compiled loop
-        (:func:`wuerfel_cvx.motion_kernel.body_reach`).
+        (:func:`wuerfel_cvx.formulations.motion_kernel.body_reach`).
         """
         return motion_kernel.body_reach(state.velocities, model.n_tables,
                                         0.5 * self.contact_margin, dt,
@@ -144,7 +144,7 @@ class VelocityFormulation(FrictionSettings):
         """The normal rows with the ``ccp`` friction cones of the contacts with friction.
 
         With ``friction_model="coulomb"`` the rows stay normal rows; their
-        :class:`ConeRows` tell the fixed point of :mod:`wuerfel_cvx.coulomb` the slips.
+        :class:`ConeRows` tell the fixed point of :mod:`wuerfel_cvx.friction.coulomb` the slips.
         """
         if not np.any(model.friction > 0.0):  # no friction: no slip rows to build
             return normal, rhs, None

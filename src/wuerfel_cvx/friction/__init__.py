@@ -1,0 +1,1 @@
+"""Friction: the coefficients of each contact and Coulomb friction."""

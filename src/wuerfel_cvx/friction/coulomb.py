@@ -1,0 +1,279 @@
+"""Exact Coulomb friction by a fixed point of two convex problems (``friction_model="coulomb"``).
+
+Staggered projections (Kaufman, Sueda, James and Pai 2008).  A step QP of ``velocity`` or
+``rigid`` (:mod:`wuerfel_cvx.formulations.qp`) keeps its normal rows; its
+:class:`~wuerfel_cvx.formulations.cone.ConeRows` give each contact's slip ``s = S x`` (m/s)
+and coefficient ``mu``.  Two problems alternate:
+
+*Contact QP*, the friction impulse ``lambda_t`` (N s, per contact, along its tangent) held
+fixed as an external impulse.  The step QP's objective ``sum w (x - t)^2`` is twice the
+kinetic-energy norm of the change of momentum (its stationarity ``W (x - t) = G' z / 2 -
+E' y / 2`` makes ``z / 2`` the impulses), so an impulse ``S' lambda_t`` on the unknowns moves
+its target to::
+
+    t' = t + W^-1 S' lambda_t                                        (units of x)
+
+and the QP with target ``t'`` has ``2 W (x - t) = G' z + 2 S' lambda_t - E' y``.  Its normal
+rows' multipliers give the normal impulses ``lambda_n = sum_rows z / 2`` of each contact (both
+closest-approach rows of a contact add to its impulse).
+
+*Friction problem*, the normal impulses held fixed::
+
+    minimise    sum w (x - t_n)^2 + 2 sum_c mu_c lambda_n,c |S_c x|
+    subject to  E x = e                 t_n = t + W^-1 G' z / 2
+
+``t_n`` the unknowns after the contact QP's normal impulses (rods re-solved by ``E x = e``):
+convex, solved as a step QP (a slack per contact, :func:`~wuerfel_cvx.friction.problem.friction_qp`)
+by the contact QPs' own solve function, its multipliers the friction impulse of maximal
+dissipation in the cone ``|lambda_t| <= mu lambda_n``, and checked by its own residuals on
+top of the QP's (:mod:`wuerfel_cvx.friction.problem`).
+
+*Iteration.* From ``lambda_t = 0``, or from the impulses the same contacts had at the end of
+the step before (``coulomb_warm_start``, :class:`FrictionMemory`): contact QP ->
+``lambda_n`` -> friction problem -> ``lambda_t`` -> contact QP ..., until two successive
+contact QPs' normal impulses differ by at most ``tolerance`` times the largest of them. The
+closest-approach passes of ``velocity``
+(:meth:`~wuerfel_cvx.formulations.velocity.VelocityFormulation.refine`) interleave: after
+each contact QP its rows are re-linearised about its solution when the formulation asks so,
+and the next contact QP takes the new rows with the current ``lambda_t``. The formulation's
+pass limit counts the passes since ``lambda_t`` last changed, so that each friction impulse
+has the passes a frictionless step has to meet the gap acceptance (a limit counted over the
+whole iteration let steps be accepted by the limit, with penetrations beyond the bound). The
+fixed point is converged only when the formulation also accepts the last contact QP's
+solution, so the step's state, always the last contact QP's, meets the formulation's gap
+acceptance (and with it the penetration bound) exactly as a frictionless step does. After
+``max_iterations`` friction problems without convergence the step goes on with the last
+iterate: further passes, ``lambda_t`` fixed, until the formulation accepts;
+:attr:`CoulombStep.converged` says so.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..errors import InputError
+from ..formulations import Formulation, StepQP
+from ..scenes.geometry import FloatArray
+from ..solve.paths import StepSolution
+from ..step.contacts import Contacts
+from ..step.identity import ContactIndex
+from ..step.model import IntArray, Model, State
+from ..trajectory import NULLABLE_COLUMNS
+from .forces import ContactForces
+from .problem import (
+    FrictionAnswer,
+    QPSolve,
+    friction_problem,
+    normal_impulses,
+    solve_friction,
+)
+
+
+@dataclass(frozen=True)
+class CoulombStep:
+    """What the fixed point solved for one step QP."""
+
+    qp: StepQP
+    """The last contact QP (its target shifted by the friction impulse it held fixed)."""
+    solved: list[tuple[StepSolution, str]]
+    """Every contact QP's solution and the run's own solver's status on it, in order."""
+    answers: list[FrictionAnswer]
+    """Every friction problem's answer, in order."""
+    converged: bool
+    forces: ContactForces
+    """Per contact of :attr:`qp`: ``lambda_n`` from its solution, the ``lambda_t`` it held
+    fixed, and the slip of its solution."""
+
+    @property
+    def iterations(self) -> int:
+        """Friction problems solved (each followed by a contact QP)."""
+        return len(self.answers)
+
+
+def with_friction_impulse(qp: StepQP, friction: FloatArray) -> StepQP:
+    """``qp`` with target ``t + W^-1 S' lambda_t``: the friction impulse held fixed."""
+    if qp.cones is None:
+        return qp
+    shift = (qp.cones.slip.T @ friction) / qp.weights
+    return dataclasses.replace(qp, target=qp.target + shift)
+
+
+@dataclass(frozen=True)
+class CoulombSettings:
+    """The fixed point's limits (fields of the formulations, see their docstrings)."""
+
+    max_iterations: int
+    """Most friction problems per step QP."""
+    tolerance: float
+    """Converged when successive normal impulses differ by at most this times the largest
+    (1)."""
+
+    def __post_init__(self) -> None:
+        if isinstance(self.max_iterations, bool) or not isinstance(self.max_iterations, int) \
+                or self.max_iterations < 1:
+            raise InputError(f"must be an integer >= 1, got {self.max_iterations}",
+                             field="coulomb_max_iterations")
+        if not (math.isfinite(self.tolerance) and self.tolerance > 0.0):
+            raise InputError(f"must be a positive number, got {self.tolerance}",
+                             field="coulomb_tolerance")
+
+
+def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP, dt: float,
+                solve: QPSolve, tol: str | float, settings: CoulombSettings,
+                initial: FloatArray | None = None) -> CoulombStep:
+    """Iterate contact QP and friction problem from ``qp`` (see the module docstring).
+
+    ``qp`` is the formulation's first pass, with ``qp.cones`` (its contacts with friction);
+    ``solve`` solves the contact QPs and the friction problems' QPs alike (raising
+    :class:`StepFailure` when no solver can), at tolerance ``tol``, which the friction
+    problems' own check takes too.  ``initial`` is the friction impulse (N s) per contact of
+    ``qp`` the first contact QP holds (zero when ``None``).
+    """
+    target = qp.target
+    base = qp
+    friction = np.zeros(len(qp.contacts)) if initial is None else np.asarray(initial, float)
+    solved: list[tuple[StepSolution, str]] = []
+    answers: list[FrictionAnswer] = []
+    previous: FloatArray | None = None
+    linearisations, converged = 1, False  # passes since the friction impulse last changed
+    while True:
+        contact_qp = with_friction_impulse(base, friction)
+        solved.append(solve(contact_qp))
+        solution = solved[-1][0]
+        refined = formulation.refine(model, state, contact_qp, solution.x, dt, linearisations)
+        if contact_qp.cones is None:  # no contact with friction left: frictionless passes
+            if refined is None:
+                converged = True
+                break
+            linearisations += 1
+            base, friction = dataclasses.replace(refined, target=target), \
+                np.zeros(len(refined.contacts))
+            continue
+        normal = normal_impulses(contact_qp, solution.ineq_dual)
+        if refined is None and previous is not None and _settled(normal, previous, settings):
+            converged = True
+            break
+        if refined is None and len(answers) >= settings.max_iterations:
+            break
+        new_impulse = len(answers) < settings.max_iterations
+        if new_impulse:
+            answers.append(solve_friction(friction_problem(contact_qp, solution, target),
+                                          solve, tol))
+            friction, previous = answers[-1].friction, normal
+        # the next contact QP is the first pass of a new impulse, or the next pass of this one
+        linearisations = 1 if new_impulse else linearisations + 1
+        if refined is not None:
+            base = dataclasses.replace(refined, target=target)
+            friction = _carried(friction, contact_qp.contacts, base.contacts)
+            previous = None if previous is None else _carried(previous, contact_qp.contacts,
+                                                              base.contacts)
+    return CoulombStep(contact_qp, solved, answers, converged,
+                       _forces(contact_qp, solution, friction))
+
+
+def _forces(qp: StepQP, solution: StepSolution, friction: FloatArray) -> ContactForces:
+    """The contact forces of ``solution`` of contact QP ``qp``, which held ``friction``."""
+    count = len(qp.contacts)
+    if qp.cones is None:  # every contact frictionless
+        zero = np.zeros(count)
+        rows = len(solution.ineq_dual) // max(count, 1) if count else 0
+        normal = (0.5 * solution.ineq_dual.reshape(rows, count).sum(axis=0) if count
+                  else zero)
+        return ContactForces(zero, np.asarray(normal, dtype=np.float64), zero, zero)
+    return ContactForces(qp.cones.coefficient, normal_impulses(qp, solution.ineq_dual),
+                         friction, np.asarray(qp.cones.slip @ solution.x, dtype=np.float64))
+
+
+def _settled(normal: FloatArray, previous: FloatArray, settings: CoulombSettings) -> bool:
+    """Whether ``normal`` and ``previous`` differ by at most the tolerance (relative)."""
+    if normal.shape != previous.shape:
+        return False
+    return bool(_inf(normal - previous) <= settings.tolerance * _inf(normal))
+
+
+def _carried(values: FloatArray, old: Contacts, new: Contacts) -> FloatArray:
+    """``values`` per contact of ``old`` moved to the same contacts of ``new`` (0 elsewhere)."""
+    if old is new:
+        return values
+    return ContactIndex.of(old.ids()[:len(values)]).carry(values, new.ids())
+
+
+def _inf(values: FloatArray) -> float:
+    return float(np.max(np.abs(values))) if np.size(values) else 0.0
+
+
+@dataclass
+class FrictionMemory:
+    """The friction impulses (N s) of the last step's contacts, by the contacts' ids.
+
+    What ``coulomb_warm_start`` starts the next step's fixed point from.  An island QP
+    numbers its bodies on its own (:meth:`~wuerfel_cvx.step.contacts.Contacts.restricted`);
+    ``boxes`` (the island's boxes, ``None``: every box) maps them back
+    (:meth:`~wuerfel_cvx.step.contacts.Contacts.ids`).
+    """
+
+    n_boxes: int
+    """Boxes of the whole model."""
+    contacts: ContactIndex = dataclasses.field(default_factory=ContactIndex.empty)
+    """The last step's contacts, by their ids in the whole model's numbering."""
+    impulses: FloatArray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    """The friction impulse (N s) of each of :attr:`contacts`."""
+
+    def initial(self, contacts: Contacts, boxes: IntArray | None) -> FloatArray:
+        """The remembered impulse of each of ``contacts`` (0 for a new contact)."""
+        return self.contacts.carry(self.impulses, contacts.ids(boxes, self.n_boxes))
+
+    def remember(self, steps: Sequence[tuple[CoulombStep, IntArray | None]]) -> None:
+        """Keep the impulses the fixed points of one step ended with, forget the rest."""
+        self.contacts = ContactIndex.of(np.concatenate(
+            [np.zeros((0, 3), dtype=np.int64)]
+            + [outcome.qp.contacts.ids(boxes, self.n_boxes) for outcome, boxes in steps]))
+        self.impulses = np.concatenate(
+            [np.zeros(0)] + [np.asarray(outcome.forces.friction, dtype=np.float64)
+                             for outcome, _ in steps])
+
+
+class CoulombNotConverged(RuntimeWarning):
+    """A step's Coulomb fixed point reached its iteration limit (the step goes on)."""
+
+
+COULOMB_COLUMNS = NULLABLE_COLUMNS
+"""The fixed point's metrics columns and their (nullable) dtypes: friction problems solved
+in the step (the most of any island QP) and whether every island's fixed point converged.
+Empty (``NA``) in a run without the fixed point (``ccp``, no friction) and in a step that
+solved no QP; ``0`` and true in a ``coulomb`` step without any contact with friction."""
+
+
+def coulomb_settings(formulation: Formulation) -> CoulombSettings:
+    """The fixed point's settings of ``formulation`` (its ``coulomb_*`` fields)."""
+    fields: Any = formulation  # velocity and rigid have them; the protocol does not
+    return CoulombSettings(int(fields.coulomb_max_iterations), float(fields.coulomb_tolerance))
+
+
+def coulomb_columns(step: int, outcomes: Sequence[CoulombStep | None], active: bool, *,
+                    warn: bool = True) -> dict[str, object]:
+    """The :data:`COULOMB_COLUMNS` of a step whose island QPs gave ``outcomes``.
+
+    ``active``: the run uses the fixed point.  A step whose fixed point did not converge
+    is reported by a :class:`CoulombNotConverged` warning naming the step if ``warn`` (a
+    run warns of its first such step; its metrics and summary name them all).
+    """
+    if not active:
+        return dict.fromkeys(COULOMB_COLUMNS, pd.NA)
+    ran = [outcome for outcome in outcomes if outcome is not None]
+    iterations = max((outcome.iterations for outcome in ran), default=0)
+    converged = all(outcome.converged for outcome in ran)
+    if not converged and warn:
+        warnings.warn(f"step {step}: the Coulomb fixed point did not converge in {iterations} "
+                      "iterations; the step goes on with its last iterate (later such steps "
+                      "are in the metrics' coulomb_converged and the run's summary)",
+                      CoulombNotConverged, stacklevel=3)
+    return {"coulomb_iterations": iterations, "coulomb_converged": converged}

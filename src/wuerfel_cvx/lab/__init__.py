@@ -1,0 +1,1 @@
+"""The laboratory: benchmarks, peer engines, robustness checks and QP export."""

@@ -1,0 +1,125 @@
+"""Fingerprints of trajectories, for determinism tests and the golden reference runs.
+
+Two digests of a run's corner positions ``points`` ``(steps + 1, 4 n, 2)``:
+
+:func:`exact_digest`
+    sha256 of the raw float64 bytes (positions and velocities).  Two runs are
+    bit-identical exactly when these agree; used within one machine (same process,
+    a fresh process).
+
+:func:`rounded_digest`
+    sha256 of ``np.round(points, 9)``.  This is what the golden file
+    ``tests/golden/trajectory_hashes.toml`` pins: a change of the model, the
+    formulation, the step or the solver's answer by more than 1e-9 m changes it.
+    1e-9 m is far above the round-off that differs between machines (a few ulps of
+    positions of order 1 m, 1e-16 to 1e-15 m; a 1e-15 change of the start grows to
+    3e-15 m over the 100 steps, as ``tests/test_determinism.py`` measures) and far
+    below any physical change (solver tolerance 1e-7, penetrations of 1e-11 m and up).
+    Limitation: rounding cannot make a digest robust to every tiny difference.  A value
+    within ``delta`` of a rounding boundary (a multiple of 1e-9 plus 5e-10) flips when
+    perturbed by ``delta``, so a round-off difference ``delta`` changes the digest of
+    ``N`` numbers with probability about ``N delta / 1e-9`` (2e-3 for the 1616 positions
+    of the golden run and ``delta = 1e-15``).  A golden mismatch therefore calls for a
+    look at the size of the change (:func:`largest_difference` against a run saved
+    before), not for a blind regeneration.
+
+``python -m wuerfel_cvx.lab.robustness.determinism`` prints the golden file's content for
+the installed versions; it never writes the file (regenerate deliberately, by hand).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...scenes.geometry import FloatArray
+from ...simulate import simulate
+from ...solve.registry import SOLVERS
+from ...trajectory import Trajectory
+from ...versions import package_version
+
+#: Decimals (of metres) the golden digests round positions to.
+GOLDEN_DECIMALS = 9
+
+#: Solvers the golden file pins.
+GOLDEN_SOLVERS = ("CLARABEL", "OSQP", "PIQP")
+
+#: Packages whose versions decide the golden digests (the solver's own is added).
+PINNED_PACKAGES = ("numpy", "scipy", "cvxpy")
+
+@dataclass(frozen=True)
+class GoldenRun:
+    """The reference run each golden digest is taken of."""
+
+    scene: str = "two-corner-landing"
+    """A library scene with contacts from its first steps: a square lands on another."""
+    dt: float = 0.01
+    """Time step (s)."""
+    steps: int = 100
+    """Number of steps."""
+    tol: str = "default"
+    """Solver tolerance preset."""
+
+    def run(self, solver: str) -> Trajectory:
+        """Simulate the reference run with ``solver`` (default formulation)."""
+        return simulate(self.scene, dt=self.dt, steps=self.steps, solver=solver, tol=self.tol)
+
+
+GOLDEN_RUN = GoldenRun()
+
+
+def exact_digest(trajectory: Trajectory) -> str:
+    """sha256 (hex) of the raw bytes of positions and velocities: equal iff bit-identical."""
+    digest = hashlib.sha256()
+    digest.update(np.ascontiguousarray(trajectory.points, dtype=np.float64).tobytes())
+    digest.update(np.ascontiguousarray(trajectory.velocities, dtype=np.float64).tobytes())
+    return digest.hexdigest()
+
+
+def rounded_digest(points: FloatArray, decimals: int = GOLDEN_DECIMALS) -> str:
+    """sha256 (hex) of the positions rounded to ``decimals`` (m); ``-0.0`` counts as ``0.0``."""
+    rounded = np.round(np.asarray(points, dtype=np.float64), decimals) + 0.0
+    return hashlib.sha256(np.ascontiguousarray(rounded).tobytes()).hexdigest()
+
+
+def largest_difference(a: Trajectory, b: Trajectory) -> float:
+    """Largest absolute difference (m) between the positions of two runs of equal length."""
+    return float(np.max(np.abs(a.points - b.points)))
+
+
+def pinned_versions(solver: str) -> dict[str, str]:
+    """Installed versions of the packages a golden digest depends on."""
+    packages = (*PINNED_PACKAGES, SOLVERS[solver].package)
+    return {package: package_version(package) for package in packages}
+
+
+def golden_file_text() -> str:
+    """The golden file's content (TOML) for the installed versions."""
+    lines = [
+        "# Golden digests of short reference runs (wuerfel_cvx.lab.robustness.determinism).",
+        "# Each is sha256 of np.round(points, 9) over the run below; tests/test_determinism.py",
+        "# compares them when the installed versions equal the ones recorded here.",
+        "# Regenerate deliberately, after checking why the trajectories changed:",
+        "#     python -m wuerfel_cvx.lab.robustness.determinism"
+        " > tests/golden/trajectory_hashes.toml",
+        "",
+        "[run]",
+        f'scene = "{GOLDEN_RUN.scene}"',
+        f"dt = {GOLDEN_RUN.dt}",
+        f"steps = {GOLDEN_RUN.steps}",
+        f'tol = "{GOLDEN_RUN.tol}"',
+        f"decimals = {GOLDEN_DECIMALS}",
+    ]
+    for solver in GOLDEN_SOLVERS:
+        trajectory = GOLDEN_RUN.run(solver)
+        lines += ["", f"[solvers.{solver}]", f'sha256 = "{rounded_digest(trajectory.points)}"']
+        lines += [f'versions.{package} = "{value}"'
+                  for package, value in pinned_versions(solver).items()]
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":  # pragma: no cover - a deliberate, manual regeneration aid
+    sys.stdout.write(golden_file_text())

@@ -1,0 +1,1 @@
+"""Scenes: the bodies and the table, read from TOML, built in, or generated."""

@@ -1,0 +1,55 @@
+"""Solving one step QP: the solve paths, the solver registry and the solvers' adapters.
+
+* :mod:`.paths`: :func:`solve_step_qp` on the run's :class:`SolvePath` (``native``,
+  ``compiled`` or ``declared``), then an independent KKT check (:func:`kkt_residuals`);
+* :mod:`.registry`: one :class:`SolverSpec` per solver, tolerances in each solver's options;
+* :mod:`.cvxpy_forms`: the step QP declared in cvxpy (``declared`` and ``compiled`` paths);
+* :mod:`.adapters`: one module per solver, the solver's own API (``native`` path);
+* :mod:`.scaling`, :mod:`.warm_start`: the QP's units, and last step's answer as a start;
+* :mod:`.residual_kernel`, :mod:`.map_kernel`: their compiled loops.
+
+The names below are imported on first use (PEP 562), as the package's own public names are.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .paths import (
+        SOLVE_PATHS,
+        VERIFY_FACTOR,
+        Residuals,
+        SolvePath,
+        StepSolution,
+        kkt_residuals,
+        solve_step_qp,
+        solve_with_fallback,
+    )
+    from .registry import SOLVERS, SolverSpec, available_solvers, get_solver, solver_options
+
+__all__ = ["SOLVERS", "SOLVE_PATHS", "VERIFY_FACTOR", "Residuals", "SolvePath", "SolverSpec",
+           "StepSolution", "available_solvers", "get_solver", "kkt_residuals", "solve_step_qp",
+           "solve_with_fallback", "solver_options"]
+
+_LAZY = {**dict.fromkeys(["SOLVE_PATHS", "VERIFY_FACTOR", "Residuals", "SolvePath",
+                          "StepSolution", "kkt_residuals", "solve_step_qp",
+                          "solve_with_fallback"], "paths"),
+         **dict.fromkeys(["SOLVERS", "SolverSpec", "available_solvers", "get_solver",
+                          "solver_options"], "registry")}
+"""Each public name imported on first use, and its module."""
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name on first use."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

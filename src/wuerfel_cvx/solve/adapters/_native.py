@@ -1,0 +1,231 @@
+"""The step QP's own data in the forms the solver adapters take, and what they answer.
+
+The adapters (:mod:`wuerfel_cvx.solve.adapters`) hand a solver the step QP in its own numbers,
+in the unknowns' deviation ``d = x - t`` from the target::
+
+    min  1/2 d' P d + l' d,   P = 2 W + 2 F' F,
+    s.t. E d = e - E t,   h - G t <= G d <= u - G t   (u = +inf where a row has no upper bound).
+
+Its objective is the step QP's, constant included (``sum w (x - t)^2 + |F (x - t)|^2``);
+a linear cost ``l' x`` (:attr:`~wuerfel_cvx.formulations.qp.StepQP.linear`) is ``l' d``
+plus the constant ``l' t``, which is dropped (the friction problem's ``l`` is zero where
+its ``t`` is not, so the constant is zero there).
+The constant matters: without it (``1/2 x' P x - (P t)' x``) the objective is of the size
+of ``w t^2``, and a solver's duality gap, relative to it, let Clarabel stop with a
+complementarity residual of 9e-6 on a step of a generated scene (the KKT check failed it).
+cvxpy's form of the same model also keeps the constant but carries auxiliary variables for
+its sums of squares, so the iterates differ, not the problem: every answer is checked by
+the same KKT residuals (:func:`wuerfel_cvx.solve.paths.kkt_residuals`) on ``x = t + d``.  The
+multipliers are those of the step QP (the shift leaves the Lagrangian's gradient as it
+is): the package's satisfy ``grad f + E' y - G' z = 0`` with ``z = z_lower - z_upper``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..._sparse import canonical_csc, canonical_csr, csc_matrix_of
+from ...formulations.qp import StepQP
+from ...scenes.geometry import FloatArray
+
+
+@dataclass(frozen=True)
+class Answer:
+    """A solver's answer in the package's terms, before it is checked."""
+
+    x: FloatArray | None
+    """The unknowns (``None``: the solver gave none)."""
+    eq_dual: FloatArray
+    """``y`` of ``E x = e``."""
+    ineq_dual: FloatArray
+    """``z = z_lower - z_upper`` (the sign convention of :mod:`wuerfel_cvx.formulations.qp`)."""
+    status: str
+    """The status name (``optimal``, ``optimal_inaccurate``, ``infeasible``, ``user_limit``,
+    ``solver_error``, ...), cvxpy's names for the solver's own statuses."""
+    reported_time: float
+    """The time the solver reports for itself (s); NaN if none."""
+    iterations: int
+    native_time: float | None = None
+    """Wall time (s) of the solver's own update and solve calls (``None``: not measured)."""
+
+
+class PatternChanged(Exception):
+    """A QP's matrices do not have the sparsity patterns its adapter was set up with.
+
+    A structure fixes the patterns of ``E``, ``G`` and ``F``; ``F' F`` can still lose an
+    entry that cancels to zero.  The caller then sets the solver up afresh.
+    """
+
+
+def check_patterns(*pairs: tuple[sp.csc_matrix, sp.csc_matrix]) -> None:
+    """Raise :class:`PatternChanged` unless each pair of CSC matrices has one pattern."""
+    for new, old in pairs:
+        if not (np.array_equal(new.indptr, old.indptr)
+                and np.array_equal(new.indices, old.indices)):
+            raise PatternChanged
+
+
+def status_name(table: Mapping[Any, str], native_status: object) -> str:
+    """The status name of a solver's ``native_status`` by its ``table`` (``solver_error``)."""
+    return table.get(native_status, "solver_error")
+
+
+class NativeData:
+    """A step QP's data in the deviation ``d = x - t``, each form built on first use.
+
+    ``qp`` is the step QP itself (the dense solvers take its rows as they are).
+    """
+
+    def __init__(self, qp: StepQP):
+        self.qp = qp
+
+    @cached_property
+    def hessian(self) -> sp.csc_matrix:
+        """``P = 2 W + 2 F' F`` (full, symmetric)."""
+        qp = self.qp
+        n = qp.n_variables
+        diagonal = np.arange(n + 1, dtype=np.int32)
+        hessian = canonical_csc(2.0 * qp.weights, diagonal[:n], diagonal, (n, n))
+        if qp.cost_factor is not None and qp.n_cost_rows:
+            factor = sp.csc_array(qp.cost_factor)
+            hessian = sp.csc_matrix(hessian + 2.0 * (factor.T @ factor))
+            hessian.sort_indices()
+        return hessian
+
+    @cached_property
+    def _at_target(self) -> FloatArray:
+        return np.asarray(self.qp.ineq_matrix @ self.qp.target, dtype=np.float64)
+
+    @property
+    def target(self) -> FloatArray:
+        """``t``: the unknowns are ``x = t + d``."""
+        return self.qp.target
+
+    @cached_property
+    def eq_rhs(self) -> FloatArray:
+        """``e - E t``."""
+        return np.asarray(self.qp.eq_rhs - self.qp.eq_matrix @ self.qp.target,
+                          dtype=np.float64)
+
+    @cached_property
+    def lower(self) -> FloatArray:
+        """``h - G t``."""
+        return np.asarray(self.qp.ineq_rhs - self._at_target, dtype=np.float64)
+
+    @cached_property
+    def upper(self) -> FloatArray:
+        """``u - G t`` per row of ``G`` (``+inf`` where there is none)."""
+        qp = self.qp
+        upper = np.full(qp.n_inequalities, np.inf)
+        if qp.upper_rows.size:
+            assert qp.ineq_upper is not None
+            bounded = qp.upper_rows
+            upper[bounded] = qp.ineq_upper[bounded] - self._at_target[bounded]
+        return upper
+
+    @property
+    def eq(self) -> sp.csc_matrix:
+        """``E``."""
+        return csc_matrix_of(self.qp.eq_matrix)
+
+    @property
+    def ineq(self) -> sp.csc_matrix:
+        """``G``."""
+        return csc_matrix_of(self.qp.ineq_matrix)
+
+    @property
+    def linear(self) -> FloatArray:
+        """``q = l``: the objective's linear term in ``d`` (zero without a linear cost)."""
+        linear = self.qp.linear
+        return np.zeros(self.qp.n_variables) if linear is None else linear
+
+    @cached_property
+    def upper_triangle(self) -> sp.csc_matrix:
+        """``P``'s upper triangle (OSQP's and Clarabel's input): ``P`` itself if diagonal."""
+        n = self.hessian.shape[0]
+        if self.hessian.nnz == n and np.array_equal(self.hessian.indices, np.arange(n)):
+            return self.hessian  # 2 W: each column's one entry on the diagonal
+        upper = sp.csc_matrix(sp.triu(self.hessian, format="csc"))
+        upper.sort_indices()
+        return upper
+
+    def unknowns(self, deviation: FloatArray) -> FloatArray:
+        """``x = t + d`` from a solver's ``d``."""
+        return np.asarray(self.target + np.asarray(deviation, dtype=np.float64),
+                          dtype=np.float64)
+
+
+def stacked(*blocks: tuple[sp.csr_array, float]) -> sp.csc_matrix:
+    """Canonical CSR ``blocks`` (each times its sign, 1.0 or -1.0) one below the other.
+
+    The rows' arrays are joined as they are (a sign flip is exact), then transposed once
+    (:func:`~wuerfel_cvx._sparse.csc_matrix_of`); all blocks have the same columns.
+    """
+    columns = int(blocks[0][0].shape[1])
+    data, indices, indptr, offset = [], [], [np.zeros(1, dtype=np.int64)], 0
+    for matrix, sign in blocks:
+        data.append(matrix.data if sign == 1.0 else -matrix.data)
+        indices.append(matrix.indices.astype(np.int64, copy=False))
+        indptr.append(matrix.indptr[1:].astype(np.int64) + offset)
+        offset += matrix.nnz
+    rows = sum(int(matrix.shape[0]) for matrix, _ in blocks)
+    return csc_matrix_of(canonical_csr(np.concatenate(data).astype(np.float64, copy=False),
+                                       np.concatenate(indices), np.concatenate(indptr),
+                                       (rows, columns)))
+
+
+RowBlock = tuple[sp.csr_array, float, "np.ndarray | None"]
+"""A block of rows: a canonical CSR matrix, its sign (1.0 or -1.0), and the rows taken
+(``None``: all)."""
+
+
+class RowStack:
+    """Blocks of CSR rows one below the other as one CSC matrix, its pattern fixed at set-up.
+
+    A solver set up on :attr:`matrix` takes a later QP of the same structure by its
+    nonzeros alone (:meth:`values`): the blocks' values, signed, gathered into the CSC
+    order found once.  The same numbers as :func:`stacked` on the new blocks.
+    """
+
+    def __init__(self, blocks: list[RowBlock]):
+        self._entries = [None if rows is None else _entries_of(matrix, rows)
+                         for matrix, _, rows in blocks]
+        taken = [matrix if rows is None else sp.csr_array(matrix[rows])
+                 for matrix, _, rows in blocks]
+        self.matrix = stacked(*((matrix, sign) for matrix, (_, sign, _) in
+                                zip(taken, blocks, strict=True)))
+        tags = [(_tagged(matrix, offset), 1.0) for matrix, offset in
+                zip(taken, np.cumsum([0] + [matrix.nnz for matrix in taken[:-1]]),
+                    strict=True)]
+        self._order = (np.asarray(stacked(*tags).data, dtype=np.int64) if taken
+                       else np.zeros(0, dtype=np.int64))
+        self._signs = np.concatenate([np.full(matrix.nnz, sign) for matrix, (_, sign, _)
+                                      in zip(taken, blocks, strict=True)] or [np.zeros(0)])
+
+    def values(self, matrices: list[sp.csr_array]) -> FloatArray:
+        """The nonzeros of the stack of ``matrices`` (the blocks' matrices, same patterns)."""
+        parts = [matrix.data if entries is None else matrix.data[entries]
+                 for matrix, entries in zip(matrices, self._entries, strict=True)]
+        data = np.concatenate(parts) if parts else np.zeros(0)
+        return np.asarray((self._signs * data)[self._order], dtype=np.float64)
+
+
+def _entries_of(matrix: sp.csr_array, rows: np.ndarray) -> np.ndarray:
+    """Indices into ``matrix.data`` of the entries of ``rows``, in row order."""
+    starts, ends = matrix.indptr[rows], matrix.indptr[np.asarray(rows) + 1]
+    if not len(rows):
+        return np.zeros(0, dtype=np.int64)
+    return np.concatenate([np.arange(start, end) for start, end in zip(starts, ends,
+                                                                       strict=True)])
+
+
+def _tagged(matrix: sp.csr_array, offset: int) -> sp.csr_array:
+    """``matrix``'s pattern holding each entry's position (from ``offset``) as its value."""
+    return canonical_csr(np.arange(offset, offset + matrix.nnz, dtype=np.float64),
+                         matrix.indices, matrix.indptr, matrix.shape)

@@ -1,0 +1,109 @@
+"""OSQP's adapter: one persistent ``osqp.OSQP`` per structure, updated in place.
+
+OSQP takes ``l <= [E; G] d <= u`` in the deviation ``d = x - t`` (:mod:`._native`), with
+``l = u`` on the equalities; OSQP's Lagrangian ``P d + q + A' w = 0`` makes the package's
+``y`` its first rows' ``w`` and ``z = -w`` on ``G``.  A later QP of the structure writes its
+bounds and the nonzeros of ``P`` and ``A`` (same patterns) into the solver, which starts
+from its own last solution (``warm_starting``); the mapped warm start of
+:mod:`wuerfel_cvx.solve.warm_start` is not used.  Its ``run_time`` includes the update.
+
+OSQP's Python wrapper (1.x) copies the vectors into a cache kept for derivatives and builds
+a namespace of the solver's report on every call; its native solver object is called
+directly where the wrapper has one, with the same numbers (bounds clipped to
+``+-OSQP_INFTY`` as the wrapper clips them).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from ...scenes.geometry import FloatArray
+from ..warm_start import WarmStart
+from ._native import Answer, NativeData, RowStack, check_patterns, status_name
+
+_STATUS = {1: "optimal", 2: "optimal_inaccurate", 3: "infeasible", 4: "infeasible_inaccurate",
+           5: "unbounded", 6: "unbounded_inaccurate", 7: "user_limit", 8: "user_limit",
+           10: "solver_error", 11: "solver_error"}
+"""OSQP's ``status_val`` by name (cvxpy's table for OSQP 1.x)."""
+
+_INFINITY = 1e30
+"""OSQP's ``OSQP_INFTY``: bounds beyond it are clipped to it."""
+
+_STDOUT_LOCK = threading.Lock()
+"""Held while a solve sends OSQP's stdout elsewhere."""
+
+
+def _settings(options: dict[str, Any]) -> dict[str, Any]:
+    settings = {key: value for key, value in options.items() if key != "warm_start"}
+    settings["warm_starting"] = bool(options.get("warm_start", True))
+    settings["verbose"] = False
+    return settings
+
+
+def _bounds(data: NativeData) -> tuple[FloatArray, FloatArray]:
+    """The bounds ``(l, u)`` of ``A = [E; G]``."""
+    lower = np.concatenate([data.eq_rhs, data.lower])
+    upper = np.concatenate([data.eq_rhs, data.upper])
+    return np.maximum(lower, -_INFINITY), np.minimum(upper, _INFINITY)
+
+
+class OSQPAdapter:
+    """A structure's persistent OSQP solver."""
+
+    def __init__(self, data: NativeData, options: dict[str, Any]):
+        import osqp
+
+        qp = data.qp
+        self.rows = RowStack([(qp.eq_matrix, 1.0, None), (qp.ineq_matrix, 1.0, None)])
+        self.hessian = data.upper_triangle
+        self.n_eq = qp.n_equalities
+        lower, upper = _bounds(data)
+        self.solver = osqp.OSQP()
+        self.solver.setup(P=self.hessian, q=data.linear, A=self.rows.matrix, l=lower,
+                          u=upper, **_settings(options))
+        self.native = getattr(self.solver, "_solver", None)
+        self._pending: NativeData | None = data
+
+    def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
+        """Solve ``data`` (this structure): update the solver in place unless just set up."""
+        started = time.perf_counter()
+        if data is not self._pending:
+            self._update(data)
+        self._pending = None
+        # With no row active at the optimum, OSQP prints "Polishing not needed ..." to
+        # sys.stdout whatever its verbose; the lock keeps two threads' redirects apart.
+        with _STDOUT_LOCK, contextlib.redirect_stdout(io.StringIO()):
+            if self.native is not None:
+                self.native.solve()
+                info, solution = self.native.info, self.native.solution
+            else:
+                solution = self.solver.solve(raise_error=False)
+                info = solution.info
+        native_time = time.perf_counter() - started
+        w = np.array(solution.y, dtype=np.float64)
+        return Answer(x=data.unknowns(solution.x), eq_dual=w[:self.n_eq],
+                      ineq_dual=-w[self.n_eq:], status=status_name(_STATUS, info.status_val),
+                      reported_time=float(info.run_time), iterations=int(info.iter),
+                      native_time=native_time)
+
+    def _update(self, data: NativeData) -> None:
+        lower, upper = _bounds(data)
+        hessian = data.upper_triangle
+        check_patterns((hessian, self.hessian))  # E's and G's: fixed by the structure
+        values = self.rows.values([data.qp.eq_matrix, data.qp.ineq_matrix])
+        if self.native is not None:
+            self.native.update_data_vec(q=data.linear, l=lower, u=upper)
+            self.native.update_data_mat(P_x=hessian.data, P_i=None, A_x=values, A_i=None)
+        else:
+            self.solver.update(q=data.linear, l=lower, u=upper, Px=hessian.data, Ax=values)
+
+
+def setup(data: NativeData, options: dict[str, Any]) -> OSQPAdapter:
+    """OSQP set up on ``data`` with ``options`` (OSQP settings)."""
+    return OSQPAdapter(data, options)

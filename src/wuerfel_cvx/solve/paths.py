@@ -1,0 +1,441 @@
+"""Solving a step QP and checking the answer independently of the solver.
+
+:func:`solve_step_qp` calls the solver on the run's solve path (:class:`SolvePath`: a cvxpy
+problem per QP, a cvxpy problem compiled per structure, or the solver's own API on the QP's
+numbers) and then recomputes, from the QP's own numeric data, the residuals of the KKT conditions of
+
+    min sum w (x - t)^2 + |F (x - t)|^2 + l' x
+    s.t.  E x = e  (multiplier y),   h <= G x <= u  (multiplier z = z_lower - z_upper)
+
+which are ``2 W (x - t) + 2 F' F (x - t) + l + E^T y - G^T z = 0`` (cvxpy's sign convention,
+see :mod:`wuerfel_cvx.formulations.qp`), primal feasibility, dual feasibility
+(``z >= 0`` on rows without an upper bound) and complementarity
+``max(z, 0)_i (G x - h)_i = 0``, ``max(-z, 0)_i (u - G x)_i = 0``.  Each residual is made
+relative to the size of the terms it balances.  A "solved" step counts as *verified*
+when all three are below ``VERIFY_FACTOR * eps``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections import OrderedDict
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import cvxpy as cp
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import InputError, StepFailure
+from ..formulations.qp import StepQP
+from ..scenes.geometry import FloatArray
+from . import residual_kernel
+from .adapters import Adapter, Answer, NativeData, adapter_for
+from .adapters._native import PatternChanged
+from .cvxpy_forms import (
+    COMPILED,
+    DECLARED,
+    NATIVE,
+    CompiledQPCache,
+    DeclaredQP,
+    declare,
+    structure_key,
+)
+from .registry import SolverSpec, get_solver, tolerance_value
+from .scaling import (
+    scale_of_magnitude,
+    scale_of_weight,
+    scaled_qp,
+    unknowns_scale,
+    weights_scale,
+)
+from .warm_start import WarmStart, WarmStarts
+
+#: A solution is verified when its relative residuals are below this multiple of ``eps``.
+#: Solvers measure their own stopping criteria in scaled or differently normed units, so
+#: the independent check allows two orders of magnitude of slack over ``eps``.
+VERIFY_FACTOR = 100.0
+
+SOLVED = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+
+SOLVE_PATHS = (NATIVE, COMPILED, DECLARED)
+"""The solve paths (:class:`SolvePath`, :attr:`StepSolution.path`): the solver's own API on
+the step QP's numbers (:mod:`wuerfel_cvx.solve.adapters`), a cvxpy problem compiled once per
+structure, or a cvxpy problem declared afresh per QP (:mod:`wuerfel_cvx.solve.cvxpy_forms`)."""
+
+PATH_COUNTS = ("compiled_structures", "steps_reusing_a_compiled_structure",
+               "canonicalised_qps", "native_setups", "native_updates")
+"""What a run's :class:`SolvePath` counted (its trajectory's ``info``; ``None`` for a peer)."""
+
+INVALID_DATA = "invalid_data"
+"""Status of a step whose QP data holds NaN or inf: no solver is called."""
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """Relative KKT residuals of a candidate solution (dimensionless)."""
+
+    primal: float
+    dual: float
+    complementarity: float
+
+    def worst(self) -> float:
+        """The largest of the three; ``inf`` if any is NaN (``max`` would skip it)."""
+        values = (self.primal, self.dual, self.complementarity)
+        return math.inf if any(math.isnan(v) for v in values) else max(values)
+
+
+@dataclass(frozen=True)
+class StepSolution:
+    """What a solver returned for one step QP, and how it checks out."""
+
+    x: FloatArray
+    solver: str
+    status: str
+    residuals: Residuals
+    verified: bool
+    solve_wall_time: float
+    """Wall time of the cvxpy ``solve`` call (s), including cvxpy's own work."""
+    solver_time: float
+    """Time the solver itself reports (s); NaN if it reports none."""
+    iterations: int
+    ineq_dual: FloatArray = field(default_factory=lambda: np.zeros(0))
+    """Multipliers ``z = z_lower - z_upper`` of ``h <= G x <= u`` (cvxpy's sign):
+    ``2 W (x - t) + 2 F' F (x - t) + l = G^T z - E^T y``; ``z >= 0`` on one-sided rows."""
+    path: str = DECLARED
+    """How it was solved: one of :data:`SOLVE_PATHS` (``none``: a step that solved no QP)."""
+    eq_dual: FloatArray = field(default_factory=lambda: np.zeros(0))
+    """Multipliers ``y`` of ``E x = e`` (cvxpy's sign, as :attr:`ineq_dual`)."""
+
+
+def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
+                  ineq_dual: FloatArray) -> Residuals:
+    """Relative primal, dual and complementarity residuals of ``(x, y, z)``.
+
+    A QP without a coupling cost, linear cost and upper bounds (the common one) is checked by
+    the compiled loop of :mod:`wuerfel_cvx.solve.residual_kernel`, others by the general NumPy code.
+    """
+    if qp.cost_factor is None and qp.ineq_upper is None and qp.linear is None:
+        eq, ineq = qp.eq_matrix, qp.ineq_matrix
+        return Residuals(*residual_kernel.residuals(
+            qp.weights, qp.target, x, eq.data, eq.indices, eq.indptr, qp.eq_rhs,
+            np.asarray(eq_dual, dtype=np.float64), ineq.data, ineq.indices, ineq.indptr,
+            qp.ineq_rhs, np.asarray(ineq_dual, dtype=np.float64)))
+    objective_grad = qp.objective_gradient(x)
+    eq_term = _transposed_product(qp.eq_matrix, eq_dual)
+    ineq_term = _transposed_product(qp.ineq_matrix, ineq_dual)
+    stationarity = objective_grad + eq_term - ineq_term
+    dual_scale = 1.0 + max(_inf(objective_grad), _inf(eq_term), _inf(ineq_term))
+    upper_rows = qp.upper_rows
+    one_sided = ineq_dual if not upper_rows.size else np.delete(ineq_dual, upper_rows)
+    dual = max(_inf(stationarity), _inf(np.minimum(one_sided, 0.0))) / dual_scale
+
+    eq_lhs = qp.eq_matrix @ x
+    ineq_lhs = qp.ineq_matrix @ x
+    eq_violation = eq_lhs - qp.eq_rhs
+    slack = ineq_lhs - qp.ineq_rhs
+    primal_scale = 1.0 + max(_inf(qp.eq_rhs), _inf(qp.ineq_rhs), _inf(eq_lhs), _inf(ineq_lhs))
+    if not upper_rows.size:
+        primal = max(_inf(eq_violation), _inf(np.minimum(slack, 0.0))) / primal_scale
+        complementarity = (_inf(ineq_dual * slack) / (1.0 + _inf(ineq_dual) * primal_scale)
+                           if slack.size else 0.0)
+        return Residuals(primal=primal, dual=dual, complementarity=complementarity)
+    assert qp.ineq_upper is not None
+    upper_slack = qp.ineq_upper[upper_rows] - ineq_lhs[upper_rows]
+    primal_scale = max(primal_scale, 1.0 + _inf(qp.ineq_upper[upper_rows]))
+    primal = max(_inf(eq_violation), _inf(np.minimum(slack, 0.0)),
+                 _inf(np.minimum(upper_slack, 0.0))) / primal_scale
+    lower_product = np.maximum(ineq_dual, 0.0) * slack
+    upper_product = np.maximum(-ineq_dual[upper_rows], 0.0) * upper_slack
+    complementarity = (max(_inf(lower_product), _inf(upper_product))
+                       / (1.0 + _inf(ineq_dual) * primal_scale))
+    return Residuals(primal=primal, dual=dual, complementarity=complementarity)
+
+
+class SolvePath:
+    """How a run's QPs reach their solvers: one of :data:`SOLVE_PATHS`, with its caches.
+
+    ``native``: a solver with an adapter (:mod:`wuerfel_cvx.solve.adapters`) gets the step QP's
+    own numbers, one persistent solver per structure and solver, updated in place; a solver
+    without one (SCS, HiGHS) goes ``compiled``.  ``compiled``: a cvxpy DPP problem per
+    structure (:mod:`wuerfel_cvx.solve.cvxpy_forms`).  ``declared``: a cvxpy problem per QP.  PROXQP
+    and DAQP take their adapters on every path
+    (:attr:`~wuerfel_cvx.solve.registry.SolverSpec.native_only`).
+    ``warm_start``: start the solvers that take one from the last step's solution mapped by
+    contact (:mod:`wuerfel_cvx.solve.warm_start`), and OSQP from its structure's last solution.
+    ``capacity`` structures are kept (compiled problems, native solvers); ``compile_after``
+    is the sighting of a structure that compiles it
+    (:class:`~wuerfel_cvx.solve.cvxpy_forms.CompiledQPCache`).
+    """
+
+    def __init__(self, name: str = NATIVE, *, warm_start: bool = True, capacity: int = 64,
+                 compile_after: int = 2):
+        if name not in SOLVE_PATHS:
+            raise InputError(f"unknown solve path '{name}' (one of {', '.join(SOLVE_PATHS)})",
+                             field="solve_path")
+        self.name = name
+        self.compiled = CompiledQPCache(capacity=capacity, compile_after=compile_after)
+        self.warm_starts = WarmStarts() if warm_start else None
+        self.capacity = capacity
+        self.native_setups = 0
+        """Native solvers set up so far (a structure and solver seen for the first time)."""
+        self.native_updates = 0
+        """Native solves of a structure already set up (its solver updated in place)."""
+        self._adapters: OrderedDict[tuple[object, ...], Adapter] = OrderedDict()
+
+    def solve(self, qp: StepQP, spec: SolverSpec, options: dict[str, object],
+              warm: WarmStart | None) -> tuple[Answer, str]:
+        """Solve ``qp`` (in the solver's units) on this path; the answer and the path taken."""
+        if spec.adapter is not None and (self.name == NATIVE or spec.native_only):
+            return self._native(qp, spec, options, warm), NATIVE
+        if self.name == DECLARED:
+            declared, path = declare(qp), DECLARED
+        else:
+            declared, path = self.compiled.prepare(qp)
+        return _solve_with_cvxpy(qp, declared, spec.cvxpy_name,
+                                 {"warm_start": False, **options}), path
+
+    def _native(self, qp: StepQP, spec: SolverSpec, options: dict[str, object],
+                warm: WarmStart | None) -> Answer:
+        assert spec.adapter is not None
+        if self.warm_starts is None:
+            options = {**options, "warm_start": False}
+        key = (spec.name, tuple(sorted(options.items())), structure_key(qp))
+        data = NativeData(qp)
+        adapter = self._adapters.get(key)
+        if adapter is not None:
+            self._adapters.move_to_end(key)
+            try:
+                answer = adapter.solve(data, warm)
+            except PatternChanged:
+                adapter = None
+            else:
+                self.native_updates += 1
+                return answer
+        adapter = adapter_for(spec.adapter).setup(data, options)
+        self._adapters[key] = adapter
+        if len(self._adapters) > self.capacity:
+            self._adapters.popitem(last=False)
+        self.native_setups += 1
+        return adapter.solve(data, warm)
+
+    def counts(self) -> dict[str, int]:
+        """What the path did so far, for a trajectory's ``info`` (:data:`PATH_COUNTS`)."""
+        return {"compiled_structures": self.compiled.compiled,
+                "steps_reusing_a_compiled_structure": self.compiled.reused,
+                "canonicalised_qps": self.compiled.canonicalised,
+                "native_setups": self.native_setups, "native_updates": self.native_updates}
+
+
+def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "default",
+                  *, step: int = 0, path: SolvePath | None = None) -> StepSolution:
+    """Solve ``qp`` with ``solver`` at tolerance ``tol`` and verify the result.
+
+    The solver sees ``qp`` in units that keep its data at most
+    :data:`~wuerfel_cvx.solve.scaling.SCALE_LIMIT` in magnitude and its largest weight at least
+    :data:`~wuerfel_cvx.solve.scaling.WEIGHT_FLOOR` (:mod:`wuerfel_cvx.solve.scaling`; ``qp``
+    itself for ordinary data); the solution and multipliers are mapped back and checked on ``qp``.
+    ``path`` (:class:`SolvePath`, kept across a run's steps) says how the QP reaches the
+    solver; without one, a fresh ``native`` path.
+
+    Raises :class:`StepFailure` (with ``step``) if the QP's data is not finite (status
+    ``invalid_data``, before any solver runs), if the solver raises, reports a status
+    other than optimal, returns non-finite numbers, or claims an inaccurate optimum
+    that fails the residual check.  A claimed optimum that fails the check is
+    returned with ``verified=False`` for the caller to record.
+    """
+    spec = get_solver(solver)
+    eps = tolerance_value(tol)
+    options = spec.options(eps)
+    path = SolvePath() if path is None else path
+    scale, weight_scale = _checked_scales(qp, step, spec.name)
+    warm_starts = path.warm_starts if spec.takes_warm_start else None
+    started = time.perf_counter()
+    try:
+        seen = scaled_qp(qp, scale, weight_scale)
+        warm = None if warm_starts is None else warm_starts.guess(spec.name, seen, scale)
+        answer, taken = path.solve(seen, spec, options, warm)
+    except cp.error.SolverError as exc:
+        raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
+    except Exception as exc:  # a solver library raising anything is a failed step
+        raise StepFailure(step, spec.name, "exception", f"{type(exc).__name__}: {exc}") from exc
+    wall = time.perf_counter() - started
+    status = answer.status
+    if status not in SOLVED or answer.x is None:
+        raise StepFailure(step, spec.name, status)
+    x = scale * np.asarray(answer.x, dtype=np.float64)  # exact: scale is a power of two
+    if not np.isfinite(x).all():
+        raise StepFailure(step, spec.name, status, "solution has non-finite entries")
+    dual_scale = scale / weight_scale  # exact: a ratio of powers of two
+    ineq_dual = dual_scale * np.asarray(answer.ineq_dual, dtype=np.float64)
+    eq_dual = dual_scale * np.asarray(answer.eq_dual, dtype=np.float64)
+    # checked on the original QP, whatever units the solver saw
+    residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
+    verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
+    if status == cp.OPTIMAL_INACCURATE and not verified:
+        raise StepFailure(step, spec.name, status,
+                          f"residuals {residuals.worst():.2e} above {VERIFY_FACTOR * eps:.1e}")
+    if warm_starts is not None and verified:
+        warm_starts.remember(spec.name, seen, answer.x, answer.eq_dual, answer.ineq_dual, scale)
+    return StepSolution(x=x, solver=spec.name, status=status, residuals=residuals,
+                        verified=verified, solve_wall_time=wall,
+                        solver_time=spec.timing.solver_time(answer.reported_time,
+                                                            answer.native_time),
+                        iterations=int(answer.iterations), ineq_dual=ineq_dual, path=taken,
+                        eq_dual=eq_dual)
+
+
+def _solve_with_cvxpy(qp: StepQP, declared: DeclaredQP, solver: str,
+                      options: dict[str, object]) -> Answer:
+    """Solve a cvxpy ``declared`` problem holding ``qp`` with cvxpy's ``solver``."""
+    with warnings.catch_warnings():
+        # cvxpy reads its own sparse parameters densely while applying them
+        warnings.filterwarnings("ignore", "Reading from a sparse CVXPY expression",
+                                RuntimeWarning)
+        # an inaccurate optimum is judged by the residual check, not by a warning
+        warnings.filterwarnings("ignore", "Solution may be inaccurate", UserWarning)
+        # warm_start=False (in options): cvxpy's in-place OSQP update can be refused by
+        # OSQP ("Problem data validation") and then silently re-solves the old data.
+        declared.problem.solve(solver=solver, **options)
+    stats = declared.problem.solver_stats
+    value = declared.variable.value
+    ineq_dual = _dual(declared.ineq_constraint, qp.n_inequalities)
+    if declared.upper_constraint is not None:  # z = z_lower - z_upper
+        ineq_dual = ineq_dual.copy()
+        ineq_dual[qp.upper_rows] -= _dual(declared.upper_constraint, qp.upper_rows.size)
+    return Answer(
+        status=str(declared.problem.status),
+        x=None if value is None else np.asarray(value, dtype=np.float64),
+        eq_dual=_dual(declared.eq_constraint, qp.n_equalities),
+        ineq_dual=ineq_dual,
+        reported_time=(stats.solve_time if stats is not None and stats.solve_time is not None
+                       else np.nan),
+        iterations=stats.num_iters if stats is not None and stats.num_iters is not None else -1,
+    )
+
+
+def _dual(constraint: cp.Constraint | None, size: int) -> FloatArray:
+    if constraint is None or size == 0:
+        return np.zeros(0)
+    value = constraint.dual_value
+    if value is None:
+        return np.full(size, np.nan)
+    return np.atleast_1d(np.asarray(value, dtype=np.float64))
+
+
+def _transposed_product(matrix: sp.csr_array, vector: FloatArray) -> FloatArray:
+    """``matrix.T @ vector`` for a CSR matrix, without building the transpose."""
+    per_entry = matrix.data * np.repeat(vector, np.diff(matrix.indptr))
+    return np.asarray(np.bincount(matrix.indices, weights=per_entry, minlength=matrix.shape[1]),
+                      dtype=np.float64)
+
+
+def _checked_scales(qp: StepQP, step: int, solver: str) -> tuple[float, float]:
+    """``qp``'s unknowns and weights scales (:mod:`wuerfel_cvx.solve.scaling`): 1 for ordinary data.
+
+    Raises :class:`StepFailure` (status ``invalid_data``) if its data are not all finite: no
+    solver is handed NaN or inf (some would panic or return garbage).  A QP without upper
+    bounds, coupling cost or linear cost is checked in one compiled pass
+    (:func:`wuerfel_cvx.solve.residual_kernel.data_summary`), others by the general NumPy code.
+    """
+    if qp.ineq_upper is None and qp.cost_factor is None and qp.linear is None:
+        finite, magnitude, largest = residual_kernel.data_summary(
+            qp.weights, qp.target, qp.eq_matrix.data, qp.eq_rhs, qp.ineq_matrix.data,
+            qp.ineq_rhs)
+        if finite:
+            return scale_of_magnitude(magnitude), scale_of_weight(largest)
+    bad_data = _non_finite_data(qp)
+    if bad_data:
+        raise StepFailure(step, solver, INVALID_DATA, f"non-finite {bad_data}")
+    return unknowns_scale(qp), weights_scale(qp)  # 1 unless data are large, bodies light
+
+
+def _non_finite_data(qp: StepQP) -> str:
+    """Names of the QP's arrays holding NaN or inf ('' if all are finite)."""
+    arrays = {"weights": qp.weights, "target": qp.target, "eq_matrix": qp.eq_matrix.data,
+              "eq_rhs": qp.eq_rhs, "ineq_matrix": qp.ineq_matrix.data, "ineq_rhs": qp.ineq_rhs}
+    if qp.cost_factor is not None:
+        arrays["cost_factor"] = qp.cost_factor.data
+    if qp.linear is not None:
+        arrays["linear"] = qp.linear
+    # a NaN or an infinity makes the arrays' sum non-finite, so a finite sum clears them
+    # all at one reduction; a non-finite sum (possibly an overflow) is looked at closely
+    if qp.ineq_upper is None and math.isfinite(np.add.reduce(np.concatenate(
+            list(arrays.values())))):
+        return ""
+    bad = [name for name, values in arrays.items() if not np.all(np.isfinite(values))]
+    if qp.ineq_upper is not None and not np.all(np.isfinite(qp.ineq_upper)
+                                                | (qp.ineq_upper == np.inf)):
+        bad.append("ineq_upper")  # +inf is a one-sided row; NaN and -inf are not data
+    return ", ".join(bad)
+
+
+def _inf(values: FloatArray) -> float:
+    return float(np.max(np.abs(values))) if np.size(values) else 0.0
+
+
+def solve_with_fallback(qp: StepQP, solvers: Sequence[str], tol: str | float, step: int,
+                        path: SolvePath | None) -> tuple[StepSolution, str]:
+    """Solve with ``solvers[0]``, on failure with the next; the solution and first status.
+
+    The first status is that of ``solvers[0]`` (the solution's own when it succeeded).
+    Raises the first solver's :class:`StepFailure`, its detail extended by what each
+    fallback gave, when every solver fails; a QP with non-finite data fails at once.
+    """
+    failures: list[StepFailure] = []
+    for name in solvers:
+        try:
+            solution = solve_step_qp(qp, name, tol, step=step, path=path)
+        except StepFailure as failure:
+            if failure.status == INVALID_DATA:  # the same data would fail every solver
+                raise
+            failures.append(failure)
+            continue
+        return solution, failures[0].status if failures else solution.status
+    first = failures[0]
+    if len(failures) == 1:
+        raise first
+    then = [f"then {f.solver} failed with '{f.status}'" + (f" ({f.detail})" if f.detail else "")
+            for f in failures[1:]]
+    raise StepFailure(step, first.solver, first.status,
+                      "; ".join(([first.detail] if first.detail else []) + then)) from first
+
+
+def combine_solutions(solutions: Sequence[StepSolution]) -> StepSolution:
+    """One step's solutions (one per island QP) as one solution.
+
+    The worst residuals and status (an inaccurate optimum if any), summed times, the most
+    iterations any island took, the unknowns one after another, and the solvers and paths
+    that produced them (``"OSQP+CLARABEL"`` when a fallback solved some islands).
+    """
+    if len(solutions) == 1:
+        return solutions[0]
+    statuses = [solution.status for solution in solutions]
+
+    def joined(names: Sequence[str]) -> str:
+        return "+".join(dict.fromkeys(names))
+
+    return StepSolution(
+        x=np.concatenate([solution.x for solution in solutions]),
+        solver=joined([solution.solver for solution in solutions]),
+        status=SOLVED[1] if SOLVED[1] in statuses else statuses[0],
+        residuals=Residuals(*(max(getattr(solution.residuals, name) for solution in solutions)
+                              for name in ("primal", "dual", "complementarity"))),
+        verified=all(solution.verified for solution in solutions),
+        solve_wall_time=sum(solution.solve_wall_time for solution in solutions),
+        solver_time=float(sum(solution.solver_time for solution in solutions)),
+        iterations=max(solution.iterations for solution in solutions),
+        path=joined([solution.path for solution in solutions]))
+
+
+def first_failed_status(solutions: Sequence[StepSolution], primary_statuses: Sequence[str],
+                        combined: StepSolution) -> str:
+    """A step's ``primary_status``.
+
+    The run's own solver's first failed status on any of the step's QPs (where a fallback
+    took over), else the ``combined`` solution's status.
+    """
+    return next((primary for solution, primary in zip(solutions, primary_statuses, strict=True)
+                 if primary != solution.status), combined.status)

@@ -1,0 +1,152 @@
+"""The KKT check's residuals as one compiled loop (numba).
+
+:func:`wuerfel_cvx.solve.paths.kkt_residuals` recomputes every step's primal, dual and
+complementarity residuals in some forty NumPy operations.  :func:`residuals` here computes
+them for the common QP, one without a coupling cost and without upper bounds, in one pass
+over the CSR arrays, with the NumPy path's arithmetic in its order: the objective's
+gradient ``(2 w) (x - t)``, the transposed products summed from 0.0 in entry order (as
+``np.bincount`` sums), the products summed from 0.0 in each row's order (as scipy's CSR
+product), the largest magnitudes propagating NaN (as ``np.max``) and combined as Python's
+``max`` combines them.  So it returns the numbers of the general NumPy check bit for bit
+(``tests/test_kernels.py``); other QPs take the general NumPy check.
+:func:`data_summary` checks the same QPs' numbers before the solve (finite, and the
+magnitudes their scaling is chosen by) in one pass.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._numba import compiled
+from ..scenes.geometry import FloatArray
+
+__all__ = ["csr_product", "data_summary", "residuals"]
+
+
+@compiled
+def _largest(values: FloatArray) -> float:
+    """``max |values|`` as ``np.max(np.abs(values))`` (NaN if any is NaN); 0.0 if empty."""
+    if values.shape[0] == 0:
+        return 0.0
+    top = float(abs(values[0]))
+    for k in range(1, values.shape[0]):
+        magnitude = abs(values[k])
+        if magnitude != magnitude or top != top:
+            top = math.nan
+        elif magnitude > top:
+            top = magnitude
+    return top
+
+
+@compiled
+def _largest_negative(values: FloatArray) -> float:
+    """``max |min(values, 0)|`` as NumPy computes it (NaN if any is NaN); 0.0 if empty."""
+    clipped = np.empty(values.shape[0])
+    for k in range(values.shape[0]):
+        value = values[k]
+        clipped[k] = value if (value < 0.0 or value != value) else 0.0
+    return _largest(clipped)
+
+
+@compiled
+def _first_max(a: float, b: float) -> float:
+    """Python's ``max(a, b)``: ``b`` only if ``b > a`` (so a NaN ``a`` stays)."""
+    return b if b > a else a
+
+
+@compiled
+def csr_product(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+             x: FloatArray) -> FloatArray:
+    """``A x`` for CSR ``A``, each row summed from 0.0 in entry order (as scipy's product)."""
+    out = np.zeros(indptr.shape[0] - 1)
+    for r in range(indptr.shape[0] - 1):
+        total = 0.0
+        for k in range(indptr[r], indptr[r + 1]):
+            total += data[k] * x[indices[k]]
+        out[r] = total
+    return out
+
+
+@compiled
+def _transposed(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, y: FloatArray,
+                n_columns: int) -> FloatArray:
+    """``A' y`` for CSR ``A``, each column summed from 0.0 in entry order."""
+    out = np.zeros(n_columns)
+    for r in range(indptr.shape[0] - 1):
+        for k in range(indptr[r], indptr[r + 1]):
+            out[indices[k]] += data[k] * y[r]
+    return out
+
+
+@compiled
+def residuals(weights: FloatArray, target: FloatArray, x: FloatArray,
+              eq_data: FloatArray, eq_indices: np.ndarray, eq_indptr: np.ndarray,
+              eq_rhs: FloatArray, eq_dual: FloatArray,
+              ineq_data: FloatArray, ineq_indices: np.ndarray, ineq_indptr: np.ndarray,
+              ineq_rhs: FloatArray, ineq_dual: FloatArray) -> tuple[float, float, float]:
+    """Relative primal, dual and complementarity residuals at ``(x, y, z)``.
+
+    Of ``min sum w (x - t)^2`` s.t. ``E x = e``, ``G x >= h``, as
+    :func:`wuerfel_cvx.solve.paths.kkt_residuals` defines them (dimensionless).
+    """
+    n = x.shape[0]
+    gradient = np.empty(n)
+    for k in range(n):
+        gradient[k] = (2.0 * weights[k]) * (x[k] - target[k])
+    eq_term = _transposed(eq_data, eq_indices, eq_indptr, eq_dual, n)
+    ineq_term = _transposed(ineq_data, ineq_indices, ineq_indptr, ineq_dual, n)
+    stationarity = np.empty(n)
+    for k in range(n):
+        stationarity[k] = (gradient[k] + eq_term[k]) - ineq_term[k]
+    dual_scale = 1.0 + _first_max(_first_max(_largest(gradient), _largest(eq_term)),
+                                  _largest(ineq_term))
+    dual = _first_max(_largest(stationarity), _largest_negative(ineq_dual)) / dual_scale
+
+    eq_lhs = csr_product(eq_data, eq_indices, eq_indptr, x)
+    ineq_lhs = csr_product(ineq_data, ineq_indices, ineq_indptr, x)
+    eq_violation = eq_lhs - eq_rhs
+    slack = ineq_lhs - ineq_rhs
+    primal_scale = 1.0 + _first_max(_first_max(_first_max(_largest(eq_rhs), _largest(ineq_rhs)),
+                                               _largest(eq_lhs)), _largest(ineq_lhs))
+    primal = _first_max(_largest(eq_violation), _largest_negative(slack)) / primal_scale
+    complementarity = 0.0
+    if slack.shape[0]:
+        complementarity = (_largest(ineq_dual * slack)
+                           / (1.0 + _largest(ineq_dual) * primal_scale))
+    return primal, dual, complementarity
+
+
+@compiled
+def _fold(values: FloatArray, finite: bool, largest: float) -> tuple[bool, float]:
+    """``finite`` and ``largest`` updated with ``values``: all finite, the largest ``|v|``."""
+    for k in range(values.shape[0]):
+        value = values[k]
+        if not math.isfinite(value):
+            finite = False
+        elif abs(value) > largest:
+            largest = abs(value)
+    return finite, largest
+
+
+@compiled
+def data_summary(weights: FloatArray, target: FloatArray, eq_data: FloatArray,
+                 eq_rhs: FloatArray, ineq_data: FloatArray, ineq_rhs: FloatArray,
+                 ) -> tuple[bool, float, float]:
+    """Whether a QP's numbers are all finite, its data's magnitude and its largest weight.
+
+    The magnitude is the largest ``|t|``, ``|e|``, ``|h|`` (0.0 if none) and the largest
+    weight ``max(w)`` (0.0 if none): for finite data the numbers
+    :func:`wuerfel_cvx.solve.scaling.data_magnitude` and ``weights.max()`` give.
+    """
+    finite, _ = _fold(weights, True, 0.0)
+    finite, _ = _fold(eq_data, finite, 0.0)
+    finite, _ = _fold(ineq_data, finite, 0.0)
+    finite, magnitude = _fold(target, finite, 0.0)
+    finite, magnitude = _fold(eq_rhs, finite, magnitude)
+    finite, magnitude = _fold(ineq_rhs, finite, magnitude)
+    largest = weights[0] if weights.shape[0] else 0.0
+    for k in range(1, weights.shape[0]):
+        largest = max(largest, weights[k])
+    return finite, magnitude, largest

@@ -1,0 +1,147 @@
+"""Recording a run: states, one metrics row per step, and the run's settings.
+
+Shared by the package's own simulation loop (:mod:`wuerfel_cvx.step.simulation`) and the peer
+engines (:mod:`wuerfel_cvx.lab.peers`), so that both write the same columns, computed by the
+same functions of :mod:`wuerfel_cvx.step.metrics`, and the same ``info``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..formulations import Formulation, get_formulation
+from ..scenes.geometry import FloatArray
+from ..scenes.scene import Scene
+from ..settings import SETTING_NAMES, Settings
+from ..solve.paths import PATH_COUNTS
+from ..trajectory import NULLABLE_COLUMNS, Trajectory
+from ..versions import package_version
+from .metrics import kinetic_energy, potential_energy, rod_length_drift
+from .model import Model, State
+
+METRIC_COLUMNS = (
+    "step", "time_s", "solver", "status", "primary_status", "verified", "n_variables",
+    "n_equalities",
+    "n_inequalities", "n_contacts", "build_time_s", "solve_time_s", "solver_time_s",
+    "step_time_s",
+    "iterations", "primal_residual", "dual_residual", "complementarity", "rod_drift",
+    "penetration_m", "kinetic_energy_J", "potential_energy_J", "total_energy_J", "path",
+    "passes", "signorini_violation_Nsm", "coulomb_violation_Ns", "dissipation_violation_J",
+    "friction_work_J",
+    "coulomb_iterations", "coulomb_converged",
+)
+"""Columns of :attr:`Trajectory.metrics`, one row per step (state after the step).
+
+``build_time_s`` is the step's contact search and QP construction, ``solve_time_s`` the
+wall time of the solve call (cvxpy's compilation included), ``solver_time_s`` the solver's
+own reported time, and ``step_time_s`` the whole step: contact search, islands and sleep if
+on, build, solve, check and advance (all in s).  A state's contacts are searched once, when
+the state is reached, and that search is counted in the step that starts from the state.
+The row's own diagnostics (rod drift, penetration, energies) are measured outside
+``step_time_s``.  ``solver`` and ``status`` are those of the solver that produced the
+step; ``primary_status`` is the run's own solver's status on it, which differs only when
+that solver failed and a ``fallback`` solver took over.  ``path`` is how the step's QPs
+reached the solver: ``native``, ``compiled`` or ``declared``
+(:class:`~wuerfel_cvx.solve.paths.SolvePath`; joined by ``+`` when a step's QPs went different
+ways; ``none`` when no QP was solved, ``peer`` for a peer engine).  ``passes`` is the
+number of QPs solved one after another for the step (the most of any island): 1 for a
+single-pass formulation, up to ``max_passes`` for the
+closest-approach Gauss-Newton passes of ``velocity``, 0 for a step that solved none; its
+times and ``iterations`` are those passes' sums.  The last four are the physical criteria
+of the step's contact impulses (:mod:`wuerfel_cvx.step.criteria`; NaN for a step without
+friction).  ``coulomb_iterations`` and ``coulomb_converged`` are the Coulomb fixed point's
+(:data:`~wuerfel_cvx.friction.coulomb.COULOMB_COLUMNS`; empty without it).
+"""
+
+
+def physical_metrics(model: Model, state: State, penetration: float) -> dict[str, float]:
+    """The physical diagnostics of a state: rod drift (1), penetration (m), energies (J).
+
+    ``penetration`` is the state's deepest penetration (m), from its contact search.
+    """
+    kinetic = kinetic_energy(model, state)
+    potential = potential_energy(model, state)
+    return {"rod_drift": rod_length_drift(model, state.points), "penetration_m": penetration,
+            "kinetic_energy_J": kinetic, "potential_energy_J": potential,
+            "total_energy_J": kinetic + potential}
+
+
+def run_info(scene: Scene, settings: Settings, *, formulation: Formulation | None = None,
+             steps: int = 0, packages: dict[str, str] | None = None) -> dict[str, Any]:
+    """A run's ``info``: its scene (name and data), its settings and the versions.
+
+    ``formulation``: the run's formulation object, when it differs from the settings' (a
+    friction model set); ``packages`` maps a key of ``info["versions"]`` to a
+    distribution whose version it records (``wuerfel_cvx`` is always recorded).
+    ``friction_model`` is ``None`` for a formulation without friction.
+    """
+    formulation = get_formulation(settings.formulation) if formulation is None else formulation
+    friction = formulation.friction
+    return info_of(scene, {**settings.to_dict(), "formulation": formulation.name,
+                           "steps": int(steps),
+                           "friction_model": None if friction is None
+                           else friction.friction_model}, packages)
+
+
+def info_of(scene: Scene, fields: dict[str, Any],
+            packages: dict[str, str] | None = None) -> dict[str, Any]:
+    """A trajectory's ``info``: the scene (name and data), ``fields`` and the versions.
+
+    ``packages`` maps a key of ``info["versions"]`` to a distribution whose version it
+    records (``wuerfel_cvx`` is always recorded).  A peer engine's run
+    (:mod:`wuerfel_cvx.lab.peers`) gives its own ``fields``; every run's ``info`` has the same
+    keys (the settings, ``steps``, ``friction_model`` and the solve path's counts), ``None``
+    where a run has no such value.
+    """
+    standard = dict.fromkeys((*SETTING_NAMES, "steps", "friction_model", *PATH_COUNTS))
+    return {"scene": scene.name, "scene_data": scene.to_dict(), **standard, **fields,
+            "versions": {key: package_version(package) for key, package in
+                         {"wuerfel_cvx": "wuerfel_cvx", **(packages or {})}.items()}}
+
+
+@dataclass
+class TrajectoryRecorder:
+    """States and metrics rows of a run as it goes; :meth:`trajectory` at any point."""
+
+    model: Model
+    info: dict[str, Any]
+    column_dtypes: dict[str, str] = field(default_factory=dict)
+    """Dtypes for columns a recorder's rows may leave empty (``pd.NA``), e.g. a peer's."""
+    times: list[float] = field(default_factory=list)
+    points: list[FloatArray] = field(default_factory=list)
+    velocities: list[FloatArray] = field(default_factory=list)
+    rows: list[dict[str, Any]] = field(default_factory=list)
+
+    @classmethod
+    def start(cls, model: Model, info: dict[str, Any], state: State,
+              column_dtypes: dict[str, str] | None = None) -> TrajectoryRecorder:
+        """A recorder holding the initial ``state`` at time 0."""
+        recorder = cls(model, info, dict(column_dtypes or {}))
+        recorder.times.append(0.0)
+        recorder.points.append(state.points)
+        recorder.velocities.append(state.velocities)
+        return recorder
+
+    def record(self, time: float, state: State, row: dict[str, Any]) -> None:
+        """Append the state at ``time`` (s) after a step, and that step's metrics ``row``."""
+        self.times.append(time)
+        self.points.append(state.points)
+        self.velocities.append(state.velocities)
+        self.rows.append(row)
+
+    def trajectory(self) -> Trajectory:
+        """The trajectory recorded so far (a copy of the lists' current contents).
+
+        Whole steps only: a state whose row a Ctrl-C kept from being recorded is left out.
+        """
+        states = len(self.rows) + 1
+        metrics = pd.DataFrame(self.rows, columns=list(METRIC_COLUMNS))
+        metrics = metrics.astype({**NULLABLE_COLUMNS, **self.column_dtypes})
+        return Trajectory(times=np.array(self.times[:states]),
+                          points=np.array(self.points[:states]),
+                          velocities=np.array(self.velocities[:states]), metrics=metrics,
+                          table_points=self.model.table_points.copy(), info=dict(self.info))

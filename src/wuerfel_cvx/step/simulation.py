@@ -1,0 +1,314 @@
+"""The time-stepping object: one state, its contacts, and :meth:`Simulation.step`.
+
+A step is a pipeline over one contact set, found once when the state is reached::
+
+    contacts (of the state, with the formulation's reach)
+      -> plan (sleep, islands: which boxes each QP takes)       wuerfel_cvx.step.sleep
+      -> build each QP from the contacts                         wuerfel_cvx.formulations
+      -> solve and check it, falling back to other solvers       wuerfel_cvx.solve.paths
+      -> advance, merge the islands' states
+      -> contacts of the new state (the next step's, and this row's penetration)
+      -> record the state and the metrics row                    wuerfel_cvx.step.recorder
+
+Nothing is kept between calls but the object's own state: no module-level memo.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError, StepFailure
+from ..formulations import (
+    Formulation,
+    StepQP,
+    get_formulation,
+    with_friction_model,
+)
+from ..friction.coulomb import (
+    CoulombStep,
+    FrictionMemory,
+    coulomb_columns,
+    coulomb_settings,
+    fixed_point,
+)
+from ..friction.forces import ContactForces
+from ..scenes.scene import Scene
+from ..settings import Settings
+from ..solve.paths import (
+    Residuals,
+    SolvePath,
+    StepSolution,
+    combine_solutions,
+    first_failed_status,
+    solve_with_fallback,
+)
+from ..solve.registry import SOLVERS
+from ..trajectory import Trajectory
+from .contacts import Contacts, find_contacts
+from .criteria import ccp_forces, combine_criteria, contact_criteria
+from .model import IntArray, Model, State
+from .recorder import TrajectoryRecorder, physical_metrics, run_info
+from .sleep import IslandPlanner, merge, restrict
+
+ASLEEP = "asleep"
+"""Status of a step in which every island slept: no QP was solved, nothing moved.  Its
+``verified`` is vacuously true and its residuals are 0; summaries count such steps apart."""
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """What one step solved: its QPs (one per island QP) and their solutions."""
+
+    step: int
+    qps: tuple[StepQP, ...]
+    solutions: tuple[StepSolution, ...]
+    coulomb_forces: tuple[ContactForces | None, ...] = ()
+    """Per island QP, the Coulomb fixed point's contact forces (``None``: no fixed point ran,
+    as for ``ccp``, frictionless contacts, or another formulation)."""
+
+
+class Simulation:
+    """A scene being stepped: ``Simulation(scene, dt, ...)``, then :meth:`step` repeatedly.
+
+    :func:`wuerfel_cvx.simulate` is a loop over this object.  The keyword arguments are the
+    fields of :class:`~wuerfel_cvx.settings.Settings` (each documented there, with its unit
+    and default), or ``settings`` gives them all at once (the keywords then must not be
+    given).
+
+    Raises
+    ------
+    InputError
+        For a bad argument.
+
+    """
+
+    def __init__(self, scene: Scene, dt: float = 0.01, solver: str = "CLARABEL",
+                 formulation: str | Formulation = "velocity", tol: str | float = "default",
+                 *, settings: Settings | None = None, **options: Any):
+        settings = settings_of(settings, dt=dt, solver=solver, formulation=formulation,
+                               tol=tol, **options)
+        self.settings = settings
+        self.dt, self.tol, self.solvers = settings.dt, settings.tol, list(settings.solvers)
+        self.model = Model.from_scene(scene, table_mass=settings.table_mass,
+                                      extra_rod=settings.extra_rod)
+        has_friction = bool(np.any(self.model.friction > 0.0))
+        self.formulation = with_friction_model(get_formulation(settings.formulation),
+                                               settings.friction_model, has_friction)
+        friction = self.formulation.friction
+        self.path = SolvePath(settings.solve_path, warm_start=settings.warm_start)
+        self._coulomb = (friction is not None and friction.friction_model == "coulomb"
+                         and has_friction)
+        self._coulomb_warned = False  # a run warns of its first unconverged step only
+        self._friction_memory = FrictionMemory(self.model.n_boxes)
+        self.planner = IslandPlanner(self.model.n_boxes, settings.sleep, settings.islands)
+        self.state = State.initial(scene)
+        self.step_index = 0
+        self.contacts, self._search_time = self._search(self.state)
+        self.recorder = TrajectoryRecorder.start(self.model, run_info(
+            scene, settings, formulation=self.formulation,
+            packages=_packages(self.solvers[0])), self.state)
+
+    def step(self) -> StepRecord:
+        """Advance by one step of ``dt``; the QPs solved and their solutions.
+
+        Raises :class:`StepFailure` when no solver solves a QP of the step, or the new
+        state is not finite; the object then still holds the state before the step.
+        """
+        step = self.step_index + 1
+        started = time.perf_counter()
+        plan = self.planner.plan(self.contacts)
+        if plan.all_asleep:
+            return self._sleep(step, started)
+        qps, solutions, primary_statuses, parts = [], [], [], []
+        build_time, mark = self._search_time, started
+        most_passes, criteria = 0, []
+        coulombs: list[CoulombStep | None] = []
+        remembered: list[tuple[CoulombStep, IntArray | None]] = []
+        for boxes in plan.groups:
+            model, state, contacts = restrict(self.model, self.state, self.contacts, boxes)
+            qp = self.formulation.build(model, state, contacts, self.dt)
+            build_time += time.perf_counter() - mark
+            qp, solution, primary, passes, coulomb = self._solve_passes(step, model, state, qp,
+                                                                        boxes)
+            most_passes = max(most_passes, passes)
+            coulombs.append(coulomb)
+            if coulomb is not None:
+                remembered.append((coulomb, boxes))
+            moved = self.formulation.advance(model, state, solution.x, self.dt)
+            parts.append((boxes, moved))
+            forces = ccp_forces(qp, solution) if coulomb is None else coulomb.forces
+            criteria.append(contact_criteria(forces, model, moved.points, qp.contacts))
+            qps.append(qp)
+            solutions.append(solution)
+            primary_statuses.append(primary)
+            mark = time.perf_counter()
+        state = merge(self.state, parts)
+        if not (np.isfinite(state.points).all() and np.isfinite(state.velocities).all()):
+            raise StepFailure(step, self.solvers[0], solutions[-1].status, "non-finite state")
+        self.planner.record(state.velocities, self.dt)
+        self._friction_memory.remember(remembered)
+        step_time = self._search_time + time.perf_counter() - started
+        combined = combine_solutions(solutions)
+        primary_status = first_failed_status(solutions, primary_statuses, combined)
+        coulomb_row = coulomb_columns(step, coulombs, self._coulomb,
+                                      warn=not self._coulomb_warned)
+        self._coulomb_warned |= coulomb_row["coulomb_converged"] is False
+        self._advance_to(step, state, _solved_row(qps, combined, primary_status, build_time,
+                                                  step_time, most_passes)
+                         | coulomb_row
+                         | combine_criteria(criteria))
+        return StepRecord(step, tuple(qps), tuple(solutions),
+                          tuple(None if c is None else c.forces for c in coulombs))
+
+    def trajectory(self) -> Trajectory:
+        """The trajectory so far: every completed step, with the run's settings."""
+        info = self.recorder.info
+        info["steps"] = self.step_index
+        info.update(self.path.counts())
+        return self.recorder.trajectory()
+
+    # ------------------------------------------------------------------ parts of a step
+    def _solve_passes(self, step: int, model: Model, state: State, qp: StepQP,
+                      boxes: IntArray | None,
+                      ) -> tuple[StepQP, StepSolution, str, int, CoulombStep | None]:
+        """Solve ``qp`` and the formulation's further passes.
+
+        Returns the last QP, its solution carrying the passes' summed times and iterations
+        and their solvers and paths (joined by ``+`` where a fallback solved a pass; its
+        residuals and status are the last pass's, whose solution is taken), the first failed
+        status of the run's own solver over the passes, and the number of passes.  With
+        ``friction_model="coulomb"`` and contacts with friction, the passes are those of the
+        Coulomb fixed point (:mod:`wuerfel_cvx.friction.coulomb`), returned last (else ``None``),
+        started from the last step's impulses (``boxes``: the island's boxes, ``None`` for
+        all; :class:`~wuerfel_cvx.friction.coulomb.FrictionMemory`); its
+        friction problems' times and iterations are in the sums, and a friction problem that
+        fails its own check makes the step unverified.
+        """
+        def solve(pass_qp: StepQP) -> tuple[StepSolution, str]:
+            return solve_with_fallback(pass_qp, self.solvers, self.tol, step, self.path)
+
+        coulomb = None
+        if qp.cones is not None and self._coulomb:
+            coulomb = fixed_point(
+                self.formulation, model, state, qp, self.dt, solve, self.tol,
+                coulomb_settings(self.formulation),
+                self._friction_memory.initial(qp.contacts, boxes)
+                if self.formulation.friction is not None
+                and self.formulation.friction.coulomb_warm_start else None)
+            qp, solved = coulomb.qp, coulomb.solved
+        else:
+            solved = [solve(qp)]
+            while (refined := self.formulation.refine(model, state, qp, solved[-1][0].x,
+                                                      self.dt, len(solved))) is not None:
+                qp = refined
+                solved.append(solve(qp))
+        solutions = [solution for solution, _ in solved]
+        last = solutions[-1]
+        answers = coulomb.answers if coulomb is not None else []
+        primary = first_failed_status(solutions, [status for _, status in solved], last)
+        if len(solved) == 1 and coulomb is None:  # one pass: its solution is the summary
+            return qp, last, primary, 1, None
+        return qp, dataclasses.replace(
+            last, solver="+".join(dict.fromkeys(s.solver for s in solutions)),
+            path="+".join(dict.fromkeys(s.path for s in solutions)),
+            verified=last.verified and all(answer.verified for answer in answers),
+            solve_wall_time=sum(s.solve_wall_time for s in solutions)
+            + sum(a.solve_wall_time for a in answers),
+            solver_time=float(sum(s.solver_time for s in solutions)
+                              + sum(a.solver_time for a in answers)),
+            iterations=sum(s.iterations for s in solutions)
+            + sum(a.iterations for a in answers)), primary, \
+            len(solved), coulomb
+
+    def _search(self, state: State) -> tuple[Contacts, float]:
+        """``state``'s contacts within the formulation's reach, and the search's time (s)."""
+        started = time.perf_counter()
+        contacts = find_contacts(self.model, state.points,
+                                 self.formulation.body_reach(self.model, state, self.dt))
+        return contacts, time.perf_counter() - started
+
+    def _advance_to(self, step: int, state: State, timing_row: dict[str, Any]) -> None:
+        """Take ``state`` as the state after ``step``: search its contacts, record the row."""
+        self.state = state
+        self.step_index = step
+        self.contacts, self._search_time = self._search(state)
+        row = {"step": step, "time_s": step * self.dt, **timing_row,
+               **physical_metrics(self.model, state, self.contacts.deepest_penetration())}
+        self.recorder.record(step * self.dt, state, row)
+
+    def _sleep(self, step: int, started: float) -> StepRecord:
+        """A step in which every island sleeps: nothing moves, no QP, no contact search."""
+        state = State(self.state.points, np.zeros_like(self.state.velocities))
+        self.planner.record(state.velocities, self.dt)
+        step_time = time.perf_counter() - started
+        self.state, self.step_index = state, step
+        self._search_time = 0.0  # the points did not move: the contacts are still valid
+        row = {"step": step, "time_s": step * self.dt, **_asleep_row(step_time),
+               **physical_metrics(self.model, state, self.contacts.deepest_penetration())}
+        self.recorder.record(step * self.dt, state, row)
+        return StepRecord(step, (), ())
+
+
+def _solved_row(qps: list[StepQP], solution: StepSolution, primary_status: str,
+                build_time: float, step_time: float, passes: int) -> dict[str, Any]:
+    """The solver and timing columns of a step's metrics row (its QPs summed)."""
+    return {
+        "solver": solution.solver, "status": solution.status,
+        "primary_status": primary_status, "verified": solution.verified,
+        "n_variables": sum(qp.n_variables for qp in qps),
+        "n_equalities": sum(qp.n_equalities for qp in qps),
+        "n_inequalities": sum(qp.n_inequalities for qp in qps),
+        "n_contacts": sum(len(qp.contacts) for qp in qps), "build_time_s": build_time,
+        "solve_time_s": solution.solve_wall_time, "solver_time_s": solution.solver_time,
+        "step_time_s": step_time, "iterations": solution.iterations,
+        "primal_residual": solution.residuals.primal, "dual_residual": solution.residuals.dual,
+        "complementarity": solution.residuals.complementarity, "path": solution.path,
+        "passes": passes,
+    }
+
+
+def _asleep_row(step_time: float) -> dict[str, Any]:
+    """The solver and timing columns of a step in which every island slept."""
+    nothing_solved = StepSolution(
+        x=np.zeros(0), solver="", status=ASLEEP, residuals=Residuals(0.0, 0.0, 0.0),
+        verified=True, solve_wall_time=0.0, solver_time=np.nan, iterations=0, path="none")
+    return (_solved_row([], nothing_solved, ASLEEP, step_time, step_time, 0)
+            | combine_criteria([]))
+
+
+def checked_steps(steps: int) -> int:
+    """``steps`` as an int, or :class:`InputError` if it is not a non-negative integer."""
+    if isinstance(steps, bool) or not isinstance(steps, int | np.integer) or steps < 0:
+        raise InputError(f"must be a non-negative integer, got {steps}", field="steps")
+    return int(steps)
+
+
+def settings_of(settings: Settings | None, **options: Any) -> Settings:
+    """``settings``, or the :class:`Settings` of ``options`` (the keyword arguments).
+
+    Raises :class:`InputError` when both are given and ``options`` differ from the
+    defaults, or an option is not a setting.
+    """
+    if settings is None:
+        try:
+            return Settings(**options)
+        except TypeError as error:  # an unknown keyword
+            raise InputError(str(error), field="settings") from None
+    defaults = {name: getattr(Settings, name) for name in options if hasattr(Settings, name)}
+    unknown = sorted(set(options) - set(defaults))
+    changed = sorted(name for name, value in options.items()
+                     if name in defaults and value != defaults[name])
+    if unknown or changed:
+        raise InputError(f"give either settings or {', '.join(unknown + changed)}, not both",
+                         field="settings")
+    return settings
+
+
+def _packages(solver: str) -> dict[str, str]:
+    """The distributions whose versions a run records: cvxpy, numpy and the solver's."""
+    return {"cvxpy": "cvxpy", "numpy": "numpy", solver.lower(): SOLVERS[solver].package}
