@@ -196,17 +196,24 @@ class RowStack:
     def __init__(self, blocks: list[RowBlock]):
         self._entries = [None if rows is None else _entries_of(matrix, rows)
                          for matrix, _, rows in blocks]
-        taken = [matrix if rows is None else sp.csr_array(matrix[rows])
-                 for matrix, _, rows in blocks]
-        self.matrix = stacked(*((matrix, sign) for matrix, (_, sign, _) in
-                                zip(taken, blocks, strict=True)))
-        tags = [(_tagged(matrix, offset), 1.0) for matrix, offset in
-                zip(taken, np.cumsum([0] + [matrix.nnz for matrix in taken[:-1]]),
-                    strict=True)]
-        self._order = (np.asarray(stacked(*tags).data, dtype=np.int64) if taken
-                       else np.zeros(0, dtype=np.int64))
-        self._signs = np.concatenate([np.full(matrix.nnz, sign) for matrix, (_, sign, _)
-                                      in zip(taken, blocks, strict=True)] or [np.zeros(0)])
+        data, indices, counts = [], [], []
+        for (matrix, sign, rows), entries in zip(blocks, self._entries, strict=True):
+            per_row = np.diff(matrix.indptr)
+            data.append(sign * (matrix.data if entries is None else matrix.data[entries]))
+            indices.append(matrix.indices if entries is None else matrix.indices[entries])
+            counts.append(per_row if rows is None else per_row[rows])
+        self._signs = np.concatenate([np.full(part.size, sign) for part, (_, sign, _)
+                                      in zip(data, blocks, strict=True)])
+        columns = np.concatenate(indices).astype(np.int64, copy=False)
+        row_counts = np.concatenate(counts).astype(np.int64, copy=False)
+        self._order = np.argsort(columns, kind="stable")  # the CSC order, rows ascending
+        row_of_entry = np.repeat(np.arange(row_counts.size, dtype=np.int64), row_counts)
+        n_columns = int(blocks[0][0].shape[1])
+        indptr = np.zeros(n_columns + 1, dtype=np.int64)
+        np.cumsum(np.bincount(columns, minlength=n_columns), out=indptr[1:])
+        self.matrix = canonical_csc(np.concatenate(data)[self._order],
+                                    row_of_entry[self._order], indptr,
+                                    (row_counts.size, n_columns))
 
     def values(self, matrices: list[sp.csr_array]) -> FloatArray:
         """The nonzeros of the stack of ``matrices`` (the blocks' matrices, same patterns)."""
@@ -218,14 +225,8 @@ class RowStack:
 
 def _entries_of(matrix: sp.csr_array, rows: np.ndarray) -> np.ndarray:
     """Indices into ``matrix.data`` of the entries of ``rows``, in row order."""
-    starts, ends = matrix.indptr[rows], matrix.indptr[np.asarray(rows) + 1]
-    if not len(rows):
-        return np.zeros(0, dtype=np.int64)
-    return np.concatenate([np.arange(start, end) for start, end in zip(starts, ends,
-                                                                       strict=True)])
-
-
-def _tagged(matrix: sp.csr_array, offset: int) -> sp.csr_array:
-    """``matrix``'s pattern holding each entry's position (from ``offset``) as its value."""
-    return canonical_csr(np.arange(offset, offset + matrix.nnz, dtype=np.float64),
-                         matrix.indices, matrix.indptr, matrix.shape)
+    rows = np.asarray(rows, dtype=np.int64)
+    starts = matrix.indptr[rows].astype(np.int64)
+    counts = matrix.indptr[rows + 1].astype(np.int64) - starts
+    shift = np.repeat(starts - (np.cumsum(counts) - counts), counts)
+    return shift + np.arange(int(counts.sum()), dtype=np.int64)
