@@ -98,6 +98,11 @@ class NativeData:
             hessian.sort_indices()
         return hessian
 
+    @property
+    def fixed_hessian(self) -> bool:
+        """Whether ``P = 2 W`` alone: fixed by the structure (its weights are part of it)."""
+        return self.qp.cost_factor is None or not self.qp.n_cost_rows
+
     @cached_property
     def _at_target(self) -> FloatArray:
         return np.asarray(self.qp.ineq_matrix @ self.qp.target, dtype=np.float64)

@@ -78,14 +78,16 @@ class ClarabelAdapter:
         started = time.perf_counter()
         setup_time = self._setup_time if data is self._pending else 0.0  # its first solve
         if data is not self._pending:
-            hessian = data.upper_triangle
-            check_patterns((hessian, self.hessian))  # E's and G's: fixed by the structure
             if not self.solver.is_data_update_allowed():
                 raise PatternChanged  # set it up afresh
             qp = data.qp
-            self.solver.update(P=hessian.data, q=data.linear, b=_rhs(data),
-                               A=self.rows.values([qp.eq_matrix, qp.ineq_matrix,
-                                                   qp.ineq_matrix]))
+            changes = {"q": data.linear, "b": _rhs(data),
+                       "A": self.rows.values([qp.eq_matrix, qp.ineq_matrix, qp.ineq_matrix])}
+            if not data.fixed_hessian:  # 2 W alone is fixed by the structure
+                hessian = data.upper_triangle
+                check_patterns((hessian, self.hessian))  # E's and G's: fixed too
+                changes["P"] = hessian.data
+            self.solver.update(**changes)
         self._pending = None
         result = self.solver.solve()
         native_time = time.perf_counter() - started + setup_time

@@ -97,14 +97,16 @@ class OSQPAdapter:
 
     def _update(self, data: NativeData) -> None:
         lower, upper = _bounds(data)
-        hessian = data.upper_triangle
-        check_patterns((hessian, self.hessian))  # E's and G's: fixed by the structure
+        hessian = None if data.fixed_hessian else data.upper_triangle  # 2 W: unchanged
+        if hessian is not None:
+            check_patterns((hessian, self.hessian))  # E's and G's: fixed by the structure
+        p_values = None if hessian is None else hessian.data
         values = self.rows.values([data.qp.eq_matrix, data.qp.ineq_matrix])
         if self.native is not None:
             self.native.update_data_vec(q=data.linear, l=lower, u=upper)
-            self.native.update_data_mat(P_x=hessian.data, P_i=None, A_x=values, A_i=None)
+            self.native.update_data_mat(P_x=p_values, P_i=None, A_x=values, A_i=None)
         else:
-            self.solver.update(q=data.linear, l=lower, u=upper, Px=hessian.data, Ax=values)
+            self.solver.update(q=data.linear, l=lower, u=upper, Px=p_values, Ax=values)
 
 
 def setup(data: NativeData, options: dict[str, Any]) -> OSQPAdapter:

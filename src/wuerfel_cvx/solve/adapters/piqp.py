@@ -13,9 +13,12 @@ import time
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 
+from ..._sparse import canonical_csc
+from ...scenes.geometry import FloatArray
 from ..warm_start import WarmStart
-from ._native import Answer, NativeData, check_patterns, status_name
+from ._native import Answer, NativeData, RowStack, check_patterns, status_name
 
 _STATUS = {"PIQP_SOLVED": "optimal", "PIQP_MAX_ITER_REACHED": "user_limit",
            "PIQP_PRIMAL_INFEASIBLE": "infeasible", "PIQP_DUAL_INFEASIBLE": "unbounded"}
@@ -31,14 +34,17 @@ def _settings(options: dict[str, Any]) -> dict[str, Any]:
     return settings
 
 
-def _matrices(data: NativeData) -> dict[str, Any]:
-    """PIQP's ``P, c, A, b, G, h_l, h_u`` (``None`` for an empty block)."""
+def _vectors(data: NativeData) -> dict[str, Any]:
+    """PIQP's ``c, b, h_l, h_u`` (``None`` for an empty block)."""
     qp = data.qp
     has_eq, has_ineq = qp.n_equalities > 0, qp.n_inequalities > 0
-    return {"P": data.hessian, "c": data.linear,
-            "A": data.eq if has_eq else None, "b": data.eq_rhs if has_eq else None,
-            "G": data.ineq if has_ineq else None, "h_l": data.lower if has_ineq else None,
-            "h_u": data.upper if has_ineq else None}
+    return {"c": data.linear, "b": data.eq_rhs if has_eq else None,
+            "h_l": data.lower if has_ineq else None, "h_u": data.upper if has_ineq else None}
+
+
+def _with_values(pattern: sp.csc_matrix, values: FloatArray) -> sp.csc_matrix:
+    """``pattern``'s CSC matrix holding ``values``."""
+    return canonical_csc(values, pattern.indices, pattern.indptr, pattern.shape)
 
 
 class PIQPAdapter:
@@ -50,9 +56,14 @@ class PIQPAdapter:
         self.solver = piqp.SparseSolver()
         for name, value in _settings(options).items():
             setattr(self.solver.settings, name, value)
-        self.matrices = _matrices(data)
+        qp = data.qp
+        self.rows = {key: RowStack([(matrix, 1.0, None)]) for key, matrix in
+                     (("A", qp.eq_matrix), ("G", qp.ineq_matrix)) if matrix.shape[0]}
+        self.hessian = data.hessian
+        matrices = {"P": self.hessian, "A": None, "G": None}
+        matrices.update({key: stack.matrix for key, stack in self.rows.items()})
         started = time.perf_counter()
-        self.solver.setup(**self.matrices)
+        self.solver.setup(**matrices, **_vectors(data))
         self._setup_time = time.perf_counter() - started
         self.sizes = (data.qp.n_equalities, data.qp.n_inequalities)
         self._pending: NativeData | None = data
@@ -62,11 +73,7 @@ class PIQPAdapter:
         started = time.perf_counter()
         setup_time = self._setup_time if data is self._pending else 0.0  # its first solve
         if data is not self._pending:
-            matrices = _matrices(data)
-            check_patterns(*((matrices[key], self.matrices[key]) for key in ("P", "A", "G")
-                             if matrices[key] is not None))
-            self.solver.update(**{key: value for key, value in matrices.items()
-                                  if value is not None})
+            self._update(data)
         self._pending = None
         self.solver.solve()
         native_time = time.perf_counter() - started + setup_time
@@ -80,6 +87,20 @@ class PIQPAdapter:
             status=status_name(_STATUS, result.info.status.name),
             reported_time=float(result.info.run_time), iterations=int(result.info.iter),
             native_time=native_time)
+
+
+    def _update(self, data: NativeData) -> None:
+        """Write ``data``'s numbers into the solver (patterns fixed by the structure)."""
+        qp = data.qp
+        changes = {key: value for key, value in _vectors(data).items() if value is not None}
+        for key, matrix in (("A", qp.eq_matrix), ("G", qp.ineq_matrix)):
+            if key in self.rows:
+                stack = self.rows[key]
+                changes[key] = _with_values(stack.matrix, stack.values([matrix]))
+        if not data.fixed_hessian:  # 2 W alone is fixed by the structure
+            check_patterns((data.hessian, self.hessian))
+            changes["P"] = data.hessian
+        self.solver.update(**changes)
 
 
 def setup(data: NativeData, options: dict[str, Any]) -> PIQPAdapter:
