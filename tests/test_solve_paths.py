@@ -19,7 +19,7 @@ from wuerfel_cvx import Scene, Settings, Simulation, simulate
 from wuerfel_cvx.errors import InputError
 from wuerfel_cvx.lab.robustness.determinism import GOLDEN_RUN, largest_difference
 from wuerfel_cvx.solve import cvxpy_forms as compiled_module
-from wuerfel_cvx.solve.adapters._native import RowStack, stacked
+from wuerfel_cvx.solve.adapters._native import RowStack
 from wuerfel_cvx.solve.paths import SOLVE_PATHS
 from wuerfel_cvx.solve.registry import SOLVERS, TOLERANCE_PRESETS, available_solvers
 
@@ -114,7 +114,8 @@ def test_a_row_stack_gathers_the_stacked_matrix_of_new_numbers() -> None:
     stack = RowStack([(pattern_e, 1.0, None), (pattern_g, -1.0, None), (pattern_g, 1.0, upper)])
     new_e, new_g = pattern_e.copy(), pattern_g.copy()
     new_e.data, new_g.data = rng.normal(size=new_e.nnz), rng.normal(size=new_g.nnz)
-    fresh = stacked((new_e, 1.0), (new_g, -1.0), (sp.csr_array(new_g[upper]), 1.0))
+    fresh = sp.csc_matrix(sp.vstack([new_e, -new_g, new_g[upper]], format="csc"))
+    fresh.sort_indices()
     np.testing.assert_array_equal(stack.matrix.indices, fresh.indices)
     np.testing.assert_array_equal(stack.matrix.indptr, fresh.indptr)
     np.testing.assert_array_equal(stack.values([new_e, new_g, new_g]), fresh.data)

@@ -306,14 +306,10 @@ def _inject_nan(monkeypatch: pytest.MonkeyPatch) -> None:
 def _inject_exception(monkeypatch: pytest.MonkeyPatch) -> None:
     from wuerfel_cvx.solve.adapters.clarabel import ClarabelAdapter
 
-    original = ClarabelAdapter.solve
+    def explode(self: ClarabelAdapter, data: Any) -> None:  # an update in place: step 2 on
+        raise RuntimeError("native solver exploded")
 
-    def explode(self: ClarabelAdapter, data: Any, warm: Any = None) -> Any:
-        if data is not self._pending:  # an update in place: from step 2 on
-            raise RuntimeError("native solver exploded")
-        return original(self, data, warm)
-
-    monkeypatch.setattr(ClarabelAdapter, "solve", explode)
+    monkeypatch.setattr(ClarabelAdapter, "_update", explode)
 
 
 def _inject_iteration_limit(monkeypatch: pytest.MonkeyPatch) -> None:

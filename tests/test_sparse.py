@@ -91,12 +91,13 @@ def test_csc_without_a_known_layout_goes_through_the_constructor(
 
 
 def test_stacked_blocks_are_scipys_stack() -> None:
-    from wuerfel_cvx.solve.adapters._native import stacked
+    from wuerfel_cvx.solve.adapters._native import RowStack
 
     rng = np.random.default_rng(3)
     blocks = [sp.csr_array(rng.normal(size=(rows, 7)) * (rng.random((rows, 7)) < 0.4))
               for rows in (0, 3, 5)]
-    ours = stacked((blocks[0], 1.0), (blocks[1], -1.0), (blocks[2], 1.0))
+    ours = RowStack([(blocks[0], 1.0, None), (blocks[1], -1.0, None),
+                     (blocks[2], 1.0, None)]).matrix
     reference = sp.vstack([blocks[0], -blocks[1], blocks[2]], format="csc")
     assert type(ours) is sp.csc_matrix and ours.has_canonical_format
     assert ours.shape == reference.shape

@@ -14,11 +14,11 @@ starts taking Ctrl-C before it imports anything heavy.
 
 from __future__ import annotations
 
-import importlib
 import sys
 import types
 from typing import TYPE_CHECKING, Any
 
+from ._lazy import lazy_names
 from .errors import InputError, Interrupted, StepFailure, WuerfelError
 
 if TYPE_CHECKING:
@@ -41,18 +41,7 @@ _LAZY = {"Box": "scenes.scene", "Scene": "scenes.scene", "Square": "scenes.scene
 """Each public name imported on first use, and its module."""
 
 
-def __getattr__(name: str) -> Any:
-    """Import a public name on first use."""
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__getattr__, __dir__ = lazy_names(__name__, _LAZY, __all__)
 
 
 class _Package(types.ModuleType):

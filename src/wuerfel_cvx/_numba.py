@@ -2,7 +2,7 @@
 
 The kernels (:mod:`~wuerfel_cvx.step.contact_kernel`, :mod:`~wuerfel_cvx.formulations.row_kernel`,
 :mod:`~wuerfel_cvx.formulations.motion_kernel`, :mod:`~wuerfel_cvx.solve.residual_kernel`,
-:mod:`~wuerfel_cvx.solve.map_kernel`, the contact matcher of :mod:`~wuerfel_cvx.step.identity`) are
+:func:`~wuerfel_cvx._sparse.add_rows`, the contact matcher of :mod:`~wuerfel_cvx.step.identity`) are
 plain Python functions over arrays; :func:`compiled` hands them to ``numba.njit`` with its
 default strict IEEE semantics (no fast-math: no reassociation, no fused multiply-add), so
 each operation rounds as NumPy's does.  The

@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ._numba import compiled
 from .scenes.geometry import FloatArray
-from .solve import map_kernel
 
 _LAYOUT = frozenset({"_shape", "maxprint", "data", "indices", "indptr"})
 """The instance attributes of a freshly constructed ``csr_array`` (scipy 1.11 to 1.17)."""
@@ -123,7 +123,7 @@ def dense_rows(rows: sp.csr_array, row_factor: FloatArray | None = None,
     As ``toarray()`` of ``rows`` (of ``diags(row_factor) @ rows``): each stored entry, after
     its exact sign flip, is added to 0.0, so a stored ``-0.0`` becomes ``0.0``.  Written
     into ``out`` (zeros, the rows' shape) if given.  By a compiled loop
-    (:func:`wuerfel_cvx.solve.map_kernel.add_rows`).
+    (:func:`add_rows`).
     """
     out = np.zeros(rows.shape) if out is None else out
     if not rows.nnz:
@@ -131,5 +131,18 @@ def dense_rows(rows: sp.csr_array, row_factor: FloatArray | None = None,
     values = rows.data
     if row_factor is not None:
         values = row_factor[np.repeat(np.arange(rows.shape[0]), np.diff(rows.indptr))] * values
-    map_kernel.add_rows(np.asarray(values, dtype=np.float64), rows.indices, rows.indptr, out)
+    add_rows(np.asarray(values, dtype=np.float64), rows.indices, rows.indptr, out)
     return out
+
+
+@compiled
+def add_rows(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+             out: FloatArray) -> None:
+    """Add canonical CSR rows' entries to ``out``'s rows, in place, as ``toarray`` does.
+
+    One compiled loop: a few NumPy operations per call cost more than this work on a small
+    scene.
+    """
+    for row in range(indptr.shape[0] - 1):
+        for k in range(indptr[row], indptr[row + 1]):
+            out[row, indices[k]] += data[k]

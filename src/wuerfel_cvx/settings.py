@@ -97,10 +97,6 @@ class Settings:
         """The formulation's registry name."""
         return get_formulation(self.formulation).name
 
-    def replace(self, **changes: Any) -> Settings:
-        """A copy with ``changes`` (validated again)."""
-        return dataclasses.replace(self, **changes)
-
     def to_dict(self) -> dict[str, Any]:
         """The settings as plain data (a formulation object by its name)."""
         data = {item.name: getattr(self, item.name) for item in dataclasses.fields(self)}

@@ -6,15 +6,16 @@
 * :mod:`.cvxpy_forms`: the step QP declared in cvxpy (``declared`` and ``compiled`` paths);
 * :mod:`.adapters`: one module per solver, the solver's own API (``native`` path);
 * :mod:`.scaling`, :mod:`.warm_start`: the QP's units, and last step's answer as a start;
-* :mod:`.residual_kernel`, :mod:`.map_kernel`: their compiled loops.
+* :mod:`.residual_kernel`: the KKT check's compiled loops.
 
 The names below are imported on first use (PEP 562), as the package's own public names are.
 """
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from .._lazy import lazy_names
 
 if TYPE_CHECKING:
     from .paths import (
@@ -41,15 +42,4 @@ _LAZY = {**dict.fromkeys(["SOLVE_PATHS", "VERIFY_FACTOR", "Residuals", "SolvePat
 """Each public name imported on first use, and its module."""
 
 
-def __getattr__(name: str) -> Any:
-    """Import a public name on first use."""
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__getattr__, __dir__ = lazy_names(__name__, _LAZY, __all__)

@@ -88,21 +88,18 @@ def clarabel_raises() -> Iterator[None]:
 
     A structure's first QP is solved; its second and later ones raise.
     """
-    from ...solve.adapters import NativeData
     from ...solve.adapters.clarabel import ClarabelAdapter
 
-    original = ClarabelAdapter.solve
+    original = ClarabelAdapter._update
 
-    def explode(self: ClarabelAdapter, data: NativeData, warm: Any = None) -> Any:
-        if data is not self._pending:
-            raise RuntimeError("injected: solver exploded")
-        return original(self, data, warm)
+    def explode(self: ClarabelAdapter, data: Any) -> None:
+        raise RuntimeError("injected: solver exploded")
 
-    ClarabelAdapter.solve = explode  # type: ignore[method-assign]
+    ClarabelAdapter._update = explode  # type: ignore[method-assign]
     try:
         yield
     finally:
-        ClarabelAdapter.solve = original  # type: ignore[method-assign]
+        ClarabelAdapter._update = original  # type: ignore[method-assign]
 
 
 @contextmanager

@@ -22,7 +22,9 @@ is): the package's satisfy ``grad f + E' y - G' z = 0`` with ``z = z_lower - z_u
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import dataclasses
+import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -30,9 +32,10 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from ..._sparse import canonical_csc, canonical_csr, csc_matrix_of
+from ..._sparse import canonical_csc
 from ...formulations.qp import StepQP
 from ...scenes.geometry import FloatArray
+from ..warm_start import WarmStart
 
 
 @dataclass(frozen=True)
@@ -53,6 +56,46 @@ class Answer:
     iterations: int
     native_time: float | None = None
     """Wall time (s) of the solver's own update and solve calls (``None``: not measured)."""
+
+
+class InPlace:
+    """A solver set up on a structure's first QP and updated in place by its later ones.
+
+    Subclasses set the solver up in ``__init__`` (timed by :meth:`_set_up`), write a later
+    QP's numbers into it in :meth:`_update` and solve in :meth:`_solve`.  The answer's
+    ``native_time`` is the wall time of the update and the solve, and on the first solve
+    also of the set-up (the solver's own work on that QP, as OSQP's ``run_time`` counts it).
+    """
+
+    def __init__(self, data: NativeData):
+        self._pending: NativeData | None = data
+        self._setup_time = 0.0
+
+    def _set_up(self, set_up: Callable[[], None]) -> None:
+        """Run the solver's set-up ``set_up`` and keep its wall time."""
+        started = time.perf_counter()
+        set_up()
+        self._setup_time = time.perf_counter() - started
+
+    def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
+        """Solve ``data`` (this structure): update the solver in place unless just set up.
+
+        ``warm`` is ignored: these solvers start from their own last solution, or cold.
+        """
+        started = time.perf_counter()
+        first = data is self._pending
+        if not first:
+            self._update(data)
+        self._pending = None
+        answer = self._solve(data)
+        elapsed = time.perf_counter() - started + (self._setup_time if first else 0.0)
+        return dataclasses.replace(answer, native_time=elapsed)
+
+    def _update(self, data: NativeData) -> None:
+        raise NotImplementedError
+
+    def _solve(self, data: NativeData) -> Answer:
+        raise NotImplementedError
 
 
 class PatternChanged(Exception):
@@ -135,16 +178,6 @@ class NativeData:
         return upper
 
     @property
-    def eq(self) -> sp.csc_matrix:
-        """``E``."""
-        return csc_matrix_of(self.qp.eq_matrix)
-
-    @property
-    def ineq(self) -> sp.csc_matrix:
-        """``G``."""
-        return csc_matrix_of(self.qp.ineq_matrix)
-
-    @property
     def linear(self) -> FloatArray:
         """``q = l``: the objective's linear term in ``d`` (zero without a linear cost)."""
         linear = self.qp.linear
@@ -166,25 +199,6 @@ class NativeData:
                           dtype=np.float64)
 
 
-def stacked(*blocks: tuple[sp.csr_array, float]) -> sp.csc_matrix:
-    """Canonical CSR ``blocks`` (each times its sign, 1.0 or -1.0) one below the other.
-
-    The rows' arrays are joined as they are (a sign flip is exact), then transposed once
-    (:func:`~wuerfel_cvx._sparse.csc_matrix_of`); all blocks have the same columns.
-    """
-    columns = int(blocks[0][0].shape[1])
-    data, indices, indptr, offset = [], [], [np.zeros(1, dtype=np.int64)], 0
-    for matrix, sign in blocks:
-        data.append(matrix.data if sign == 1.0 else -matrix.data)
-        indices.append(matrix.indices.astype(np.int64, copy=False))
-        indptr.append(matrix.indptr[1:].astype(np.int64) + offset)
-        offset += matrix.nnz
-    rows = sum(int(matrix.shape[0]) for matrix, _ in blocks)
-    return csc_matrix_of(canonical_csr(np.concatenate(data).astype(np.float64, copy=False),
-                                       np.concatenate(indices), np.concatenate(indptr),
-                                       (rows, columns)))
-
-
 RowBlock = tuple[sp.csr_array, float, "np.ndarray | None"]
 """A block of rows: a canonical CSR matrix, its sign (1.0 or -1.0), and the rows taken
 (``None``: all)."""
@@ -195,7 +209,7 @@ class RowStack:
 
     A solver set up on :attr:`matrix` takes a later QP of the same structure by its
     nonzeros alone (:meth:`values`): the blocks' values, signed, gathered into the CSC
-    order found once.  The same numbers as :func:`stacked` on the new blocks.
+    order found once: the CSC matrix of the blocks, signed, stacked afresh.
     """
 
     def __init__(self, blocks: list[RowBlock]):

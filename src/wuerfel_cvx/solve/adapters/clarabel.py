@@ -10,14 +10,20 @@ Clarabel allows one (its presolve changed nothing); else it is set up afresh.
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
 
 from ...scenes.geometry import FloatArray
-from ..warm_start import WarmStart
-from ._native import Answer, NativeData, PatternChanged, RowStack, check_patterns, status_name
+from ._native import (
+    Answer,
+    InPlace,
+    NativeData,
+    PatternChanged,
+    RowStack,
+    check_patterns,
+    status_name,
+)
 
 _STATUS = {"Solved": "optimal", "PrimalInfeasible": "infeasible", "DualInfeasible": "unbounded",
            "AlmostSolved": "optimal_inaccurate", "AlmostPrimalInfeasible": "infeasible_inaccurate",
@@ -54,12 +60,13 @@ def _rhs(data: NativeData) -> FloatArray:
     return np.concatenate([data.eq_rhs, -data.lower, data.upper[data.qp.upper_rows]])
 
 
-class ClarabelAdapter:
+class ClarabelAdapter(InPlace):
     """A structure's persistent Clarabel solver."""
 
     def __init__(self, data: NativeData, options: dict[str, Any]):
         import clarabel
 
+        super().__init__(data)
         qp = data.qp
         self.rows = _rows(data)
         self.hessian = data.upper_triangle
@@ -67,38 +74,34 @@ class ClarabelAdapter:
         cones = [clarabel.ZeroConeT(qp.n_equalities)] if qp.n_equalities else []
         if qp.n_inequalities + qp.upper_rows.size:
             cones.append(clarabel.NonnegativeConeT(qp.n_inequalities + qp.upper_rows.size))
-        started = time.perf_counter()
-        self.solver = clarabel.DefaultSolver(self.hessian, data.linear, self.rows.matrix,
-                                             _rhs(data), cones, settings_of(options))
-        self._setup_time = time.perf_counter() - started
-        self._pending: NativeData | None = data
 
-    def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
-        """Solve ``data`` (this structure): update the solver in place unless just set up."""
-        started = time.perf_counter()
-        setup_time = self._setup_time if data is self._pending else 0.0  # its first solve
-        if data is not self._pending:
-            if not self.solver.is_data_update_allowed():
-                raise PatternChanged  # set it up afresh
-            qp = data.qp
-            changes = {"q": data.linear, "b": _rhs(data),
-                       "A": self.rows.values([qp.eq_matrix, qp.ineq_matrix, qp.ineq_matrix])}
-            if not data.fixed_hessian:  # 2 W alone is fixed by the structure
-                hessian = data.upper_triangle
-                check_patterns((hessian, self.hessian))  # E's and G's: fixed too
-                changes["P"] = hessian.data
-            self.solver.update(**changes)
-        self._pending = None
+        def set_up() -> None:
+            self.solver = clarabel.DefaultSolver(self.hessian, data.linear, self.rows.matrix,
+                                                 _rhs(data), cones, settings_of(options))
+
+        self._set_up(set_up)
+
+    def _update(self, data: NativeData) -> None:
+        if not self.solver.is_data_update_allowed():
+            raise PatternChanged  # set it up afresh
+        qp = data.qp
+        changes = {"q": data.linear, "b": _rhs(data),
+                   "A": self.rows.values([qp.eq_matrix, qp.ineq_matrix, qp.ineq_matrix])}
+        if not data.fixed_hessian:  # 2 W alone is fixed by the structure
+            hessian = data.upper_triangle
+            check_patterns((hessian, self.hessian))  # E's and G's: fixed too
+            changes["P"] = hessian.data
+        self.solver.update(**changes)
+
+    def _solve(self, data: NativeData) -> Answer:
         result = self.solver.solve()
-        native_time = time.perf_counter() - started + setup_time
         n_eq, n_ineq, upper_rows = self.sizes
         z = np.asarray(result.z, dtype=np.float64)
         ineq_dual = z[n_eq:n_eq + n_ineq].copy()
         ineq_dual[upper_rows] -= z[n_eq + n_ineq:]
         return Answer(x=data.unknowns(result.x), eq_dual=z[:n_eq].copy(), ineq_dual=ineq_dual,
                       status=status_name(_STATUS, str(result.status)),
-                      reported_time=float(result.solve_time), iterations=int(result.iterations),
-                      native_time=native_time)
+                      reported_time=float(result.solve_time), iterations=int(result.iterations))
 
 
 def setup(data: NativeData, options: dict[str, Any]) -> ClarabelAdapter:

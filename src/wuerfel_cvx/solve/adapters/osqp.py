@@ -18,14 +18,12 @@ from __future__ import annotations
 import contextlib
 import io
 import threading
-import time
 from typing import Any
 
 import numpy as np
 
 from ...scenes.geometry import FloatArray
-from ..warm_start import WarmStart
-from ._native import Answer, NativeData, RowStack, check_patterns, status_name
+from ._native import Answer, InPlace, NativeData, RowStack, check_patterns, status_name
 
 _STATUS = {1: "optimal", 2: "optimal_inaccurate", 3: "infeasible", 4: "infeasible_inaccurate",
            5: "unbounded", 6: "unbounded_inaccurate", 7: "user_limit", 8: "user_limit",
@@ -53,32 +51,25 @@ def _bounds(data: NativeData) -> tuple[FloatArray, FloatArray]:
     return np.maximum(lower, -_INFINITY), np.minimum(upper, _INFINITY)
 
 
-class OSQPAdapter:
+class OSQPAdapter(InPlace):
     """A structure's persistent OSQP solver."""
 
     def __init__(self, data: NativeData, options: dict[str, Any]):
         import osqp
 
+        super().__init__(data)
         qp = data.qp
         self.rows = RowStack([(qp.eq_matrix, 1.0, None), (qp.ineq_matrix, 1.0, None)])
         self.hessian = data.upper_triangle
         self.n_eq = qp.n_equalities
         lower, upper = _bounds(data)
-        started = time.perf_counter()
         self.solver = osqp.OSQP()
-        self.solver.setup(P=self.hessian, q=data.linear, A=self.rows.matrix, l=lower,
-                          u=upper, **_settings(options))
-        self._setup_time = time.perf_counter() - started
+        self._set_up(lambda: self.solver.setup(P=self.hessian, q=data.linear,
+                                               A=self.rows.matrix, l=lower, u=upper,
+                                               **_settings(options)))
         self.native = getattr(self.solver, "_solver", None)
-        self._pending: NativeData | None = data
 
-    def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
-        """Solve ``data`` (this structure): update the solver in place unless just set up."""
-        started = time.perf_counter()
-        setup_time = self._setup_time if data is self._pending else 0.0  # its first solve
-        if data is not self._pending:
-            self._update(data)
-        self._pending = None
+    def _solve(self, data: NativeData) -> Answer:
         # With no row active at the optimum, OSQP prints "Polishing not needed ..." to
         # sys.stdout whatever its verbose; the lock keeps two threads' redirects apart.
         with _STDOUT_LOCK, contextlib.redirect_stdout(io.StringIO()):
@@ -88,12 +79,10 @@ class OSQPAdapter:
             else:
                 solution = self.solver.solve(raise_error=False)
                 info = solution.info
-        native_time = time.perf_counter() - started + setup_time
         w = np.array(solution.y, dtype=np.float64)
         return Answer(x=data.unknowns(solution.x), eq_dual=w[:self.n_eq],
                       ineq_dual=-w[self.n_eq:], status=status_name(_STATUS, info.status_val),
-                      reported_time=float(info.run_time), iterations=int(info.iter),
-                      native_time=native_time)
+                      reported_time=float(info.run_time), iterations=int(info.iter))
 
     def _update(self, data: NativeData) -> None:
         lower, upper = _bounds(data)

@@ -9,7 +9,6 @@ sparse backend is adapted: ``backend="dense"`` is refused (:class:`ValueError`).
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
@@ -17,8 +16,7 @@ import scipy.sparse as sp
 
 from ..._sparse import canonical_csc
 from ...scenes.geometry import FloatArray
-from ..warm_start import WarmStart
-from ._native import Answer, NativeData, RowStack, check_patterns, status_name
+from ._native import Answer, InPlace, NativeData, RowStack, check_patterns, status_name
 
 _STATUS = {"PIQP_SOLVED": "optimal", "PIQP_MAX_ITER_REACHED": "user_limit",
            "PIQP_PRIMAL_INFEASIBLE": "infeasible", "PIQP_DUAL_INFEASIBLE": "unbounded"}
@@ -47,12 +45,13 @@ def _with_values(pattern: sp.csc_matrix, values: FloatArray) -> sp.csc_matrix:
     return canonical_csc(values, pattern.indices, pattern.indptr, pattern.shape)
 
 
-class PIQPAdapter:
+class PIQPAdapter(InPlace):
     """A structure's persistent PIQP solver."""
 
     def __init__(self, data: NativeData, options: dict[str, Any]):
         import piqp
 
+        super().__init__(data)
         self.solver = piqp.SparseSolver()
         for name, value in _settings(options).items():
             setattr(self.solver.settings, name, value)
@@ -62,21 +61,11 @@ class PIQPAdapter:
         self.hessian = data.hessian
         matrices = {"P": self.hessian, "A": None, "G": None}
         matrices.update({key: stack.matrix for key, stack in self.rows.items()})
-        started = time.perf_counter()
-        self.solver.setup(**matrices, **_vectors(data))
-        self._setup_time = time.perf_counter() - started
+        self._set_up(lambda: self.solver.setup(**matrices, **_vectors(data)))
         self.sizes = (data.qp.n_equalities, data.qp.n_inequalities)
-        self._pending: NativeData | None = data
 
-    def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
-        """Solve ``data`` (this structure): update the solver in place unless just set up."""
-        started = time.perf_counter()
-        setup_time = self._setup_time if data is self._pending else 0.0  # its first solve
-        if data is not self._pending:
-            self._update(data)
-        self._pending = None
+    def _solve(self, data: NativeData) -> Answer:
         self.solver.solve()
-        native_time = time.perf_counter() - started + setup_time
         result = self.solver.result  # its arrays are views the next solve overwrites
         n_eq, n_ineq = self.sizes
         return Answer(
@@ -85,8 +74,7 @@ class PIQPAdapter:
             ineq_dual=(np.array(result.z_l, dtype=np.float64)
                        - np.array(result.z_u, dtype=np.float64))[:n_ineq],
             status=status_name(_STATUS, result.info.status.name),
-            reported_time=float(result.info.run_time), iterations=int(result.info.iter),
-            native_time=native_time)
+            reported_time=float(result.info.run_time), iterations=int(result.info.iter))
 
 
     def _update(self, data: NativeData) -> None:
