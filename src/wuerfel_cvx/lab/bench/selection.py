@@ -92,12 +92,19 @@ def is_value(column: pd.Series, value: str) -> pd.Series:
 def plain_variant(results: pd.DataFrame) -> pd.Series:
     """Mask of rows without a variant.
 
-    Fixed tables, five rods, no sleep, one joint QP and the default friction model (or none).
+    Fixed tables, five rods, no sleep, one joint QP, the default friction model (or none)
+    and the default solve path (or none recorded).
     """
     return (results["table_mass"].isna() & ~results["extra_rod"].fillna(False).astype(bool)
             & ~results["sleep"].fillna(False).astype(bool)
             & ~results["islands"].fillna(False).astype(bool)
-            & ~_other_friction_model(results))
+            & ~_other_friction_model(results) & ~_other_solve_path(results))
+
+
+def _other_solve_path(results: pd.DataFrame) -> pd.Series:
+    """Mask of rows solved on a path other than ``native`` (a peer's or a missing one: no)."""
+    paths = results["solve_path"].astype("string")
+    return (paths.notna() & paths.isin(["compiled", "declared"])).fillna(False).astype(bool)
 
 
 def _other_friction_model(results: pd.DataFrame) -> pd.Series:
@@ -107,18 +114,21 @@ def _other_friction_model(results: pd.DataFrame) -> pd.Series:
 
 
 def variant_labels(results: pd.DataFrame) -> pd.Series:
-    """Short text per row naming its variant (``table 1e+06 kg``, ``sleep``, ``coulomb``...)."""
+    """Short text per row naming its variant (``table 1e+06 kg``, ``sleep``, ``compiled``...)."""
     masses = results["table_mass"]
     rods = results["extra_rod"].fillna(False).astype(bool)
     sleeps = results["sleep"].fillna(False).astype(bool)
     islands = results["islands"].fillna(False).astype(bool)
     models = results["friction_model"].astype("string").fillna("")
     other = _other_friction_model(results)
+    paths = results["solve_path"].astype("string").fillna("").where(_other_solve_path(results),
+                                                                    "")
     labels = [" ".join(part for part in (
         f"table {mass:.0e} kg" if pd.notna(mass) else "", "extra rod" if rod else "",
-        "sleep" if sleep else "", "islands" if island else "", model if odd else "") if part)
-        for mass, rod, sleep, island, model, odd in zip(masses, rods, sleeps, islands, models,
-                                                        other, strict=True)]
+        "sleep" if sleep else "", "islands" if island else "", model if odd else "",
+        path) if part)
+        for mass, rod, sleep, island, model, odd, path in zip(
+            masses, rods, sleeps, islands, models, other, paths, strict=True)]
     return pd.Series(labels, index=results.index, dtype=object)
 
 
