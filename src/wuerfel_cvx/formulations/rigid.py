@@ -31,7 +31,7 @@ from ..scenes.geometry import FloatArray, corner_mean, cross
 from ..step.contacts import Contacts
 from ..step.model import Model, State
 from . import motion_kernel, row_kernel
-from .base import FrictionSettings, SinglePass
+from .base import FrictionSettings, RowUnits, SinglePass, velocity_rows
 from .cone import contact_cones
 from .motion import rigid_step
 from .qp import StepQP, declare_qp
@@ -81,6 +81,10 @@ class RigidFormulation(SinglePass, FrictionSettings):
         weights, target = rigid_objective(model, state, dt)
         return declare_qp(weights, target, empty_rows(weights.shape[0]), np.zeros(0),
                           body_rows(corner_rows, points), rhs, contacts, cones=cones)
+
+    def row_units(self, dt: float) -> RowUnits:
+        """A contact row's multiplier and slack in impulse (N s) and gap (m)."""
+        return velocity_rows(dt)
 
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
         """The corner velocities ``(4 n, 2)`` (m/s) of the new body velocities.

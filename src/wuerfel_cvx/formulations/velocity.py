@@ -53,7 +53,7 @@ from ..step.contacts import Contacts, find_contacts
 from ..step.model import Model, State
 from . import motion_kernel
 from .approach import closest_approach, rows_along
-from .base import FrictionSettings
+from .base import FrictionSettings, RowUnits, velocity_rows
 from .cone import ConeRows, contact_cones
 from .motion import rigid_step
 from .qp import StepQP, declare_qp, point_rows
@@ -211,6 +211,10 @@ class VelocityFormulation(FrictionSettings):
         matrix = side_rows(all_points, contacts, model)
         rate = np.where(contacts.distance > 0.0, 1.0 / dt, self.beta / dt)
         return matrix, -rate * contacts.gap
+
+    def row_units(self, dt: float) -> RowUnits:
+        """A contact row's multiplier and slack in impulse (N s) and gap (m)."""
+        return velocity_rows(dt)
 
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
         """The QP's new corner velocities ``(4 n, 2)`` (m/s)."""
