@@ -46,7 +46,9 @@ def _stored_bytes(trajectory_lists: dict[str, list[Any]]) -> int:
 
     A numpy array also holds its shape and strides (``16 ndim`` bytes, allocated
     apart from the object) and, for a view, its base array.  Values shared by every row
-    (interned strings, small ints, booleans) are not counted.
+    (interned strings, small ints, booleans) are not counted, nor a row value whose memory
+    tracemalloc did not see allocated (a float object reused from Python's free list: no
+    new memory).  Called while tracing.
     """
     objects: dict[int, object] = {}  # by id: each object counted once
     for items in trajectory_lists.values():
@@ -57,9 +59,10 @@ def _stored_bytes(trajectory_lists: dict[str, list[Any]]) -> int:
                 objects[id(item.base)] = item.base
             if isinstance(item, dict):
                 for value in item.values():
-                    if isinstance(value, float | np.floating) or (
+                    if (isinstance(value, float | np.floating) or (
                             isinstance(value, int) and not isinstance(value, bool)
-                            and not -5 <= value <= 256):
+                            and not -5 <= value <= 256)) \
+                            and tracemalloc.get_object_traceback(value) is not None:
                         objects[id(value)] = value
     return sum(sys.getsizeof(obj) + (16 * obj.ndim if isinstance(obj, np.ndarray) else 0)
                for obj in objects.values())
@@ -91,13 +94,13 @@ class WindowSampler:
             tracemalloc.start()
             return
         traced, _ = tracemalloc.get_traced_memory()
-        tracemalloc.stop()
         start, capacity_before, held_before = self._open
         self._open = None
         new_items = {name: [item for item in items if id(item) not in held_before]
                      for name, items in lists.items()}
         stored = _stored_bytes(new_items) - sum(sys.getsizeof(items) for items in
                                                  new_items.values())
+        tracemalloc.stop()
         for name, items in lists.items():  # a list that grew got a new, traced buffer
             if sys.getsizeof(items) != capacity_before[name]:
                 stored += sys.getsizeof(items) - sys.getsizeof([])

@@ -202,7 +202,7 @@ def test_a_ctrl_c_that_a_solver_takes_still_stops_the_run(
     real = simulation_module.solve_with_fallback
 
     def solver_taking_ctrl_c(qp: StepQP, solvers: list[str], tol: str, step: int,
-                             cache: object) -> object:
+                             cache: object, **options: object) -> object:
         if step == 5:
             try:
                 os.kill(os.getpid(), signal.SIGINT)  # the user presses Ctrl-C ...
@@ -210,7 +210,7 @@ def test_a_ctrl_c_that_a_solver_takes_still_stops_the_run(
             except KeyboardInterrupt:
                 pass  # ... and the solver takes it
             raise StepFailure(step, solvers[0], "solver_error")
-        return real(qp, solvers, tol, step, cache)  # type: ignore[arg-type]
+        return real(qp, solvers, tol, step, cache, **options)  # type: ignore[arg-type]
 
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal
     try:

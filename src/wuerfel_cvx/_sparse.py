@@ -146,3 +146,16 @@ def add_rows(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
     for row in range(indptr.shape[0] - 1):
         for k in range(indptr[row], indptr[row + 1]):
             out[row, indices[k]] += data[k]
+
+
+def selected_rows(matrix: sp.csr_array, rows: np.ndarray) -> sp.csr_array:
+    """The rows ``rows`` (int64, in that order) of a canonical CSR ``matrix``, canonical too.
+
+    Gathered by index arithmetic: scipy's fancy indexing does the same with more calls.
+    """
+    counts = np.diff(matrix.indptr)[rows]
+    indptr = np.zeros(rows.size + 1, dtype=np.int64)
+    np.add.accumulate(counts, out=indptr[1:])
+    positions = np.repeat(matrix.indptr[rows] - indptr[:-1], counts) + np.arange(indptr[-1])
+    return canonical_csr(matrix.data[positions], matrix.indices[positions], indptr,
+                         (rows.size, matrix.shape[1]))

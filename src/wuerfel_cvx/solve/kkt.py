@@ -30,6 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .._sparse import selected_rows
 from ..formulations.qp import StepQP
 from ..scenes.geometry import FloatArray
 from . import residual_kernel
@@ -207,8 +208,10 @@ def guess_active_set(qp: StepQP, x: FloatArray, ineq_dual: FloatArray,
 
 
 def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray,
-           residuals: Residuals) -> Polish:
+           residuals: Residuals | None = None) -> Polish:
     """The answer ``(x, y, z)`` with residuals ``residuals``, made exact on its active set.
+
+    ``residuals`` are the answer's (:func:`kkt_residuals`; computed when not given).
 
     Guesses the tight rows (:func:`guess_active_set`) and solves the equality-constrained
     KKT system ``[[P, A'], [A, 0]] [x; lam] = [-q; b]`` of the objective (``P = 2 (W +
@@ -233,6 +236,8 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     sign-consistent to :data:`ROUND_OFF` and its residuals are no worse than ``residuals``;
     else :data:`REJECTED` with the reason.
     """
+    if residuals is None:
+        residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
     scales = _scales(qp, x, eq_dual, ineq_dual)
     active = guess_active_set(qp, x, ineq_dual, scales)
     for _ in range(REPAIRS + 1):
@@ -300,13 +305,15 @@ def reduced_kkt(qp: StepQP, active: ActiveSet) -> tuple[sp.csc_array, FloatArray
         gradient_at_zero = gradient_at_zero - coupling @ qp.target
     if qp.linear is not None:
         gradient_at_zero = gradient_at_zero + qp.linear
-    rows = sp.vstack([qp.eq_matrix, qp.ineq_matrix[active.lower],
-                      qp.ineq_matrix[active.upper]], format="csr")
+    # conversions by their own methods, not by format name: scipy's asformat builds the
+    # method's name afresh each call, and Python's type cache keeps such names
+    rows = sp.vstack([qp.eq_matrix, selected_rows(qp.ineq_matrix, active.lower),
+                      selected_rows(qp.ineq_matrix, active.upper)]).tocsr()
     bounds = [qp.eq_rhs, qp.ineq_rhs[active.lower]]
     if active.upper.size:
         assert qp.ineq_upper is not None
         bounds.append(qp.ineq_upper[active.upper])
-    matrix = sp.block_array([[hessian, rows.T], [rows, None]], format="csc")
+    matrix = sp.block_array([[hessian, rows.T], [rows, None]]).tocsc()
     return matrix, np.concatenate([-gradient_at_zero, *bounds])
 
 
@@ -350,7 +357,7 @@ def _regularised_solver(matrix: sp.csc_array,
         else 1.0
     shift = np.concatenate([np.full(n, REGULARISATION * hessian_scale),
                             np.full(size - n, -REGULARISATION * row_scale**2 / hessian_scale)])
-    regularised = matrix + sp.diags_array(shift, format="csc")
+    regularised = (matrix + sp.diags_array(shift).tocsc()).tocsc()
     try:
         factor = spla.splu(regularised)
     except RuntimeError:  # SuperLU: "Factor is exactly singular"

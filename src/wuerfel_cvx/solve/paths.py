@@ -10,6 +10,7 @@ three residuals are below ``VERIFY_FACTOR * eps``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -209,15 +210,15 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     except Exception as exc:  # a solver library raising anything is a failed step
         raise StepFailure(step, spec.name, "exception", f"{type(exc).__name__}: {exc}") from exc
     wall = time.perf_counter() - started
+    outcome, reason = KEPT, ""
+    if polishing:  # in the solver's units, so a power-of-two change of units changes no bit
+        polished = polish(seen, *_answer_on_qp(answer, step, spec.name, 1.0, 1.0))
+        outcome, reason = polished.outcome, polished.reason
+        answer = dataclasses.replace(answer, x=polished.x, eq_dual=polished.eq_dual,
+                                     ineq_dual=polished.ineq_dual)
     x, eq_dual, ineq_dual = _answer_on_qp(answer, step, spec.name, scale, scale / weight_scale)
     # checked on the original QP, whatever units the solver saw
     residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
-    outcome, reason = KEPT, ""
-    if polishing:
-        polished = polish(qp, x, eq_dual, ineq_dual, residuals)
-        outcome, reason = polished.outcome, polished.reason
-        x, eq_dual, ineq_dual = polished.x, polished.eq_dual, polished.ineq_dual
-        residuals = polished.residuals
     verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
     if answer.status == cp.OPTIMAL_INACCURATE and not verified:
         raise StepFailure(step, spec.name, answer.status,

@@ -54,7 +54,8 @@ single-pass formulation, up to ``max_passes`` for the
 closest-approach Gauss-Newton passes of ``velocity``, 0 for a step that solved none; its
 times and ``iterations`` are those passes' sums.  ``polish`` is what became of the step's
 answers (:data:`~wuerfel_cvx.solve.kkt.POLISH_OUTCOMES`: ``polished``, ``kept`` with
-polishing off, ``rejected`` if any QP's polish was).  The next six are the physical
+polishing off, ``rejected (reason)`` if any QP's polish was, with the reasons of
+:attr:`wuerfel_cvx.solve.kkt.Polish.reason`).  The next six are the physical
 criteria of the step's contact impulses (:mod:`wuerfel_cvx.step.criteria`: Signorini and
 pushes at a distance in every step with a contact, the friction criteria NaN for a step
 without friction); a step whose rows push at a distance beyond the bound derived from the

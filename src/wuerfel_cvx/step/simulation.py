@@ -299,7 +299,8 @@ def _solved_row(qps: list[StepQP], solution: StepSolution, primary_status: str,
         "step_time_s": step_time, "iterations": solution.iterations,
         "primal_residual": solution.residuals.primal, "dual_residual": solution.residuals.dual,
         "complementarity": solution.residuals.complementarity, "path": solution.path,
-        "passes": passes, "polish": solution.polish,
+        "passes": passes, "polish": (f"{solution.polish} ({solution.polish_reason})"
+                                     if solution.polish_reason else solution.polish),
     }
 
 

@@ -1,11 +1,11 @@
 """A run's friction columns of the results table, from its per-step metrics.
 
-The per-step physical criteria (:mod:`wuerfel_cvx.step.criteria`, NaN on a step without a
-contact with friction) become the run's worst violation of each law and its summed
-friction work; the Coulomb fixed point's per-step ``coulomb_iterations`` and
-``coulomb_converged`` (empty outside that model) become its mean and largest iteration
-count and the share of its steps that converged.  A metrics table without those columns
-(a run recorded before they existed) gives empty cells, never zeros.
+The per-step physical criteria (:mod:`wuerfel_cvx.step.criteria`; the friction ones NaN on
+a step without a contact with friction) become the run's worst violation of each law over
+the steps with friction and its summed friction work; the Coulomb fixed point's per-step
+``coulomb_iterations`` and ``coulomb_converged`` (empty outside that model) become its mean
+and largest iteration count and the share of its steps that converged.  A metrics table
+without those columns (a run recorded before they existed) gives empty cells, never zeros.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from ...step.criteria import CRITERIA_COLUMNS
+from ...step.criteria import FRICTION_COLUMNS as FRICTION_CRITERIA
 from ...trajectory import Trajectory
 
 ITERATIONS_COLUMN = "coulomb_iterations"
@@ -45,12 +46,14 @@ def friction_summary(trajectory: Trajectory, peer: bool = False) -> dict[str, An
     metrics = trajectory.metrics
     summary["friction_model"] = trajectory.info.get("friction_model")
     criteria = pd.DataFrame({name: _numbers(metrics, name) for name in CRITERIA_COLUMNS})
-    measured = criteria[criteria.notna().any(axis=1)]
+    measured = criteria[criteria[list(FRICTION_CRITERIA)].notna().any(axis=1)]
     summary["friction_steps"] = len(measured)
     if len(measured):
         for column, source in _WORST.items():
             summary[column] = _largest(measured[source])
         summary["friction_work"] = float(measured["friction_work_J"].sum())
+    # Signorini is measured on every step with a contact, with or without friction
+    summary["max_signorini_violation"] = _largest(criteria["signorini_violation_Nsm"].dropna())
     summary |= _fixed_point(metrics)
     return summary
 

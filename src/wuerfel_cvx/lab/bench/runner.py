@@ -162,6 +162,7 @@ def measure_point(point: GridPoint, reference: Reference | None,
            **_call_timing(trajectory, call_seconds),
            **_accuracy(trajectory, point, reference),
            **friction_summary(trajectory, peer=point.engine != "wuerfel_cvx"),
+           **_polish_summary(trajectory),
            "reference_disagreement": disagreement}
     series = trajectory.metrics.reindex(columns=list(schema.SERIES_COLUMNS))
     return PointResult(schema.new_row(**row), series)
@@ -226,7 +227,7 @@ def _configuration(point: GridPoint) -> dict[str, Any]:
         "tol": point.tol, "dt": point.dt, "duration": point.duration, "steps": point.steps,
         "table_mass": point.table_mass, "extra_rod": point.extra_rod, "sleep": point.sleep,
         "islands": point.islands, "friction_model": point.friction_model,
-        "solve_path": point.solve_path,
+        "solve_path": point.solve_path, "polish": point.polish,
         "solver_version": _solver_version(point.solver), **machine(),
         "finished_at": dt_module.datetime.now(dt_module.UTC).isoformat(timespec="seconds"),
         "reference_kind": point.reference,
@@ -252,6 +253,39 @@ def _outcome(trajectory: Trajectory, failure: StepFailure | None) -> dict[str, A
     if failure is not None:
         outcome |= {"error": _message(failure), "failed_step": failure.step}
     return outcome
+
+
+def _polish_summary(trajectory: Trajectory) -> dict[str, Any]:
+    """The run's polish columns: how often answers were polished, why not, and pushes.
+
+    Counted over the steps that solved a QP (their ``polish`` is ``polished``, ``kept`` or
+    ``rejected (reason)``); empty for a peer or a run recorded before polishing.
+    """
+    metrics = trajectory.metrics
+    if "polish" not in metrics.columns:
+        return {}
+    outcomes = metrics["polish"].astype("string").dropna()
+    outcomes = outcomes[outcomes.ne("")]
+    summary: dict[str, Any] = {
+        "max_push_at_distance": _largest(metrics.get("push_at_distance_Ns")),
+        "max_push_gap_product": _largest(metrics.get("push_gap_product_Nsm"))}
+    if not len(outcomes) or outcomes.eq("kept").all():
+        return summary
+    rejected = outcomes[outcomes.str.startswith("rejected")]
+    reasons = rejected.str.extract(r"\((.*)\)", expand=False).fillna("").value_counts()
+    return summary | {
+        "polished_fraction": float(outcomes.eq("polished").mean()),
+        "polish_rejected_steps": len(rejected),
+        "polish_rejections": ", ".join(f"{reason}: {count}" for reason, count in reasons.items())
+        or None}
+
+
+def _largest(values: pd.Series | None) -> float | None:
+    """The largest number of a metrics column; ``None`` if it has none."""
+    if values is None:
+        return None
+    numbers = pd.to_numeric(values, errors="coerce").dropna()
+    return float(numbers.max()) if len(numbers) else None
 
 
 def _call_timing(trajectory: Trajectory, seconds: float) -> dict[str, Any]:

@@ -24,7 +24,7 @@ import pandas as pd
 from ...errors import InputError
 from ...formulations import FORMULATIONS
 
-SCHEMA_VERSION = 7
+SCHEMA_VERSION = 8
 """Version of :data:`COLUMNS`; stored in every row's ``schema_version``."""
 
 FRICTION_FORMULATIONS: frozenset[str] = frozenset(
@@ -53,6 +53,8 @@ ADDED_COLUMNS: dict[int, dict[str, Any]] = {
         "coulomb_iterations_mean": None, "coulomb_iterations_max": None,
         "coulomb_converged_fraction": None, "coulomb_unconverged_steps": None},
     7: {"solve_path": None, "call_wall_time_per_step": None, "call_over_solver_mean": None},
+    8: {"polish": False, "polished_fraction": None, "polish_rejected_steps": None,
+        "polish_rejections": None, "max_push_at_distance": None, "max_push_gap_product": None},
 }
 """Per schema version, the columns it added and their value in the rows of older files:
 a constant, ``None`` (not measured then: missing), or a function of the older frame giving
@@ -61,7 +63,8 @@ version 4 did not measure ``max_overlap_depth``; version 5 had no friction, so i
 criteria and fixed-point columns are missing and its ``friction_model`` is that of
 :func:`_old_friction_model`; version 6 had no ``solve_path`` (its runs solved repeated
 structures on a direct path that no longer exists: left empty) and did not time the whole
-``simulate`` call."""
+``simulate`` call; version 7 did not polish (``polish`` false) nor measure pushes at a
+distance row by row."""
 
 ColumnType = Literal["str", "int", "float", "bool"]
 
@@ -100,6 +103,7 @@ COLUMNS: tuple[Column, ...] = (
     _c("sleep", "bool", "", "islands at rest sleep (left out of the QP until touched)"),
     _c("islands", "bool", "", "one QP per island instead of one joint QP per step"),
     _c("solve_path", "str", "", "how the QPs reached the solver: native, compiled or declared"),
+    _c("polish", "bool", "", "answers polished on their active set (wuerfel_cvx.solve.kkt)"),
     _c("n_squares", "int", "1", "number of squares"),
     # environment
     _c("package_version", "str", "", "wuerfel_cvx version"),
@@ -116,6 +120,17 @@ COLUMNS: tuple[Column, ...] = (
     _c("success", "bool", "", "the solver claimed success on every step"),
     _c("verified", "bool", "", "the independent KKT residual check held on every step"),
     _c("verified_fraction", "float", "1", "fraction of completed steps that were verified"),
+    _c("polished_fraction", "float", "1",
+       "fraction of the steps that solved a QP whose answers were all polished; empty "
+       "without polishing"),
+    _c("polish_rejected_steps", "int", "1", "steps with a polish rejected"),
+    _c("polish_rejections", "str", "",
+       "why polishes were rejected: 'reason: steps', ...; empty when none was"),
+    _c("max_push_at_distance", "float", "N s",
+       "largest impulse on a QP row whose gap opened over its step (metrics' "
+       "push_at_distance_Ns)"),
+    _c("max_push_gap_product", "float", "N s m",
+       "largest gap times impulse on a QP row (metrics' push_gap_product_Nsm)"),
     # timing
     _c("wall_time_per_step_median", "float", "s", "median wall time of a whole step"),
     _c("call_wall_time_per_step", "float", "s",

@@ -92,13 +92,23 @@ def is_value(column: pd.Series, value: str) -> pd.Series:
 def plain_variant(results: pd.DataFrame) -> pd.Series:
     """Mask of rows without a variant.
 
-    Fixed tables, five rods, no sleep, one joint QP, the default friction model (or none)
-    and the default solve path (or none recorded).
+    Fixed tables, five rods, no sleep, one joint QP, the default friction model (or none),
+    the default solve path (or none recorded) and polished answers (or a peer's).
     """
     return (results["table_mass"].isna() & ~results["extra_rod"].fillna(False).astype(bool)
             & ~results["sleep"].fillna(False).astype(bool)
             & ~results["islands"].fillna(False).astype(bool)
-            & ~_other_friction_model(results) & ~_other_solve_path(results))
+            & ~_other_friction_model(results) & ~_other_solve_path(results)
+            & ~_unpolished(results))
+
+
+def _unpolished(results: pd.DataFrame) -> pd.Series:
+    """Mask of our rows run without polishing (a peer's, empty: no)."""
+    if "polish" not in results.columns:
+        return pd.Series(False, index=results.index)
+    flags = results["polish"].astype("boolean")
+    return (flags.notna() & ~flags.fillna(True) & results["engine"].eq("wuerfel_cvx")
+            ).fillna(False).astype(bool)
 
 
 def _other_solve_path(results: pd.DataFrame) -> pd.Series:
@@ -123,12 +133,13 @@ def variant_labels(results: pd.DataFrame) -> pd.Series:
     other = _other_friction_model(results)
     paths = results["solve_path"].astype("string").fillna("").where(_other_solve_path(results),
                                                                     "")
+    unpolished = _unpolished(results)
     labels = [" ".join(part for part in (
         f"table {mass:.0e} kg" if pd.notna(mass) else "", "extra rod" if rod else "",
         "sleep" if sleep else "", "islands" if island else "", model if odd else "",
-        path) if part)
-        for mass, rod, sleep, island, model, odd, path in zip(
-            masses, rods, sleeps, islands, models, other, paths, strict=True)]
+        path, "unpolished" if raw else "") if part)
+        for mass, rod, sleep, island, model, odd, path, raw in zip(
+            masses, rods, sleeps, islands, models, other, paths, unpolished, strict=True)]
     return pd.Series(labels, index=results.index, dtype=object)
 
 

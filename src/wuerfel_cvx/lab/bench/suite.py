@@ -19,6 +19,7 @@ Cartesian product of its lists::
     islands = [false]                   # true: one QP per island instead of one joint QP
     friction_models = ["ccp"]           # "ccp" and/or "coulomb" (scenes with friction)
     solve_paths = ["native"]            # "native", "compiled", "declared" (wuerfel_cvx.solve.paths)
+    polishing = [true]                  # false: answers as the solvers gave them (no polish)
     peers = []                          # peer engines; names unknown here are left out
     reference = "dt/8"                  # "dt/8", "rest" or "none"
     compare_every = 1                   # steps between re-solves by the reference solver
@@ -74,14 +75,14 @@ REFERENCE_TOL = "high"
 _LIST_KEYS = {"scenes": str, "formulations": str, "solvers": str, "tols": str,
               "dts": float, "table_masses": (str, float), "extra_rods": bool,
               "sleeps": bool, "islands": bool, "friction_models": str, "peers": str,
-              "solve_paths": str}
+              "solve_paths": str, "polishing": bool}
 _SCALAR_KEYS = {"duration": float, "reference": str, "compare_every": int,
                 "time_limit": float}
 _DEFAULTS: dict[str, Any] = {
     "formulations": ["velocity"], "solvers": ["CLARABEL"], "tols": ["default"],
     "dts": [0.01], "table_masses": ["fixed"], "extra_rods": [False], "sleeps": [False],
     "islands": [False], "friction_models": [DEFAULT_FRICTION_MODEL], "peers": [],
-    "solve_paths": [NATIVE],
+    "solve_paths": [NATIVE], "polishing": [True],
     "reference": "dt/8",
     "compare_every": 1, "time_limit": 600.0,
 }
@@ -120,6 +121,9 @@ class GridPoint:
     solve_path: str = NATIVE
     """How the QPs reach the solver (:class:`~wuerfel_cvx.solve.paths.SolvePath`); ``native``
     for a peer."""
+    polish: bool = True
+    """``simulate(..., polish=...)``: answers polished on their active set; ``True`` for a
+    peer."""
     scene_file: str | None = None
     """The scene's TOML file, absolute, when ``scene`` names one: found relative to the suite
     file as the suite was read.  ``scene`` stays as the suite wrote it, in the point's id."""
@@ -130,7 +134,8 @@ class GridPoint:
                         tol=self.tol, solve_path=self.solve_path,
                         friction_model=self.friction_model or DEFAULT_FRICTION_MODEL,
                         table_mass=self.table_mass, extra_rod=self.extra_rod,
-                        sleep=SleepSettings() if self.sleep else None, islands=self.islands)
+                        sleep=SleepSettings() if self.sleep else None, islands=self.islands,
+                        polish=self.polish)
 
     @property
     def scene_input(self) -> str:
@@ -164,6 +169,8 @@ class GridPoint:
             parts.append(f"friction={self.friction_model}")
         if self.solve_path != NATIVE:
             parts.append(f"path={self.solve_path}")
+        if not self.polish:
+            parts.append("unpolished")
         return "|".join(parts)
 
     @property
@@ -339,19 +346,20 @@ def _expand(suite: str, s: dict[str, Any], source: str, where: str,
                              source=source, field=f"{where}.solve_paths")
     points: dict[str, GridPoint] = {}  # a peer's point once, whatever our settings
     for (scene, formulation, solver, tol, dt, mass, rod, sleep, islands, model,
-         path) in itertools.product(s["scenes"], s["formulations"], s["solvers"], s["tols"],
-                                    s["dts"], masses, s["extra_rods"], s["sleeps"],
-                                    s["islands"], models, s["solve_paths"]):
+         path, polish) in itertools.product(s["scenes"], s["formulations"], s["solvers"],
+                                            s["tols"], s["dts"], masses, s["extra_rods"],
+                                            s["sleeps"], s["islands"], models,
+                                            s["solve_paths"], s["polishing"]):
         solver = solver.upper()
         friction_model: str | None = model
         if solver in PEER_ENGINES:
-            formulation, tol, mass, rod, sleep, islands, friction_model, path = (
-                "peer", "native", None, False, False, False, None, NATIVE)
+            formulation, tol, mass, rod, sleep, islands, friction_model, path, polish = (
+                "peer", "native", None, False, False, False, None, NATIVE, True)
         point = GridPoint(suite, scene, formulation, solver, str(tol), float(dt),
                           float(duration), mass, bool(rod), bool(sleep), s["reference"],
                           s["compare_every"], float(s["time_limit"]), islands=bool(islands),
                           friction_model=friction_model, solve_path=path,
-                          scene_file=files[scene])
+                          polish=bool(polish), scene_file=files[scene])
         points.setdefault(point.point_id, point)
     return list(points.values())
 
