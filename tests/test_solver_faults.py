@@ -79,7 +79,8 @@ def assert_clean_partial(traj: Trajectory, n_steps: int) -> None:
 # ------------------------------------------------------------------ iteration limit
 #: One iteration cannot meet the default tolerance; what each solver then reports
 #: (checked by running it).  SCS returns an 'optimal_inaccurate' answer that the
-#: residual check rejects (with polishing off: its active set, polished, can be exact).  OSQP is in test_solver_failures.py.
+#: residual check rejects (with polishing off: its active set, polished, can be exact).
+#: OSQP is in test_solver_failures.py.
 ONE_ITERATION: dict[str, tuple[dict[str, Any], str]] = {
     "CLARABEL": ({"max_iter": 1}, cp.USER_LIMIT),
     "PIQP": ({"max_iter": 1}, cp.USER_LIMIT),

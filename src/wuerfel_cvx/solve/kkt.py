@@ -313,7 +313,8 @@ def reduced_kkt(qp: StepQP, active: ActiveSet) -> tuple[sp.csc_array, FloatArray
     if active.upper.size:
         assert qp.ineq_upper is not None
         bounds.append(qp.ineq_upper[active.upper])
-    matrix = sp.block_array([[hessian, rows.T], [rows, None]]).tocsc()
+    blocks: list[list[sp.sparray | None]] = [[hessian, rows.T], [rows, None]]
+    matrix: sp.csc_array = sp.block_array(blocks).tocsc()
     return matrix, np.concatenate([-gradient_at_zero, *bounds])
 
 
