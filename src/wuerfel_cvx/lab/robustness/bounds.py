@@ -111,8 +111,7 @@ import numpy as np
 
 from ...formulations import VelocityFormulation, get_formulation
 from ...formulations.rigid import body_velocities
-from ...scenes.bodies import half_diagonal
-from ...scenes.scene import Scene
+from ...scenes.scene import Scene, half_diagonal
 from ...step.metrics import deepest_penetration
 from ...step.model import Model
 from ...trajectory import Trajectory
