@@ -20,12 +20,11 @@ from wuerfel_cvx.formulations.qp import StepQP
 from wuerfel_cvx.formulations.rigid import body_velocities
 from wuerfel_cvx.formulations.rows import n_unknown_points, unknown_index
 from wuerfel_cvx.scenes.geometry import FloatArray, corner_mean, rot90, side_gradients
-from wuerfel_cvx.step import contact_kernel
-from wuerfel_cvx.step.contacts import TIE_TOLERANCE, Contacts, pair_distances
+from wuerfel_cvx.step.contacts import TIE_TOLERANCE, Contacts, pair_distances, tree_pairs
 from wuerfel_cvx.step.model import IntArray, Model, State
 
 # --------------------------------------------------------------------------------------
-# Contact search (wuerfel_cvx.step.contacts; compiled: wuerfel_cvx.step.contact_kernel)
+# Contact search (wuerfel_cvx.step.contacts, compiled there)
 # --------------------------------------------------------------------------------------
 
 
@@ -48,7 +47,7 @@ def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntAr
     bound = radii + reach
     found = [np.zeros((0, 2), dtype=np.int64)]
     if n > 1:
-        candidates = contact_kernel.tree_pairs(centers[:n], 2.0 * float(bound[:n].max()))
+        candidates = tree_pairs(centers[:n], 2.0 * float(bound[:n].max()))
         dist = _lengths(centers[candidates[:, 0]] - centers[candidates[:, 1]])
         found.append(candidates[dist <= bound[candidates[:, 0]] + bound[candidates[:, 1]]])
     if t:
@@ -131,7 +130,7 @@ def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
                  ) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
     """Held contacts of the ordered pairs: pair index, corner, edge, distance, clearance (m).
 
-    Rows in pair-major order, as ``contact_kernel.narrow_phase`` returns them.
+    Rows in pair-major order, as ``contacts.narrow_phase`` returns them.
     """
     distances = pair_distances(corners, edge_body, point_body)
     pair_margin = reach[edge_body] + reach[point_body]

@@ -1,8 +1,8 @@
 """The decorator that compiles the step path's kernels with numba (a core dependency).
 
-The kernels (:mod:`~wuerfel_cvx.step.contact_kernel`, :mod:`~wuerfel_cvx.formulations.row_kernel`,
+The kernels (:mod:`~wuerfel_cvx.step.contacts`, :mod:`~wuerfel_cvx.formulations.row_kernel`,
 :mod:`~wuerfel_cvx.formulations.motion_kernel`, :mod:`~wuerfel_cvx.solve.residual_kernel`,
-:func:`~wuerfel_cvx._sparse.add_rows`, the contact matcher of :mod:`~wuerfel_cvx.step.identity`) are
+:func:`~wuerfel_cvx._sparse.add_rows`, the contact matcher of :mod:`~wuerfel_cvx.step.contacts`) are
 plain Python functions over arrays; :func:`compiled` hands them to ``numba.njit`` with its
 default strict IEEE semantics (no fast-math: no reassociation, no fused multiply-add), so
 each operation rounds as NumPy's does.  The
