@@ -143,12 +143,12 @@ def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
 
 
 # --------------------------------------------------------------------------------------
-# Rows (wuerfel_cvx.formulations.qp, .rows, .rigid; compiled: wuerfel_cvx.formulations.row_kernel)
+# Rows (wuerfel_cvx.formulations.rows, compiled there)
 # --------------------------------------------------------------------------------------
 
 
 def stacked_point_rows(index: np.ndarray, grad: FloatArray, n_points: int) -> sp.csr_array:
-    """``qp.stacked_point_rows``: ``index`` ``(R, B)``, ``grad`` ``(R, B, 2)`` to CSR rows.
+    """``rows.stacked_point_rows``: ``index`` ``(R, B)``, ``grad`` ``(R, B, 2)`` to CSR rows.
 
     Each row's entries sorted by column with a stable argsort; a point twice in a row:
     summed by scipy.
@@ -176,7 +176,7 @@ def stacked_point_rows(index: np.ndarray, grad: FloatArray, n_points: int) -> sp
 
 def point_rows(n_rows: int, n_points: int,
                blocks: list[tuple[np.ndarray, FloatArray]]) -> sp.csr_array:
-    """``qp.point_rows`` of per-point gradient blocks, by :func:`stacked_point_rows`."""
+    """``rows.point_rows`` of per-point gradient blocks, by :func:`stacked_point_rows`."""
     if not blocks:
         return sp.csr_array((n_rows, 2 * n_points))
     index = np.stack([np.asarray(point) for point, _ in blocks], axis=1)  # (R, B)
@@ -224,7 +224,7 @@ def _offsets(points: FloatArray) -> FloatArray:
 
 
 def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
-    """``rigid.body_rows``: canonical corner rows times the corner map, cells summed in order."""
+    """``rows.body_rows``: canonical corner rows times the corner map, cells summed in order."""
     n_rows = corner_rows.shape[0]
     n_cols = 3 * (corner_rows.shape[1] // 8)
     turned = rot90(_offsets(points)).reshape(-1)  # per corner coordinate (4 n * 2,)
@@ -259,8 +259,7 @@ def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
 
 
 # --------------------------------------------------------------------------------------
-# Rigid motion (wuerfel_cvx.formulations.motion, .rigid, .velocity;
-# compiled: wuerfel_cvx.formulations.motion_kernel)
+# Rigid motion (wuerfel_cvx.formulations.motion, compiled there; .rigid, .velocity)
 # --------------------------------------------------------------------------------------
 
 

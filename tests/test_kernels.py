@@ -30,11 +30,13 @@ from test_contacts_fast import (
 from wuerfel_cvx import simulate
 from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations.motion import rigid_step
-from wuerfel_cvx.formulations.qp import StepQP, point_rows
-from wuerfel_cvx.formulations.rigid import RigidFormulation, body_rows, rigid_objective
+from wuerfel_cvx.formulations.qp import StepQP
+from wuerfel_cvx.formulations.rigid import RigidFormulation, rigid_objective
 from wuerfel_cvx.formulations.rows import (
+    body_rows,
     held_table_blocks,
     n_unknown_points,
+    point_rows,
     rod_rows,
     seed_side_blocks,
     side_rows,
