@@ -1,8 +1,10 @@
 """The step path's NumPy versions, kept as references for its compiled kernels.
 
 Each function here is the batched NumPy code a stage ran before the compiled kernel
-replaced it (``src/wuerfel_cvx/*_kernel.py``); the product runs the kernels only, and
-``tests/test_kernels.py`` checks them against these, bit for bit.  The KKT check keeps its
+replaced it (the compiled loops in the stage's own module: ``step/contacts.py``,
+``formulations/rows.py``, ``formulations/motion.py``, ``solve/residual_kernel.py``); the
+product runs the kernels only, and ``tests/test_kernels.py`` checks them against these, bit
+for bit.  The KKT check keeps its
 general NumPy code in the product (QPs with a coupling cost or upper bounds):
 :func:`general_route` hands it a QP the kernel would check.
 """
