@@ -63,6 +63,10 @@ class Settings:
     """Solvers to try, in order, on a QP the solver fails."""
     warm_start: bool = True
     """Start each solve from the last step's solution (see :mod:`wuerfel_cvx.solve.warm_start`)."""
+    polish: bool = True
+    """Polish every solver's answer on its active set (:func:`wuerfel_cvx.solve.kkt.polish`):
+    exact to round-off where the active set is right; the metrics column ``polish`` says
+    what became of each step's answer."""
 
     def __post_init__(self) -> None:
         set_field = object.__setattr__  # normalised once, on a frozen object

@@ -306,6 +306,27 @@ class Formulation(Protocol):
         """Corner velocities ``(4 n, 2)`` (m/s) right after the step, before any position fit."""
         ...
 
+    def row_units(self, dt: float) -> RowUnits:
+        """What a contact row's multiplier and slack stand for in a step of ``dt`` (s)."""
+        ...
+
+
+@dataclass(frozen=True)
+class RowUnits:
+    """The physical meaning of a contact row's numbers (its multiplier ``z``, slack ``s``)."""
+
+    impulse_per_multiplier: float
+    """Impulse (N s) per unit of ``z`` along the row's normal: 1/2 for rows in velocities
+    (the objective has no 1/2), dt/2 for rows in accelerations."""
+    gap_per_slack: float
+    """Gap (m) per unit of ``s`` opened over the step: dt for rows in velocities (m/s),
+    dt^2/2 for rows in accelerations (m/s^2)."""
+
+
+def velocity_rows(dt: float) -> RowUnits:
+    """:class:`RowUnits` of rows in the corner or body velocities."""
+    return RowUnits(impulse_per_multiplier=0.5, gap_per_slack=dt)
+
 
 class SinglePass:
     """Mixin for formulations whose step is one QP: :meth:`refine` accepts every solution."""

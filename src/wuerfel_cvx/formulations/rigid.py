@@ -32,7 +32,7 @@ from ..step.model import Model, State
 from . import motion
 from .cone import contact_cones
 from .motion import rigid_step
-from .qp import FrictionSettings, SinglePass, StepQP, declare_qp
+from .qp import FrictionSettings, RowUnits, SinglePass, StepQP, declare_qp, velocity_rows
 from .rows import body_rows
 from .velocity import VelocityFormulation
 
@@ -80,6 +80,10 @@ class RigidFormulation(SinglePass, FrictionSettings):
         weights, target = rigid_objective(model, state, dt)
         return declare_qp(weights, target, empty_rows(weights.shape[0]), np.zeros(0),
                           body_rows(corner_rows, points), rhs, contacts, cones=cones)
+
+    def row_units(self, dt: float) -> RowUnits:
+        """A contact row's multiplier and slack in impulse (N s) and gap (m)."""
+        return velocity_rows(dt)
 
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
         """The corner velocities ``(4 n, 2)`` (m/s) of the new body velocities.

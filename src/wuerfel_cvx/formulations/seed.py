@@ -45,7 +45,7 @@ import scipy.sparse as sp
 from ..scenes.geometry import FloatArray, side_rate, side_value, side_velocity_product
 from ..step.contacts import TIE_TOLERANCE, Contacts, pair_distances
 from ..step.model import Model, State
-from .qp import SinglePass, StepQP, declare_qp
+from .qp import RowUnits, SinglePass, StepQP, declare_qp
 from .rows import (
     held_table_blocks,
     n_unknown_points,
@@ -132,6 +132,10 @@ class SeedFormulation(SinglePass):
         ineq_rhs = -(side_velocity_product(v_i, v_j, v_k) + feedback) / edge_length
         return declare_qp(weights, target, sp.csr_array(sp.vstack(matrices, format="csr")), eq_rhs,
                           ineq_matrix, ineq_rhs, contacts)
+
+    def row_units(self, dt: float) -> RowUnits:
+        """A contact row's multiplier and slack in impulse (N s) and gap (m)."""
+        return RowUnits(impulse_per_multiplier=0.5 * dt, gap_per_slack=0.5 * dt * dt)
 
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
         """``v' + a dt`` for the square corners (m/s)."""

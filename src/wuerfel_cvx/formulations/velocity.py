@@ -90,7 +90,7 @@ from ..step.model import IntArray, Model, State
 from . import motion
 from .cone import ConeRows, contact_cones
 from .motion import BodyMotion, body_motion, rigid_step
-from .qp import FrictionSettings, StepQP, declare_qp
+from .qp import FrictionSettings, RowUnits, StepQP, declare_qp, velocity_rows
 from .rows import (
     held_table_blocks,
     n_unknown_points,
@@ -246,6 +246,10 @@ class VelocityFormulation(FrictionSettings):
         matrix = side_rows(all_points, contacts, model)
         rate = np.where(contacts.distance > 0.0, 1.0 / dt, self.beta / dt)
         return matrix, -rate * contacts.gap
+
+    def row_units(self, dt: float) -> RowUnits:
+        """A contact row's multiplier and slack in impulse (N s) and gap (m)."""
+        return velocity_rows(dt)
 
     def new_velocities(self, state: State, solution: FloatArray, dt: float) -> FloatArray:
         """The QP's new corner velocities ``(4 n, 2)`` (m/s)."""

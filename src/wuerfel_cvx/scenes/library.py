@@ -343,6 +343,26 @@ def _corner_overlap_wedged(_: int | None) -> Scene:
     return Scene("corner-overlap-wedged", (lower, upper), (FLOOR,), allow_overlap=True)
 
 
+ROW_COUNT = 5
+"""Squares in ``square-row`` and ``pushed-row``."""
+
+
+def _square_row(_: int | None) -> Scene:
+    squares = tuple(Square(center=(k - (ROW_COUNT - 1) / 2, 0.5)) for k in range(ROW_COUNT))
+    return Scene("square-row", squares, (FLOOR,))
+
+
+def _pushed_row(_: int | None) -> Scene:
+    first = Square(center=(-(ROW_COUNT + 1) / 2, 0.5), velocity=(1.0, 0.0))
+    rest = tuple(Square(center=(k - (ROW_COUNT - 3) / 2, 0.5)) for k in range(ROW_COUNT - 1))
+    return Scene("pushed-row", (first, *rest), (FLOOR,))
+
+
+def _inelastic_impact(_: int | None) -> Scene:
+    moving = Square(center=(-1.5, 0.5), velocity=(2.0, 0.0))
+    return Scene("inelastic-impact", (moving, Square(center=(0.0, 0.5))), (FLOOR,))
+
+
 # ---------------------------------------------------------------------- the field's scenes
 BOX2D_DEFAULT_FRICTION = 0.6
 """Friction coefficient (1) of a Box2D v3 or Solver2D shape left at its default."""
@@ -811,6 +831,12 @@ ENTRIES: tuple[SceneEntry, ...] = (
                "v0^2 / (2 mu g)", lambda _: launched_box_scene()),
     SceneEntry("ladder", "a 2 x 0.1 m plank leaning at 60 degrees on a frictionless wall, "
                "floor mu 0.3 (stands above 0.264)", lambda _: ladder_scene()),
+    SceneEntry("square-row", "five unit squares side by side at rest on a frictionless "
+               "floor: contacts that carry no load", _square_row),
+    SceneEntry("pushed-row", "a square at 1 m/s, 0.5 m from a resting row of four, "
+               "frictionless: the push travels down the row", _pushed_row),
+    SceneEntry("inelastic-impact", "a square at 2 m/s hits a resting one on a frictionless "
+               "floor: they move on together", _inelastic_impact),
     # the field's scenes, from Solver2D and Box2D v3
     *(SceneEntry(*row) for row in FIELD_SCENES),
 )

@@ -1,7 +1,9 @@
 """Solving one step QP: the solve paths, the solver registry and the solvers' adapters.
 
 * :mod:`.paths`: :func:`solve_step_qp` on the run's :class:`SolvePath` (``native``,
-  ``compiled`` or ``declared``), then an independent KKT check (:func:`kkt_residuals`);
+  ``compiled`` or ``declared``), then the answer polished and checked;
+* :mod:`.kkt`: the step QP's KKT conditions: the independent check (:func:`kkt_residuals`)
+  and the active-set polish (:func:`~.kkt.polish`);
 * :mod:`.registry`: one :class:`SolverSpec` per solver, tolerances in each solver's options;
 * :mod:`.cvxpy_forms`: the step QP declared in cvxpy (``declared`` and ``compiled`` paths);
 * :mod:`.adapters`: one module per solver, the solver's own API (``native`` path);
@@ -18,13 +20,12 @@ from typing import TYPE_CHECKING
 from .. import _lazy_names
 
 if TYPE_CHECKING:
+    from .kkt import Residuals, kkt_residuals
     from .paths import (
         SOLVE_PATHS,
         VERIFY_FACTOR,
-        Residuals,
         SolvePath,
         StepSolution,
-        kkt_residuals,
         solve_step_qp,
         solve_with_fallback,
     )
@@ -34,9 +35,9 @@ __all__ = ["SOLVERS", "SOLVE_PATHS", "VERIFY_FACTOR", "Residuals", "SolvePath", 
            "StepSolution", "available_solvers", "get_solver", "kkt_residuals", "solve_step_qp",
            "solve_with_fallback", "solver_options"]
 
-_LAZY = {**dict.fromkeys(["SOLVE_PATHS", "VERIFY_FACTOR", "Residuals", "SolvePath",
-                          "StepSolution", "kkt_residuals", "solve_step_qp",
-                          "solve_with_fallback"], "paths"),
+_LAZY = {**dict.fromkeys(["SOLVE_PATHS", "VERIFY_FACTOR", "SolvePath", "StepSolution",
+                          "solve_step_qp", "solve_with_fallback"], "paths"),
+         **dict.fromkeys(["Residuals", "kkt_residuals"], "kkt"),
          **dict.fromkeys(["SOLVERS", "SolverSpec", "available_solvers", "get_solver",
                           "solver_options"], "registry")}
 """Each public name imported on first use, and its module."""

@@ -1,18 +1,11 @@
-"""Solving a step QP and checking the answer independently of the solver.
+"""Solving a step QP, polishing the answer, and checking it independently of the solver.
 
 :func:`solve_step_qp` calls the solver on the run's solve path (:class:`SolvePath`: a cvxpy
 problem per QP, a cvxpy problem compiled per structure, or the solver's own API on the QP's
-numbers) and then recomputes, from the QP's own numeric data, the residuals of the KKT conditions of
-
-    min sum w (x - t)^2 + |F (x - t)|^2 + l' x
-    s.t.  E x = e  (multiplier y),   h <= G x <= u  (multiplier z = z_lower - z_upper)
-
-which are ``2 W (x - t) + 2 F' F (x - t) + l + E^T y - G^T z = 0`` (cvxpy's sign convention,
-see :mod:`wuerfel_cvx.formulations.qp`), primal feasibility, dual feasibility
-(``z >= 0`` on rows without an upper bound) and complementarity
-``max(z, 0)_i (G x - h)_i = 0``, ``max(-z, 0)_i (u - G x)_i = 0``.  Each residual is made
-relative to the size of the terms it balances.  A "solved" step counts as *verified*
-when all three are below ``VERIFY_FACTOR * eps``.
+numbers), polishes the answer on its active set (:func:`wuerfel_cvx.solve.kkt.polish`), and
+recomputes, from the QP's own numeric data, the residuals of its KKT conditions
+(:func:`wuerfel_cvx.solve.kkt.kkt_residuals`).  A "solved" step counts as *verified* when all
+three residuals are below ``VERIFY_FACTOR * eps``.
 """
 
 from __future__ import annotations
@@ -26,7 +19,6 @@ from dataclasses import dataclass, field
 
 import cvxpy as cp
 import numpy as np
-import scipy.sparse as sp
 
 from ..errors import InputError, StepFailure
 from ..formulations.qp import StepQP
@@ -43,6 +35,10 @@ from .cvxpy_forms import (
     declare,
     structure_key,
 )
+from .kkt import KEPT, POLISH_OUTCOMES, Residuals, kkt_residuals, polish
+
+__all__ = ["SOLVED", "SOLVE_PATHS", "VERIFY_FACTOR", "Residuals", "SolvePath", "StepSolution",
+           "combine_solutions", "kkt_residuals", "solve_step_qp", "solve_with_fallback"]
 from .registry import SolverSpec, get_solver, tolerance_value
 from .scaling import (
     scale_of_magnitude,
@@ -74,20 +70,6 @@ INVALID_DATA = "invalid_data"
 
 
 @dataclass(frozen=True)
-class Residuals:
-    """Relative KKT residuals of a candidate solution (dimensionless)."""
-
-    primal: float
-    dual: float
-    complementarity: float
-
-    def worst(self) -> float:
-        """The largest of the three; ``inf`` if any is NaN (``max`` would skip it)."""
-        values = (self.primal, self.dual, self.complementarity)
-        return math.inf if any(math.isnan(v) for v in values) else max(values)
-
-
-@dataclass(frozen=True)
 class StepSolution:
     """What a solver returned for one step QP, and how it checks out."""
 
@@ -108,50 +90,14 @@ class StepSolution:
     """How it was solved: one of :data:`SOLVE_PATHS` (``none``: a step that solved no QP)."""
     eq_dual: FloatArray = field(default_factory=lambda: np.zeros(0))
     """Multipliers ``y`` of ``E x = e`` (cvxpy's sign, as :attr:`ineq_dual`)."""
-
-
-def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
-                  ineq_dual: FloatArray) -> Residuals:
-    """Relative primal, dual and complementarity residuals of ``(x, y, z)``.
-
-    A QP without a coupling cost, linear cost and upper bounds (the common one) is checked by
-    the compiled loop of :mod:`wuerfel_cvx.solve.residual_kernel`, others by the general NumPy code.
-    """
-    if qp.cost_factor is None and qp.ineq_upper is None and qp.linear is None:
-        eq, ineq = qp.eq_matrix, qp.ineq_matrix
-        return Residuals(*residual_kernel.residuals(
-            qp.weights, qp.target, x, eq.data, eq.indices, eq.indptr, qp.eq_rhs,
-            np.asarray(eq_dual, dtype=np.float64), ineq.data, ineq.indices, ineq.indptr,
-            qp.ineq_rhs, np.asarray(ineq_dual, dtype=np.float64)))
-    objective_grad = qp.objective_gradient(x)
-    eq_term = _transposed_product(qp.eq_matrix, eq_dual)
-    ineq_term = _transposed_product(qp.ineq_matrix, ineq_dual)
-    stationarity = objective_grad + eq_term - ineq_term
-    dual_scale = 1.0 + max(_inf(objective_grad), _inf(eq_term), _inf(ineq_term))
-    upper_rows = qp.upper_rows
-    one_sided = ineq_dual if not upper_rows.size else np.delete(ineq_dual, upper_rows)
-    dual = max(_inf(stationarity), _inf(np.minimum(one_sided, 0.0))) / dual_scale
-
-    eq_lhs = qp.eq_matrix @ x
-    ineq_lhs = qp.ineq_matrix @ x
-    eq_violation = eq_lhs - qp.eq_rhs
-    slack = ineq_lhs - qp.ineq_rhs
-    primal_scale = 1.0 + max(_inf(qp.eq_rhs), _inf(qp.ineq_rhs), _inf(eq_lhs), _inf(ineq_lhs))
-    if not upper_rows.size:
-        primal = max(_inf(eq_violation), _inf(np.minimum(slack, 0.0))) / primal_scale
-        complementarity = (_inf(ineq_dual * slack) / (1.0 + _inf(ineq_dual) * primal_scale)
-                           if slack.size else 0.0)
-        return Residuals(primal=primal, dual=dual, complementarity=complementarity)
-    assert qp.ineq_upper is not None
-    upper_slack = qp.ineq_upper[upper_rows] - ineq_lhs[upper_rows]
-    primal_scale = max(primal_scale, 1.0 + _inf(qp.ineq_upper[upper_rows]))
-    primal = max(_inf(eq_violation), _inf(np.minimum(slack, 0.0)),
-                 _inf(np.minimum(upper_slack, 0.0))) / primal_scale
-    lower_product = np.maximum(ineq_dual, 0.0) * slack
-    upper_product = np.maximum(-ineq_dual[upper_rows], 0.0) * upper_slack
-    complementarity = (max(_inf(lower_product), _inf(upper_product))
-                       / (1.0 + _inf(ineq_dual) * primal_scale))
-    return Residuals(primal=primal, dual=dual, complementarity=complementarity)
+    polish: str = KEPT
+    """What became of the solver's answer (:data:`~wuerfel_cvx.solve.kkt.POLISH_OUTCOMES`):
+    ``polished`` (``x`` and the multipliers are its polished point), ``kept`` (polishing
+    off) or ``rejected`` (the solver's answer, its polish rejected: :attr:`polish_reason`)."""
+    polish_reason: str = ""
+    """Why the polish was rejected (:attr:`wuerfel_cvx.solve.kkt.Polish.reason`), else ``""``."""
+    polish_time: float = 0.0
+    """Wall time (s) after the solver returned: mapping back, polish and the KKT check."""
 
 
 class SolvePath:
@@ -230,15 +176,17 @@ class SolvePath:
 
 
 def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "default",
-                  *, step: int = 0, path: SolvePath | None = None) -> StepSolution:
-    """Solve ``qp`` with ``solver`` at tolerance ``tol`` and verify the result.
+                  *, step: int = 0, path: SolvePath | None = None,
+                  polishing: bool = True) -> StepSolution:
+    """Solve ``qp`` with ``solver`` at tolerance ``tol``, polish and verify the result.
 
     The solver sees ``qp`` in units that keep its data at most
     :data:`~wuerfel_cvx.solve.scaling.SCALE_LIMIT` in magnitude and its largest weight at least
     :data:`~wuerfel_cvx.solve.scaling.WEIGHT_FLOOR` (:mod:`wuerfel_cvx.solve.scaling`; ``qp``
-    itself for ordinary data); the solution and multipliers are mapped back and checked on ``qp``.
-    ``path`` (:class:`SolvePath`, kept across a run's steps) says how the QP reaches the
-    solver; without one, a fresh ``native`` path.
+    itself for ordinary data); the solution and multipliers are mapped back, polished on
+    their active set (``polishing``; :func:`wuerfel_cvx.solve.kkt.polish`) and checked on
+    ``qp``.  ``path`` (:class:`SolvePath`, kept across a run's steps) says how the QP reaches
+    the solver; without one, a fresh ``native`` path.
 
     Raises :class:`StepFailure` (with ``step``) if the QP's data is not finite (status
     ``invalid_data``, before any solver runs), if the solver raises, reports a status
@@ -248,7 +196,6 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     """
     spec = get_solver(solver)
     eps = tolerance_value(tol)
-    options = spec.options(eps)
     path = SolvePath() if path is None else path
     scale, weight_scale = _checked_scales(qp, step, spec.name)
     warm_starts = path.warm_starts if spec.takes_warm_start else None
@@ -256,35 +203,52 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     try:
         seen = scaled_qp(qp, scale, weight_scale)
         warm = None if warm_starts is None else warm_starts.guess(spec.name, seen, scale)
-        answer, taken = path.solve(seen, spec, options, warm)
+        answer, taken = path.solve(seen, spec, spec.options(eps), warm)
     except cp.error.SolverError as exc:
         raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
     except Exception as exc:  # a solver library raising anything is a failed step
         raise StepFailure(step, spec.name, "exception", f"{type(exc).__name__}: {exc}") from exc
     wall = time.perf_counter() - started
-    status = answer.status
-    if status not in SOLVED or answer.x is None:
-        raise StepFailure(step, spec.name, status)
-    x = scale * np.asarray(answer.x, dtype=np.float64)  # exact: scale is a power of two
-    if not np.isfinite(x).all():
-        raise StepFailure(step, spec.name, status, "solution has non-finite entries")
-    dual_scale = scale / weight_scale  # exact: a ratio of powers of two
-    ineq_dual = dual_scale * np.asarray(answer.ineq_dual, dtype=np.float64)
-    eq_dual = dual_scale * np.asarray(answer.eq_dual, dtype=np.float64)
+    x, eq_dual, ineq_dual = _answer_on_qp(answer, step, spec.name, scale, scale / weight_scale)
     # checked on the original QP, whatever units the solver saw
     residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
+    outcome, reason = KEPT, ""
+    if polishing:
+        polished = polish(qp, x, eq_dual, ineq_dual, residuals)
+        outcome, reason = polished.outcome, polished.reason
+        x, eq_dual, ineq_dual = polished.x, polished.eq_dual, polished.ineq_dual
+        residuals = polished.residuals
     verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
-    if status == cp.OPTIMAL_INACCURATE and not verified:
-        raise StepFailure(step, spec.name, status,
+    if answer.status == cp.OPTIMAL_INACCURATE and not verified:
+        raise StepFailure(step, spec.name, answer.status,
                           f"residuals {residuals.worst():.2e} above {VERIFY_FACTOR * eps:.1e}")
     if warm_starts is not None and verified:
-        warm_starts.remember(spec.name, seen, answer.x, answer.eq_dual, answer.ineq_dual, scale)
-    return StepSolution(x=x, solver=spec.name, status=status, residuals=residuals,
+        dual_scale = scale / weight_scale
+        warm_starts.remember(spec.name, seen, x / scale, eq_dual / dual_scale,
+                             ineq_dual / dual_scale, scale)
+    return StepSolution(x=x, solver=spec.name, status=answer.status, residuals=residuals,
                         verified=verified, solve_wall_time=wall,
                         solver_time=spec.timing.solver_time(answer.reported_time,
                                                             answer.native_time),
                         iterations=int(answer.iterations), ineq_dual=ineq_dual, path=taken,
-                        eq_dual=eq_dual)
+                        eq_dual=eq_dual, polish=outcome, polish_reason=reason,
+                        polish_time=time.perf_counter() - started - wall)
+
+
+def _answer_on_qp(answer: Answer, step: int, solver: str, scale: float,
+                  dual_scale: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The solver's ``(x, y, z)`` in the QP's own units.
+
+    ``scale`` and ``dual_scale`` are powers of two, so the mapping is exact.  Raises
+    :class:`StepFailure` for a status other than solved or a non-finite ``x``.
+    """
+    if answer.status not in SOLVED or answer.x is None:
+        raise StepFailure(step, solver, answer.status)
+    x = scale * np.asarray(answer.x, dtype=np.float64)
+    if not np.isfinite(x).all():
+        raise StepFailure(step, solver, answer.status, "solution has non-finite entries")
+    return (x, dual_scale * np.asarray(answer.eq_dual, dtype=np.float64),
+            dual_scale * np.asarray(answer.ineq_dual, dtype=np.float64))
 
 
 def _solve_with_cvxpy(qp: StepQP, declared: DeclaredQP, solver: str,
@@ -323,13 +287,6 @@ def _dual(constraint: cp.Constraint | None, size: int) -> FloatArray:
     if value is None:
         return np.full(size, np.nan)
     return np.atleast_1d(np.asarray(value, dtype=np.float64))
-
-
-def _transposed_product(matrix: sp.csr_array, vector: FloatArray) -> FloatArray:
-    """``matrix.T @ vector`` for a CSR matrix, without building the transpose."""
-    per_entry = matrix.data * np.repeat(vector, np.diff(matrix.indptr))
-    return np.asarray(np.bincount(matrix.indices, weights=per_entry, minlength=matrix.shape[1]),
-                      dtype=np.float64)
 
 
 def _checked_scales(qp: StepQP, step: int, solver: str) -> tuple[float, float]:
@@ -372,12 +329,9 @@ def _non_finite_data(qp: StepQP) -> str:
     return ", ".join(bad)
 
 
-def _inf(values: FloatArray) -> float:
-    return float(np.max(np.abs(values))) if np.size(values) else 0.0
-
-
 def solve_with_fallback(qp: StepQP, solvers: Sequence[str], tol: str | float, step: int,
-                        path: SolvePath | None) -> tuple[StepSolution, str]:
+                        path: SolvePath | None, *, polishing: bool = True,
+                        ) -> tuple[StepSolution, str]:
     """Solve with ``solvers[0]``, on failure with the next; the solution and first status.
 
     The first status is that of ``solvers[0]`` (the solution's own when it succeeded).
@@ -387,7 +341,7 @@ def solve_with_fallback(qp: StepQP, solvers: Sequence[str], tol: str | float, st
     failures: list[StepFailure] = []
     for name in solvers:
         try:
-            solution = solve_step_qp(qp, name, tol, step=step, path=path)
+            solution = solve_step_qp(qp, name, tol, step=step, path=path, polishing=polishing)
         except StepFailure as failure:
             if failure.status == INVALID_DATA:  # the same data would fail every solver
                 raise
@@ -408,7 +362,8 @@ def combine_solutions(solutions: Sequence[StepSolution]) -> StepSolution:
 
     The worst residuals and status (an inaccurate optimum if any), summed times, the most
     iterations any island took, the unknowns one after another, and the solvers and paths
-    that produced them (``"OSQP+CLARABEL"`` when a fallback solved some islands).
+    that produced them (``"OSQP+CLARABEL"`` when a fallback solved some islands); the polish
+    outcome is the last of ``kept``, ``polished``, ``rejected`` that any of them had.
     """
     if len(solutions) == 1:
         return solutions[0]
@@ -427,7 +382,10 @@ def combine_solutions(solutions: Sequence[StepSolution]) -> StepSolution:
         solve_wall_time=sum(solution.solve_wall_time for solution in solutions),
         solver_time=float(sum(solution.solver_time for solution in solutions)),
         iterations=max(solution.iterations for solution in solutions),
-        path=joined([solution.path for solution in solutions]))
+        path=joined([solution.path for solution in solutions]),
+        polish=max((solution.polish for solution in solutions), key=POLISH_OUTCOMES.index),
+        polish_reason=joined([s.polish_reason for s in solutions if s.polish_reason]),
+        polish_time=sum(solution.polish_time for solution in solutions))
 
 
 def first_failed_status(solutions: Sequence[StepSolution], primary_statuses: Sequence[str],

@@ -8,7 +8,9 @@ with gap ``phi`` (m) after the step, normal impulse ``lambda_n`` (N s), friction
 Signorini (no penetration, no pull, no push at a distance)
     ``phi >= 0``, ``lambda_n >= 0`` and ``phi lambda_n = 0``.  The negative gap is the
     metrics' ``penetration_m``; ``signorini_violation_Nsm`` is the largest
-    ``|phi| lambda_n`` (N s m): an impulse that pushes at a distance.
+    ``|phi| lambda_n`` (N s m) over the contacts, measured on the bodies' corners after
+    the step: it shows a model's own pushes at a distance too (``ccp``'s hover while
+    sliding, the linearised rows of ``rigid`` on a turning body).
 Coulomb (the impulse inside the friction cone)
     ``|lambda_t| <= mu lambda_n``; ``coulomb_violation_Ns`` is the largest
     ``max(0, |lambda_t| - mu lambda_n)`` (N s).
@@ -19,12 +21,22 @@ Maximum dissipation (friction opposes the slip, at the cone's edge while slippin
     oppose the slip, or where the contact slips while its impulse is strictly inside the
     cone.
 
+Push at a distance, row by row
+    The same law on the QP's own rows: a row's slack ``s`` turned into the gap it opens
+    over the step, and its multiplier into the impulse it carries
+    (:class:`~wuerfel_cvx.formulations.base.RowUnits`).  ``push_at_distance_Ns`` is the
+    largest impulse on a row whose gap opens by more than :data:`OPEN_GAP_M`, and
+    ``push_gap_product_Nsm`` the largest gap times impulse.  An exact answer of the QP
+    has both 0 (complementarity); an inexact one pushes at a distance by what its solver
+    left, which is what a step's physical check bounds (:func:`push_bound`).
+
 ``friction_work_J`` is the friction impulses' work ``sum lambda_t s`` (J) at the
 velocities after the step, which is never positive when maximum dissipation holds.  The
 criteria are measured from the step's own impulses (the QP's multipliers), so a solver's
-inexactness shows in them at the size of its tolerance.  A step without a contact with
-friction (``mu > 0``; a frictionless scene, or a body in flight) has no friction cones in
-its QP: its criteria are NaN.
+inexactness shows in them at the size of its tolerance.  The Signorini and push columns are
+measured in every step with a contact (0 without one); the friction columns are NaN in a
+step without a contact with friction (``mu > 0``; a frictionless scene, or a body in
+flight), whose QP has no friction cones.
 """
 
 from __future__ import annotations
@@ -33,16 +45,80 @@ import math
 
 import numpy as np
 
-from ..formulations.qp import StepQP
+from ..formulations.qp import RowUnits, StepQP
 from ..friction.forces import ContactForces
 from ..scenes.geometry import FloatArray, cross
-from ..solve.paths import StepSolution
+from ..solve.paths import VERIFY_FACTOR, StepSolution
 from .contacts import Contacts
-from .model import Model
+from .model import Model, State
 
-CRITERIA_COLUMNS: tuple[str, ...] = ("signorini_violation_Nsm", "coulomb_violation_Ns",
-                                     "dissipation_violation_J", "friction_work_J")
+FRICTION_COLUMNS: tuple[str, ...] = ("coulomb_violation_Ns", "dissipation_violation_J",
+                                     "friction_work_J")
+"""The criteria columns of contacts with friction (NaN in a step without)."""
+
+CRITERIA_COLUMNS: tuple[str, ...] = ("signorini_violation_Nsm", "push_at_distance_Ns",
+                                     "push_gap_product_Nsm", *FRICTION_COLUMNS)
 """The metrics columns of :func:`contact_criteria` (units in their names)."""
+
+OPEN_GAP_M = 1e-9
+"""A row's gap (m) counts as open above this: the widening the exact answers keep a row of
+resting squares below over seconds (a thousandth of a micrometre)."""
+
+
+def row_pushes(qp: StepQP, solution: StepSolution, units: RowUnits) -> dict[str, float]:
+    """``push_at_distance_Ns`` and ``push_gap_product_Nsm`` of a QP's rows (module docstring).
+
+    A row's slack is measured on the bound its multiplier rests on: ``G x - h`` for
+    ``z > 0``, ``u - G x`` for ``z < 0``.
+    """
+    if not qp.n_inequalities:
+        return {"push_at_distance_Ns": 0.0, "push_gap_product_Nsm": 0.0}
+    lhs = qp.ineq_matrix @ solution.x
+    multiplier = solution.ineq_dual
+    slack = lhs - qp.ineq_rhs
+    if qp.upper_rows.size:
+        assert qp.ineq_upper is not None
+        on_upper = multiplier < 0.0
+        slack = np.where(on_upper, qp.ineq_upper - lhs, slack)
+    impulse = np.abs(multiplier) * units.impulse_per_multiplier
+    gap = np.maximum(slack, 0.0) * units.gap_per_slack
+    open_rows = gap > OPEN_GAP_M
+    return {"push_at_distance_Ns": float(impulse[open_rows].max()) if open_rows.any() else 0.0,
+            "push_gap_product_Nsm": float(np.max(impulse * gap))}
+
+
+def push_bound(model: Model, state: State, dt: float, eps: float) -> float:
+    """The largest ``push_gap_product_Nsm`` (N s m) a verified step may have.
+
+    The KKT check lets a row's multiplier times slack reach ``VERIFY_FACTOR eps (1 + |z|
+    p)`` (:func:`~wuerfel_cvx.solve.kkt.kkt_residuals`), with ``|z|`` twice the largest
+    impulse and ``p`` the rows' velocity scale.  A step's impulses are at most ``M V`` (the
+    moving mass ``M`` stopped from its speed scale ``V = |g| dt + v_max``, kg m/s) and its
+    rows' velocities ``V``, so the product of a gap (slack times ``dt``) and an impulse
+    (half the multiplier) stays below ``VERIFY_FACTOR eps dt (1/2 + M V (1 + V))`` (the 1 in
+    units of 1 m/s, as in the relative residuals).  A row pushing harder at a distance is a
+    solver's answer that the residuals let through and the physics does not.
+    """
+    mass = float(np.sum(model.point_masses))
+    speed = float(np.linalg.norm(model.gravity)) * dt + (
+        float(np.max(np.linalg.norm(state.velocities, axis=1))) if state.velocities.size else 0.0)
+    return VERIFY_FACTOR * eps * dt * (0.5 + mass * speed * (1.0 + speed))
+
+
+def normal_impulses(qp: StepQP, solution: StepSolution, units: RowUnits) -> FloatArray:
+    """Each contact's normal impulse (N s) from its rows' multipliers.
+
+    With friction cones, as :meth:`~wuerfel_cvx.formulations.cone.ConeRows.impulses`; without,
+    the rows are the contacts' (one each, or for the closest-approach rows two: all rate
+    rows, then all approach rows), each multiplier standing for
+    ``units.impulse_per_multiplier`` of impulse.
+    """
+    if qp.cones is not None:
+        return qp.cones.impulses(solution.ineq_dual)[0]
+    count = len(qp.contacts)
+    rows = np.arange(qp.n_inequalities) % max(count, 1)
+    return np.asarray(units.impulse_per_multiplier * np.bincount(
+        rows, weights=solution.ineq_dual, minlength=count), dtype=np.float64)
 
 
 def ccp_forces(qp: StepQP, solution: StepSolution) -> ContactForces | None:
@@ -66,22 +142,24 @@ def gaps_after(all_points: FloatArray, contacts: Contacts) -> FloatArray:
     return np.asarray(cross(edge, p_k - p_i) / np.linalg.norm(edge, axis=1), dtype=np.float64)
 
 
-def contact_criteria(forces: ContactForces | None, model: Model, points_after: FloatArray,
-                     contacts: Contacts) -> dict[str, float]:
-    """The criteria columns (see the module docstring) of one QP's ``contacts``.
+def contact_criteria(forces: ContactForces | None, normal: FloatArray, model: Model,
+                     points_after: FloatArray, contacts: Contacts) -> dict[str, float]:
+    """The Signorini and friction columns (module docstring) of one QP's ``contacts``.
 
-    ``points_after`` (m) are the corners of ``model``'s boxes after the step; the gaps
-    are measured there only when there are forces to weigh them.
+    ``normal`` are the contacts' normal impulses (N s, :func:`normal_impulses`), ``forces``
+    their friction (``None``: no contact with friction, NaN friction columns);
+    ``points_after`` (m) are the corners of ``model``'s boxes after the step.
     """
-    if forces is None:
-        return dict.fromkeys(CRITERIA_COLUMNS, math.nan)
     if not len(contacts):
-        return dict.fromkeys(CRITERIA_COLUMNS, 0.0)
+        return dict.fromkeys(("signorini_violation_Nsm", *FRICTION_COLUMNS), 0.0)
     gaps = gaps_after(model.all_points(points_after), contacts)
+    signorini = float(np.max(np.abs(gaps) * np.maximum(normal, 0.0)))
+    if forces is None:
+        return {"signorini_violation_Nsm": signorini} | dict.fromkeys(FRICTION_COLUMNS, math.nan)
     cone = forces.coefficient * forces.normal
     power = forces.friction * forces.slip
     return {
-        "signorini_violation_Nsm": float(np.max(np.abs(gaps) * np.maximum(forces.normal, 0.0))),
+        "signorini_violation_Nsm": signorini,
         "coulomb_violation_Ns": float(np.max(np.maximum(np.abs(forces.friction) - cone, 0.0))),
         "dissipation_violation_J": float(np.max(power + cone * np.abs(forces.slip))),
         "friction_work_J": float(np.sum(power)),

@@ -30,7 +30,8 @@ METRIC_COLUMNS = (
     "step_time_s",
     "iterations", "primal_residual", "dual_residual", "complementarity", "rod_drift",
     "penetration_m", "kinetic_energy_J", "potential_energy_J", "total_energy_J", "path",
-    "passes", "signorini_violation_Nsm", "coulomb_violation_Ns", "dissipation_violation_J",
+    "passes", "polish", "signorini_violation_Nsm", "push_at_distance_Ns",
+    "push_gap_product_Nsm", "coulomb_violation_Ns", "dissipation_violation_J",
     "friction_work_J",
     "coulomb_iterations", "coulomb_converged",
 )
@@ -51,10 +52,14 @@ ways; ``none`` when no QP was solved, ``peer`` for a peer engine).  ``passes`` i
 number of QPs solved one after another for the step (the most of any island): 1 for a
 single-pass formulation, up to ``max_passes`` for the
 closest-approach Gauss-Newton passes of ``velocity``, 0 for a step that solved none; its
-times and ``iterations`` are those passes' sums.  The last four are the physical criteria
-of the step's contact impulses (:mod:`wuerfel_cvx.step.criteria`; NaN for a step without
-friction).  ``coulomb_iterations`` and ``coulomb_converged`` are the Coulomb fixed point's
-(:data:`~wuerfel_cvx.friction.coulomb.COULOMB_COLUMNS`; empty without it).
+times and ``iterations`` are those passes' sums.  ``polish`` is what became of the step's
+answers (:data:`~wuerfel_cvx.solve.kkt.POLISH_OUTCOMES`: ``polished``, ``kept`` with
+polishing off, ``rejected`` if any QP's polish was).  The next six are the physical
+criteria of the step's contact impulses (:mod:`wuerfel_cvx.step.criteria`: Signorini and
+pushes at a distance in every step with a contact, the friction criteria NaN for a step
+without friction); a step whose rows push at a distance beyond the bound derived from the
+tolerance is not ``verified``.  ``coulomb_iterations`` and ``coulomb_converged`` are the
+Coulomb fixed point's (:data:`~wuerfel_cvx.friction.coulomb.COULOMB_COLUMNS`; empty without it).
 """
 
 

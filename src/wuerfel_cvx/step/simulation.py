@@ -39,6 +39,7 @@ from ..friction.coulomb import (
 from ..friction.forces import ContactForces
 from ..scenes.scene import Scene
 from ..settings import Settings
+from ..solve.kkt import POLISH_OUTCOMES
 from ..solve.paths import (
     Residuals,
     SolvePath,
@@ -47,10 +48,17 @@ from ..solve.paths import (
     first_failed_status,
     solve_with_fallback,
 )
-from ..solve.registry import SOLVERS
+from ..solve.registry import SOLVERS, tolerance_value
 from ..trajectory import Trajectory
 from .contacts import Contacts, find_contacts
-from .criteria import ccp_forces, combine_criteria, contact_criteria
+from .criteria import (
+    ccp_forces,
+    combine_criteria,
+    contact_criteria,
+    normal_impulses,
+    push_bound,
+    row_pushes,
+)
 from .model import IntArray, Model, State
 from .recorder import TrajectoryRecorder, physical_metrics, run_info
 from .sleep import IslandPlanner, merge, restrict
@@ -141,8 +149,8 @@ class Simulation:
                 remembered.append((coulomb, boxes))
             moved = self.formulation.advance(model, state, solution.x, self.dt)
             parts.append((boxes, moved))
-            forces = ccp_forces(qp, solution) if coulomb is None else coulomb.forces
-            criteria.append(contact_criteria(forces, model, moved.points, qp.contacts))
+            solution, row = self._physical_check(qp, solution, coulomb, model, state, moved)
+            criteria.append(row)
             qps.append(qp)
             solutions.append(solution)
             primary_statuses.append(primary)
@@ -190,7 +198,8 @@ class Simulation:
         fails its own check makes the step unverified.
         """
         def solve(pass_qp: StepQP) -> tuple[StepSolution, str]:
-            return solve_with_fallback(pass_qp, self.solvers, self.tol, step, self.path)
+            return solve_with_fallback(pass_qp, self.solvers, self.tol, step, self.path,
+                                       polishing=self.settings.polish)
 
         coulomb = None
         if qp.cones is not None and self._coulomb:
@@ -222,8 +231,30 @@ class Simulation:
             solver_time=float(sum(s.solver_time for s in solutions)
                               + sum(a.solver_time for a in answers)),
             iterations=sum(s.iterations for s in solutions)
-            + sum(a.iterations for a in answers)), primary, \
+            + sum(a.iterations for a in answers),
+            polish=max((s.polish for s in solutions), key=POLISH_OUTCOMES.index),
+            polish_reason="+".join(dict.fromkeys(s.polish_reason for s in solutions
+                                                 if s.polish_reason))), primary, \
             len(solved), coulomb
+
+    def _physical_check(self, qp: StepQP, solution: StepSolution, coulomb: CoulombStep | None,
+                        model: Model, state: State, moved: State,
+                        ) -> tuple[StepSolution, dict[str, float]]:
+        """The criteria of a QP's answer, and the answer unverified if it pushes at a distance.
+
+        A verified answer whose rows push at a distance beyond
+        :func:`~wuerfel_cvx.step.criteria.push_bound` is marked not verified: the step is
+        then reported as any unverified step.
+        """
+        units = self.formulation.row_units(self.dt)
+        forces = ccp_forces(qp, solution) if coulomb is None else coulomb.forces
+        row = (contact_criteria(forces, normal_impulses(qp, solution, units), model,
+                                moved.points, qp.contacts)
+               | row_pushes(qp, solution, units))
+        bound = push_bound(model, state, self.dt, tolerance_value(self.tol))
+        if solution.verified and not row["push_gap_product_Nsm"] <= bound:
+            solution = dataclasses.replace(solution, verified=False)
+        return solution, row
 
     def _search(self, state: State) -> tuple[Contacts, float]:
         """``state``'s contacts within the formulation's reach, and the search's time (s)."""
@@ -268,7 +299,7 @@ def _solved_row(qps: list[StepQP], solution: StepSolution, primary_status: str,
         "step_time_s": step_time, "iterations": solution.iterations,
         "primal_residual": solution.residuals.primal, "dual_residual": solution.residuals.dual,
         "complementarity": solution.residuals.complementarity, "path": solution.path,
-        "passes": passes,
+        "passes": passes, "polish": solution.polish,
     }
 
 

@@ -1,0 +1,358 @@
+"""A step QP's KKT conditions: the independent check of an answer, and its polish.
+
+For the step QP of :mod:`wuerfel_cvx.formulations.qp`
+
+    min sum w (x - t)^2 + |F (x - t)|^2 + l' x
+    s.t.  E x = e  (multiplier y),   h <= G x <= u  (multiplier z = z_lower - z_upper)
+
+the KKT conditions are ``2 W (x - t) + 2 F' F (x - t) + l + E^T y - G^T z = 0``
+(stationarity, cvxpy's signs), primal feasibility, dual feasibility (``z >= 0`` on rows
+without an upper bound) and complementarity ``max(z, 0)_i (G x - h)_i = 0``,
+``max(-z, 0)_i (u - G x)_i = 0``.  :func:`kkt_residuals` measures them, each relative to the
+size of the terms it balances, from the QP's own numbers, whatever solver gave the answer.
+
+:func:`polish` makes an answer exact where its active set is right, as OSQP polishes its
+own (Stellato et al. 2020, section 4): it guesses which rows hold with equality from the
+answer's slacks and multipliers, solves the KKT system of the QP with those rows as
+equalities, and keeps the result only if it is feasible, its multipliers have the right
+signs and its residuals are no worse than the answer's.  See :func:`polish` for how it
+copes with a degenerate active set (more tight rows than unknowns, as in a resting pile
+with friction cones).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..formulations.qp import StepQP
+from ..scenes.geometry import FloatArray
+from . import residual_kernel
+
+__all__ = ["POLISH_OUTCOMES", "ActiveSet", "Polish", "Residuals", "guess_active_set",
+           "kkt_residuals", "polish"]
+
+POLISHED, KEPT, REJECTED = "polished", "kept", "rejected"
+POLISH_OUTCOMES = (KEPT, POLISHED, REJECTED)
+"""What became of a QP's answer: replaced by its polished point, kept as the solver gave it
+(polishing off), or kept because the polished point was rejected (:attr:`Polish.reason`)."""
+
+ROUND_OFF = 1e-12
+"""Relative size (1) of what double-precision arithmetic leaves in a polished point's
+residuals: a polished point whose sign or feasibility errors stay below it counts as exact,
+and one whose residuals are within it of the answer's counts as no worse."""
+
+REGULARISATION = 1e-9
+"""Relative regularisation (1) of the reduced KKT matrix (OSQP's ``delta`` is 1e-6 in its
+scaled units): small enough that iterative refinement removes its effect in a few sweeps,
+large enough that a rank-deficient active set still factors."""
+
+REFINEMENTS = 10
+"""Most iterative-refinement sweeps of a polish (OSQP's ``polish_refine_iter`` is 3)."""
+
+REPAIRS = 3
+"""Most corrections of the guessed active set (rows dropped for a wrong-signed multiplier,
+rows added for a violated bound) before a polish gives up."""
+
+@dataclass(frozen=True)
+class Residuals:
+    """Relative KKT residuals of a candidate solution (dimensionless)."""
+
+    primal: float
+    dual: float
+    complementarity: float
+
+    def worst(self) -> float:
+        """The largest of the three; ``inf`` if any is NaN (``max`` would skip it)."""
+        values = (self.primal, self.dual, self.complementarity)
+        return math.inf if any(math.isnan(v) for v in values) else max(values)
+
+
+def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
+                  ineq_dual: FloatArray) -> Residuals:
+    """Relative primal, dual and complementarity residuals of ``(x, y, z)``.
+
+    A QP without a coupling cost, linear cost and upper bounds (the common one) is checked by
+    the compiled loop of :mod:`wuerfel_cvx.solve.residual_kernel`, others by the general NumPy code.
+    """
+    if qp.cost_factor is None and qp.ineq_upper is None and qp.linear is None:
+        eq, ineq = qp.eq_matrix, qp.ineq_matrix
+        return Residuals(*residual_kernel.residuals(
+            qp.weights, qp.target, x, eq.data, eq.indices, eq.indptr, qp.eq_rhs,
+            np.asarray(eq_dual, dtype=np.float64), ineq.data, ineq.indices, ineq.indptr,
+            qp.ineq_rhs, np.asarray(ineq_dual, dtype=np.float64)))
+    objective_grad = qp.objective_gradient(x)
+    eq_term = _transposed_product(qp.eq_matrix, eq_dual)
+    ineq_term = _transposed_product(qp.ineq_matrix, ineq_dual)
+    stationarity = objective_grad + eq_term - ineq_term
+    dual_scale = 1.0 + max(_inf(objective_grad), _inf(eq_term), _inf(ineq_term))
+    upper_rows = qp.upper_rows
+    one_sided = ineq_dual if not upper_rows.size else np.delete(ineq_dual, upper_rows)
+    dual = max(_inf(stationarity), _inf(np.minimum(one_sided, 0.0))) / dual_scale
+
+    eq_lhs = qp.eq_matrix @ x
+    ineq_lhs = qp.ineq_matrix @ x
+    eq_violation = eq_lhs - qp.eq_rhs
+    slack = ineq_lhs - qp.ineq_rhs
+    primal_scale = 1.0 + max(_inf(qp.eq_rhs), _inf(qp.ineq_rhs), _inf(eq_lhs), _inf(ineq_lhs))
+    if not upper_rows.size:
+        primal = max(_inf(eq_violation), _inf(np.minimum(slack, 0.0))) / primal_scale
+        complementarity = (_inf(ineq_dual * slack) / (1.0 + _inf(ineq_dual) * primal_scale)
+                           if slack.size else 0.0)
+        return Residuals(primal=primal, dual=dual, complementarity=complementarity)
+    assert qp.ineq_upper is not None
+    upper_slack = qp.ineq_upper[upper_rows] - ineq_lhs[upper_rows]
+    primal_scale = max(primal_scale, 1.0 + _inf(qp.ineq_upper[upper_rows]))
+    primal = max(_inf(eq_violation), _inf(np.minimum(slack, 0.0)),
+                 _inf(np.minimum(upper_slack, 0.0))) / primal_scale
+    lower_product = np.maximum(ineq_dual, 0.0) * slack
+    upper_product = np.maximum(-ineq_dual[upper_rows], 0.0) * upper_slack
+    complementarity = (max(_inf(lower_product), _inf(upper_product))
+                       / (1.0 + _inf(ineq_dual) * primal_scale))
+    return Residuals(primal=primal, dual=dual, complementarity=complementarity)
+
+
+def _transposed_product(matrix: sp.csr_array, vector: FloatArray) -> FloatArray:
+    """``matrix.T @ vector`` for a CSR matrix, without building the transpose."""
+    per_entry = matrix.data * np.repeat(vector, np.diff(matrix.indptr))
+    return np.asarray(np.bincount(matrix.indices, weights=per_entry, minlength=matrix.shape[1]),
+                      dtype=np.float64)
+
+
+def _inf(values: FloatArray) -> float:
+    return float(np.max(np.abs(values))) if np.size(values) else 0.0
+
+
+@dataclass(frozen=True)
+class ActiveSet:
+    """The inequality rows taken to hold with equality (row indices of ``G``, int64)."""
+
+    lower: np.ndarray
+    """Rows resting on their lower bound: ``(G x)_r = h_r``."""
+    upper: np.ndarray
+    """Rows resting on their upper bound: ``(G x)_r = u_r``."""
+
+    @property
+    def size(self) -> int:
+        """Number of tight rows."""
+        return int(self.lower.size + self.upper.size)
+
+
+@dataclass(frozen=True)
+class Polish:
+    """What :func:`polish` made of an answer."""
+
+    outcome: str
+    """:data:`POLISHED` (the point below replaces the answer) or :data:`REJECTED`."""
+    reason: str
+    """Why a polish was rejected (``""`` when polished): ``singular`` (the reduced KKT
+    matrix did not factor), ``active set`` (no sign-consistent, feasible active set within
+    :data:`REPAIRS` corrections) or ``worse`` (residuals above the answer's)."""
+    x: FloatArray
+    eq_dual: FloatArray
+    ineq_dual: FloatArray
+    residuals: Residuals
+    """The polished point's residuals (:func:`kkt_residuals`)."""
+    active: ActiveSet
+    """The active set of the polished point."""
+
+
+@dataclass(frozen=True)
+class _Scales:
+    """The primal and dual scales of an answer, as :func:`kkt_residuals` measures them."""
+
+    primal: float
+    dual: float
+
+
+def _scales(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray) -> _Scales:
+    lhs = qp.ineq_matrix @ x
+    bounds = [_inf(qp.eq_rhs), _inf(qp.ineq_rhs), _inf(qp.eq_matrix @ x), _inf(lhs)]
+    if qp.upper_rows.size:
+        assert qp.ineq_upper is not None
+        bounds.append(_inf(qp.ineq_upper[qp.upper_rows]))
+    dual = max(_inf(qp.objective_gradient(x)), _inf(_transposed_product(qp.eq_matrix, eq_dual)),
+               _inf(_transposed_product(qp.ineq_matrix, ineq_dual)))
+    return _Scales(primal=1.0 + max(bounds), dual=1.0 + dual)
+
+
+def guess_active_set(qp: StepQP, x: FloatArray, ineq_dual: FloatArray,
+                     scales: _Scales | None = None) -> ActiveSet:
+    """The rows an answer ``(x, z)`` rests on: OSQP's rule "slack below multiplier".
+
+    A row is taken as tight on its lower bound when ``z_r / dual scale`` exceeds
+    ``(G x - h)_r / primal scale``, and on its upper bound when ``-z_r / dual scale``
+    exceeds ``(u - G x)_r / primal scale``: the comparison OSQP makes in its scaled units,
+    made unit-free by the scales of the KKT check.  A violated row counts as tight.
+    """
+    scales = _scales(qp, x, np.zeros(qp.n_equalities), ineq_dual) if scales is None else scales
+    lhs = qp.ineq_matrix @ x
+    weight = ineq_dual / scales.dual
+    lower_tight = weight > (lhs - qp.ineq_rhs) / scales.primal
+    upper_tight = np.zeros_like(lower_tight)
+    rows = qp.upper_rows
+    if rows.size:
+        assert qp.ineq_upper is not None
+        upper_tight[rows] = -weight[rows] > (qp.ineq_upper[rows] - lhs[rows]) / scales.primal
+        both = lower_tight & upper_tight  # a row with h = u: the multiplier's sign decides
+        lower_tight[both] = ineq_dual[both] >= 0.0
+        upper_tight[both] = ~lower_tight[both]
+    return ActiveSet(lower=np.flatnonzero(lower_tight).astype(np.int64),
+                     upper=np.flatnonzero(upper_tight).astype(np.int64))
+
+
+def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray,
+           residuals: Residuals) -> Polish:
+    """The answer ``(x, y, z)`` with residuals ``residuals``, made exact on its active set.
+
+    Guesses the tight rows (:func:`guess_active_set`) and solves the equality-constrained
+    KKT system ``[[P, A'], [A, 0]] [x; lam] = [-q; b]`` of the objective (``P = 2 (W +
+    F'F)``, ``q = l - P t``) with ``A`` the equality rows and the tight rows, ``lam = [y;
+    -z_tight]``.  The matrix is factored with a small quasi-definite regularisation
+    (:data:`REGULARISATION`: ``+delta`` on the unknowns' block, ``-delta`` on the rows'),
+    and iterative refinement against the unregularised system removes its effect
+    (:data:`REFINEMENTS` sweeps), as OSQP's polish does.
+
+    Rank deficiency: the refinement starts from the answer itself, not from zero.  A
+    refinement sweep changes the point only by a solution of the regularised system for the
+    current residual, which has no component in the null space of the KKT matrix; so where
+    the tight rows are linearly dependent (a resting pile's friction cones: more tight rows
+    than unknowns), the multipliers keep the solver's split among the dependent rows, and
+    only the part the rows determine is corrected.  That split is the solver's (nearly)
+    sign-consistent one, so the polished multipliers keep their signs up to the size of the
+    answer's own error.
+
+    Then the guess is repaired: tight rows whose multiplier has the wrong sign are freed,
+    violated rows made tight, and the system solved again (at most :data:`REPAIRS` times).
+    The polished point is returned as :data:`POLISHED` only if it is feasible and
+    sign-consistent to :data:`ROUND_OFF` and its residuals are no worse than ``residuals``;
+    else :data:`REJECTED` with the reason.
+    """
+    scales = _scales(qp, x, eq_dual, ineq_dual)
+    active = guess_active_set(qp, x, ineq_dual, scales)
+    for _ in range(REPAIRS + 1):
+        point = _solve_on(qp, active, x, eq_dual, ineq_dual)
+        if point is None:
+            return _rejected("singular", qp, x, eq_dual, ineq_dual, residuals, active)
+        x_new, y_new, z_new = point
+        repaired = _repaired(qp, active, x_new, z_new, scales)
+        if repaired is None:
+            break
+        active = repaired
+    else:
+        return _rejected("active set", qp, x, eq_dual, ineq_dual, residuals, active)
+    polished = kkt_residuals(qp, x_new, y_new, z_new)
+    if not polished.worst() <= max(residuals.worst(), ROUND_OFF):
+        return _rejected("worse", qp, x, eq_dual, ineq_dual, residuals, active)
+    return Polish(POLISHED, "", x_new, y_new, z_new, polished, active)
+
+
+def _rejected(reason: str, qp: StepQP, x: FloatArray, eq_dual: FloatArray,
+              ineq_dual: FloatArray, residuals: Residuals, active: ActiveSet) -> Polish:
+    del qp
+    return Polish(REJECTED, reason, x, eq_dual, ineq_dual, residuals, active)
+
+
+def _repaired(qp: StepQP, active: ActiveSet, x: FloatArray, z: FloatArray,
+              scales: _Scales) -> ActiveSet | None:
+    """``active`` corrected for the point ``(x, z)`` solved on it; ``None`` if it is right.
+
+    Frees tight rows whose multiplier has the wrong sign and tightens rows whose bound is
+    violated, both beyond :data:`ROUND_OFF` of the scales.
+    """
+    lhs = qp.ineq_matrix @ x
+    lower = np.zeros(qp.n_inequalities, dtype=bool)
+    upper = np.zeros(qp.n_inequalities, dtype=bool)
+    lower[active.lower], upper[active.upper] = True, True
+    dual_tol, primal_tol = ROUND_OFF * scales.dual, ROUND_OFF * scales.primal
+    wrong_lower = lower & (z < -dual_tol)
+    wrong_upper = upper & (z > dual_tol)
+    violated_lower = ~lower & ((lhs - qp.ineq_rhs) < -primal_tol)
+    violated_upper = np.zeros_like(upper)
+    rows = qp.upper_rows
+    if rows.size:
+        assert qp.ineq_upper is not None
+        violated_upper[rows] = ~upper[rows] & ((qp.ineq_upper[rows] - lhs[rows]) < -primal_tol)
+    if not (wrong_lower.any() or wrong_upper.any() or violated_lower.any()
+            or violated_upper.any()):
+        return None
+    lower = (lower & ~wrong_lower) | violated_lower
+    upper = (upper & ~wrong_upper) | violated_upper
+    return ActiveSet(lower=np.flatnonzero(lower).astype(np.int64),
+                     upper=np.flatnonzero(upper).astype(np.int64))
+
+
+def reduced_kkt(qp: StepQP, active: ActiveSet) -> tuple[sp.csc_array, FloatArray]:
+    """The KKT matrix of ``qp`` with the ``active`` rows as equalities, and its right side.
+
+    ``[[P, A'], [A, 0]]`` and ``[-q; b]``, as :func:`polish` describes them.
+    """
+    hessian = sp.diags_array(2.0 * qp.weights)
+    gradient_at_zero = -2.0 * qp.weights * qp.target
+    if qp.cost_factor is not None and qp.n_cost_rows:
+        coupling = 2.0 * (qp.cost_factor.T @ qp.cost_factor)
+        hessian = hessian + coupling
+        gradient_at_zero = gradient_at_zero - coupling @ qp.target
+    if qp.linear is not None:
+        gradient_at_zero = gradient_at_zero + qp.linear
+    rows = sp.vstack([qp.eq_matrix, qp.ineq_matrix[active.lower],
+                      qp.ineq_matrix[active.upper]], format="csr")
+    bounds = [qp.eq_rhs, qp.ineq_rhs[active.lower]]
+    if active.upper.size:
+        assert qp.ineq_upper is not None
+        bounds.append(qp.ineq_upper[active.upper])
+    matrix = sp.block_array([[hessian, rows.T], [rows, None]], format="csc")
+    return matrix, np.concatenate([-gradient_at_zero, *bounds])
+
+
+def _solve_on(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,
+              ineq_dual: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """The KKT point of ``qp`` with ``active`` rows tight, refined from ``(x, y, z)``.
+
+    ``None`` if the regularised matrix does not factor.  See :func:`polish`.
+    """
+    n, n_eq = qp.n_variables, qp.n_equalities
+    matrix, rhs = reduced_kkt(qp, active)
+    solve = _regularised_solver(matrix, n)
+    if solve is None:
+        return None
+    tight = np.concatenate([active.lower, active.upper])
+    point = np.concatenate([x, eq_dual, -ineq_dual[tight]])
+    best, best_norm = point, math.inf
+    for _ in range(REFINEMENTS):
+        residual = rhs - matrix @ point
+        norm = _inf(residual)
+        if not norm < best_norm:  # stalled at round-off (or diverging): keep the best
+            break
+        best, best_norm = point, norm
+        if norm == 0.0:
+            break
+        point = point + solve(residual)
+    if not np.isfinite(best).all():
+        return None
+    z = np.zeros(qp.n_inequalities)
+    z[tight] = -best[n + n_eq:]
+    return best[:n], best[n:n + n_eq], z
+
+
+def _regularised_solver(matrix: sp.csc_array,
+                        n: int) -> Callable[[FloatArray], FloatArray] | None:
+    """A solve with ``matrix + diag(delta_x I_n, -delta_y I)`` (see :data:`REGULARISATION`)."""
+    size = matrix.shape[0]
+    diagonal = matrix.diagonal()[:n]
+    hessian_scale = float(np.max(np.abs(diagonal))) if n and np.any(diagonal) else 1.0
+    row_scale = float(np.max(np.abs(matrix[n:, :n].data))) if size > n and matrix[n:, :n].nnz \
+        else 1.0
+    shift = np.concatenate([np.full(n, REGULARISATION * hessian_scale),
+                            np.full(size - n, -REGULARISATION * row_scale**2 / hessian_scale)])
+    regularised = matrix + sp.diags_array(shift, format="csc")
+    try:
+        factor = spla.splu(regularised)
+    except RuntimeError:  # SuperLU: "Factor is exactly singular"
+        return None
+    return lambda rhs: np.asarray(factor.solve(rhs), dtype=np.float64)
