@@ -7,7 +7,7 @@ way.
   :func:`~wuerfel_cvx.scenes.geometry.edge_distances`.
 * :func:`corner_velocity_map` and :func:`structural_product`: the rigid formulation's
   contact rows as the sparse product ``corner_rows @ corner_velocity_map(points)``, which
-  :func:`wuerfel_cvx.formulations.rigid.body_rows` and
+  :func:`wuerfel_cvx.formulations.rows.body_rows` and
   :meth:`~wuerfel_cvx.formulations.RigidFormulation.new_velocities` write directly and
   must reproduce bit for bit.
 * :func:`declared_friction`: the Coulomb fixed point's friction problem declared in cvxpy

@@ -1,8 +1,10 @@
 """The step path's NumPy versions, kept as references for its compiled kernels.
 
 Each function here is the batched NumPy code a stage ran before the compiled kernel
-replaced it (``src/wuerfel_cvx/*_kernel.py``); the product runs the kernels only, and
-``tests/test_kernels.py`` checks them against these, bit for bit.  The KKT check keeps its
+replaced it (the compiled loops in the stage's own module: ``step/contacts.py``,
+``formulations/rows.py``, ``formulations/motion.py``, ``solve/residual_kernel.py``); the
+product runs the kernels only, and ``tests/test_kernels.py`` checks them against these, bit
+for bit.  The KKT check keeps its
 general NumPy code in the product (QPs with a coupling cost or upper bounds):
 :func:`general_route` hands it a QP the kernel would check.
 """
@@ -20,12 +22,11 @@ from wuerfel_cvx.formulations.qp import StepQP
 from wuerfel_cvx.formulations.rigid import body_velocities
 from wuerfel_cvx.formulations.rows import n_unknown_points, unknown_index
 from wuerfel_cvx.scenes.geometry import FloatArray, corner_mean, rot90, side_gradients
-from wuerfel_cvx.step import contact_kernel
-from wuerfel_cvx.step.contacts import TIE_TOLERANCE, Contacts, pair_distances
+from wuerfel_cvx.step.contacts import TIE_TOLERANCE, Contacts, pair_distances, tree_pairs
 from wuerfel_cvx.step.model import IntArray, Model, State
 
 # --------------------------------------------------------------------------------------
-# Contact search (wuerfel_cvx.step.contacts; compiled: wuerfel_cvx.step.contact_kernel)
+# Contact search (wuerfel_cvx.step.contacts, compiled there)
 # --------------------------------------------------------------------------------------
 
 
@@ -48,7 +49,7 @@ def body_pairs(model: Model, all_points: FloatArray, reach: FloatArray) -> IntAr
     bound = radii + reach
     found = [np.zeros((0, 2), dtype=np.int64)]
     if n > 1:
-        candidates = contact_kernel.tree_pairs(centers[:n], 2.0 * float(bound[:n].max()))
+        candidates = tree_pairs(centers[:n], 2.0 * float(bound[:n].max()))
         dist = _lengths(centers[candidates[:, 0]] - centers[candidates[:, 1]])
         found.append(candidates[dist <= bound[candidates[:, 0]] + bound[candidates[:, 1]]])
     if t:
@@ -131,7 +132,7 @@ def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
                  ) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
     """Held contacts of the ordered pairs: pair index, corner, edge, distance, clearance (m).
 
-    Rows in pair-major order, as ``contact_kernel.narrow_phase`` returns them.
+    Rows in pair-major order, as ``contacts.narrow_phase`` returns them.
     """
     distances = pair_distances(corners, edge_body, point_body)
     pair_margin = reach[edge_body] + reach[point_body]
@@ -144,12 +145,12 @@ def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
 
 
 # --------------------------------------------------------------------------------------
-# Rows (wuerfel_cvx.formulations.qp, .rows, .rigid; compiled: wuerfel_cvx.formulations.row_kernel)
+# Rows (wuerfel_cvx.formulations.rows, compiled there)
 # --------------------------------------------------------------------------------------
 
 
 def stacked_point_rows(index: np.ndarray, grad: FloatArray, n_points: int) -> sp.csr_array:
-    """``qp.stacked_point_rows``: ``index`` ``(R, B)``, ``grad`` ``(R, B, 2)`` to CSR rows.
+    """``rows.stacked_point_rows``: ``index`` ``(R, B)``, ``grad`` ``(R, B, 2)`` to CSR rows.
 
     Each row's entries sorted by column with a stable argsort; a point twice in a row:
     summed by scipy.
@@ -177,7 +178,7 @@ def stacked_point_rows(index: np.ndarray, grad: FloatArray, n_points: int) -> sp
 
 def point_rows(n_rows: int, n_points: int,
                blocks: list[tuple[np.ndarray, FloatArray]]) -> sp.csr_array:
-    """``qp.point_rows`` of per-point gradient blocks, by :func:`stacked_point_rows`."""
+    """``rows.point_rows`` of per-point gradient blocks, by :func:`stacked_point_rows`."""
     if not blocks:
         return sp.csr_array((n_rows, 2 * n_points))
     index = np.stack([np.asarray(point) for point, _ in blocks], axis=1)  # (R, B)
@@ -225,7 +226,7 @@ def _offsets(points: FloatArray) -> FloatArray:
 
 
 def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
-    """``rigid.body_rows``: canonical corner rows times the corner map, cells summed in order."""
+    """``rows.body_rows``: canonical corner rows times the corner map, cells summed in order."""
     n_rows = corner_rows.shape[0]
     n_cols = 3 * (corner_rows.shape[1] // 8)
     turned = rot90(_offsets(points)).reshape(-1)  # per corner coordinate (4 n * 2,)
@@ -260,8 +261,7 @@ def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
 
 
 # --------------------------------------------------------------------------------------
-# Rigid motion (wuerfel_cvx.formulations.motion, .rigid, .velocity;
-# compiled: wuerfel_cvx.formulations.motion_kernel)
+# Rigid motion (wuerfel_cvx.formulations.motion, compiled there; .rigid, .velocity)
 # --------------------------------------------------------------------------------------
 
 

@@ -1,6 +1,6 @@
 """The closest-approach contact rows, checked against finite differences of the motion.
 
-:mod:`wuerfel_cvx.formulations.approach` linearises each contact's gap ``phi(tau; v)``
+:mod:`wuerfel_cvx.formulations.velocity` linearises each contact's gap ``phi(tau; v)``
 along the rigid motion of the step.  These tests check, independently of the row
 formulas, that the rows are those derivatives (central differences in ``v`` and in
 ``tau``), that the motion is the one the state update performs, that the closest
@@ -16,7 +16,8 @@ import pytest
 
 from wuerfel_cvx import Scene, Simulation
 from wuerfel_cvx.formulations import VelocityFormulation, rigid_step
-from wuerfel_cvx.formulations.approach import (
+from wuerfel_cvx.formulations.motion import body_motion
+from wuerfel_cvx.formulations.velocity import (
     Approach,
     ApproachRows,
     closest_approach,
@@ -24,7 +25,6 @@ from wuerfel_cvx.formulations.approach import (
     ramp_end,
     rows_along,
 )
-from wuerfel_cvx.formulations.motion import body_motion
 from wuerfel_cvx.scenes.geometry import FloatArray
 from wuerfel_cvx.scenes.scene import Square, Table
 from wuerfel_cvx.step.contacts import Contacts, find_contacts

@@ -24,7 +24,6 @@ from reference_kernels import rod_blocks
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx import formulations as formulations_package
 from wuerfel_cvx.formulations import get_formulation, step_qp
-from wuerfel_cvx.formulations import qp as new_qp
 from wuerfel_cvx.formulations import rows as new_rows
 from wuerfel_cvx.formulations import seed as seed_module
 from wuerfel_cvx.formulations import velocity as velocity_module
@@ -250,14 +249,14 @@ def check_everything(model: Model, state: State, rng: np.random.Generator) -> in
                        point_rows(len(contacts), n_unknown, side_blocks(all_points, contacts,
                                                                          model)))
     seed_blocks = seed_side_blocks(all_points, contacts, model)
-    assert_same_matrix(new_qp.point_rows(len(contacts), n_unknown, seed_blocks),
+    assert_same_matrix(new_rows.point_rows(len(contacts), n_unknown, seed_blocks),
                        point_rows(len(contacts), n_unknown, seed_blocks))
     rods, _ = rod_blocks(model, state.points)
     assert_same_matrix(new_rows.rod_rows(model, state.points)[0],
                        point_rows(len(model.rods), n_unknown, rods))
     held = held_table_blocks(model)
     if held:
-        assert_same_matrix(new_qp.point_rows(len(held[0][0]), n_unknown, held),
+        assert_same_matrix(new_rows.point_rows(len(held[0][0]), n_unknown, held),
                            point_rows(len(held[0][0]), n_unknown, held))
     return found
 
@@ -321,13 +320,13 @@ def test_point_rows_with_fixed_points_duplicates_and_no_rows() -> None:
     n_rows, n_points = 50, 12
     blocks = [(rng.integers(-2, n_points, size=n_rows), rng.normal(size=(n_rows, 2)))
               for _ in range(4)]  # negative: fixed; repeated indices within a row: summed
-    assert_same_matrix(new_qp.point_rows(n_rows, n_points, blocks),
+    assert_same_matrix(new_rows.point_rows(n_rows, n_points, blocks),
                        point_rows(n_rows, n_points, blocks))
     empty = [(np.zeros(0, dtype=np.int64), np.zeros((0, 2)))] * 3
-    assert_same_matrix(new_qp.point_rows(0, n_points, empty), point_rows(0, n_points, empty))
-    assert_same_matrix(new_qp.point_rows(5, n_points, []), point_rows(5, n_points, []))
+    assert_same_matrix(new_rows.point_rows(0, n_points, empty), point_rows(0, n_points, empty))
+    assert_same_matrix(new_rows.point_rows(5, n_points, []), point_rows(5, n_points, []))
     all_fixed = [(np.full(n_rows, -1), rng.normal(size=(n_rows, 2)))]
-    assert_same_matrix(new_qp.point_rows(n_rows, n_points, all_fixed),
+    assert_same_matrix(new_rows.point_rows(n_rows, n_points, all_fixed),
                        point_rows(n_rows, n_points, all_fixed))
 
 

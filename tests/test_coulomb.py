@@ -37,8 +37,7 @@ from wuerfel_cvx.solve.paths import (
     solve_with_fallback,
 )
 from wuerfel_cvx.solve.registry import available_solvers, tolerance_value
-from wuerfel_cvx.step.contacts import find_contacts
-from wuerfel_cvx.step.identity import ContactIndex
+from wuerfel_cvx.step.contacts import ContactIndex, find_contacts
 from wuerfel_cvx.step.model import Model, State
 from wuerfel_cvx.step.simulation import Simulation
 from wuerfel_cvx.trajectory import Trajectory

@@ -1,4 +1,4 @@
-"""The field's benchmark scenes (:mod:`wuerfel_cvx.scenes.field`) and their example files.
+"""The field's benchmark scenes (:mod:`wuerfel_cvx.scenes.library`) and their example files.
 
 Counts, friction coefficients and positions are checked against the numbers of the
 Solver2D and Box2D sources the module docstring names; overlaps with the metrics'
@@ -16,15 +16,15 @@ import numpy as np
 import pytest
 
 from wuerfel_cvx import InputError, Scene, simulate
-from wuerfel_cvx.scenes.field import (
+from wuerfel_cvx.scenes.geometry import polygon_overlap_depth, polygon_overlap_depths
+from wuerfel_cvx.scenes.library import (
     DOUBLE_DOMINO_IMPULSE,
     EXAMPLE_NAMES,
     FIELD_SCENES,
     example_text,
+    scene_names,
     write_examples,
 )
-from wuerfel_cvx.scenes.geometry import polygon_overlap_depth, polygon_overlap_depths
-from wuerfel_cvx.scenes.library import scene_names
 from wuerfel_cvx.scenes.scene import DEFAULT_GRAVITY, OVERLAP_TOLERANCE, Square, Table
 from wuerfel_cvx.step.metrics import deepest_overlap
 from wuerfel_cvx.step.model import Model

@@ -22,16 +22,16 @@ import pytest
 
 from test_properties import DT, WEDGED_CORNER, energy_identity_terms
 from wuerfel_cvx import simulate
-from wuerfel_cvx.scenes.analytic import (
+from wuerfel_cvx.scenes.library import (
     GRAVITY,
     ladder_scene,
     ladder_static_friction,
     launched_box_scene,
+    named_scene,
     slope_acceleration,
     slope_origin,
     slope_scene,
 )
-from wuerfel_cvx.scenes.library import named_scene
 from wuerfel_cvx.scenes.scene import Scene
 from wuerfel_cvx.solve.paths import VERIFY_FACTOR, solve_step_qp
 from wuerfel_cvx.solve.registry import TOLERANCE_PRESETS

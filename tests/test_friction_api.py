@@ -7,7 +7,7 @@ import pytest
 from wuerfel_cvx import simulate
 from wuerfel_cvx.cli import main
 from wuerfel_cvx.errors import InputError
-from wuerfel_cvx.scenes.analytic import slope_scene
+from wuerfel_cvx.scenes.library import slope_scene
 
 pytestmark = pytest.mark.unit
 

@@ -14,7 +14,7 @@ from wuerfel_cvx.lab.bench.friction_targets import (
     ramp_rows,
     render,
 )
-from wuerfel_cvx.scenes.analytic import slope_acceleration, slope_scene
+from wuerfel_cvx.scenes.library import slope_acceleration, slope_scene
 
 pytestmark = pytest.mark.integration
 

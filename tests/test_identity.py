@@ -1,4 +1,4 @@
-"""One contact identity across steps (:mod:`wuerfel_cvx.step.identity`).
+"""One contact identity across steps (:mod:`wuerfel_cvx.step.contacts`).
 
 The matcher, exact at any index, and the two uses it carries: the warm starts and the
 Coulomb friction memory.
@@ -16,7 +16,7 @@ from wuerfel_cvx.formulations import StepQP, get_formulation, step_qp
 from wuerfel_cvx.friction.coulomb import CoulombStep, FrictionMemory
 from wuerfel_cvx.friction.forces import ContactForces
 from wuerfel_cvx.solve.warm_start import WarmStarts
-from wuerfel_cvx.step.identity import ContactIndex
+from wuerfel_cvx.step.contacts import ContactIndex
 from wuerfel_cvx.step.model import Model, State
 
 pytestmark = pytest.mark.unit

@@ -170,7 +170,7 @@ def test_a_grid_point_cut_short_by_ctrl_c_becomes_no_row(monkeypatch: pytest.Mon
 
 @pytest.mark.subprocess
 def test_the_package_imports_cvxpy_only_when_a_name_needs_it() -> None:
-    code = ("import sys, wuerfel_cvx, wuerfel_cvx._entry\n"
+    code = ("import sys, wuerfel_cvx, wuerfel_cvx.__main__\n"
             "assert 'cvxpy' not in sys.modules and 'numpy' not in sys.modules\n"
             "import wuerfel_cvx.lab.bench.runner  # imports the module wuerfel_cvx.simulate\n"
             "from wuerfel_cvx import Scene, simulate\n"

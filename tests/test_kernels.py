@@ -1,7 +1,8 @@
 """The compiled kernels give their NumPy references' results bit for bit, stage by stage.
 
-The product runs the compiled kernels only (``src/wuerfel_cvx/*_kernel.py``); the batched
-NumPy code they replaced is kept in ``tests/reference_kernels.py``.  One test per stage
+The product runs the compiled kernels only (each in its stage's module: ``step/contacts.py``,
+``formulations/rows.py``, ``formulations/motion.py``, ``solve/residual_kernel.py``); the
+batched NumPy code they replaced is kept in ``tests/reference_kernels.py``.  One test per stage
 compares the two on the same inputs: the states of ``tests/test_contacts_fast.py``
 (library scenes, random overlapping squares of random size and angle against random
 tables, exactly aligned grids with corner-on-corner ties), random boxes of every size and
@@ -30,11 +31,13 @@ from test_contacts_fast import (
 from wuerfel_cvx import simulate
 from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations.motion import rigid_step
-from wuerfel_cvx.formulations.qp import StepQP, point_rows
-from wuerfel_cvx.formulations.rigid import RigidFormulation, body_rows, rigid_objective
+from wuerfel_cvx.formulations.qp import StepQP
+from wuerfel_cvx.formulations.rigid import RigidFormulation, rigid_objective
 from wuerfel_cvx.formulations.rows import (
+    body_rows,
     held_table_blocks,
     n_unknown_points,
+    point_rows,
     rod_rows,
     seed_side_blocks,
     side_rows,
@@ -44,7 +47,7 @@ from wuerfel_cvx.scenes.geometry import FloatArray, rectangle_corners
 from wuerfel_cvx.solve import residual_kernel
 from wuerfel_cvx.solve.paths import Residuals, StepSolution, _checked_scales, kkt_residuals
 from wuerfel_cvx.solve.scaling import data_magnitude
-from wuerfel_cvx.step import contact_kernel, contacts
+from wuerfel_cvx.step import contacts
 from wuerfel_cvx.step.contacts import find_contacts
 from wuerfel_cvx.step.model import Model, State
 
@@ -103,7 +106,7 @@ def same_contact_search(model: Model, state: State, rng: np.random.Generator) ->
         if len(pairs) == 0:
             continue
         expected = reference.narrow_phase(corners, pairs[:, 0], pairs[:, 1], reach)
-        compiled = contact_kernel.narrow_phase(corners, pairs[:, 0], pairs[:, 1], reach)
+        compiled = contacts.narrow_phase(corners, pairs[:, 0], pairs[:, 1], reach)
         for ours, theirs in zip(compiled, expected, strict=True):
             assert_same_bits(ours, theirs)  # same rows, same order, same bits
         found += len(expected[0])
@@ -131,7 +134,7 @@ def test_the_all_pairs_loop_lists_the_sorted_trees_pairs() -> None:
     from scipy.spatial import cKDTree
 
     rng = np.random.default_rng(7)
-    limit = contact_kernel.ALL_PAIRS_LIMIT
+    limit = contacts.ALL_PAIRS_LIMIT
     clouds = [rng.normal(size=(int(rng.integers(2, limit + 20)), 2)) * rng.uniform(0.01, 10.0)
               for _ in range(300)]
     grid = np.array([[x, y] for x in range(8) for y in range(8)], dtype=np.float64)
@@ -139,11 +142,11 @@ def test_the_all_pairs_loop_lists_the_sorted_trees_pairs() -> None:
     for centers in clouds:
         for radius in (0.0, 0.5, 1.0, 2.0, float(rng.uniform(0.0, 8.0)), 1e3):
             tree = cKDTree(centers).query_pairs(r=radius, output_type="set")
-            expected = contact_kernel.tree_pairs(centers, radius)
+            expected = contacts.tree_pairs(centers, radius)
             assert {tuple(pair) for pair in expected.tolist()} == tree  # the tree's pairs
             assert np.array_equal(expected, np.array(sorted(tree), dtype=np.int64
                                                      ).reshape(-1, 2))  # sorted
-            assert_same_bits(contact_kernel.candidate_pairs(centers, radius), expected)
+            assert_same_bits(contacts.candidate_pairs(centers, radius), expected)
 
 
 # --------------------------------------------------------------------------------------

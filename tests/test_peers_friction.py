@@ -15,8 +15,8 @@ import pytest
 
 from wuerfel_cvx import Scene, Square
 from wuerfel_cvx.lab.peers import PEER_ENGINES, PEER_MODULES, simulate_peer
-from wuerfel_cvx.scenes.bodies import Table
 from wuerfel_cvx.scenes.geometry import FloatArray
+from wuerfel_cvx.scenes.scene import Table
 from wuerfel_cvx.trajectory import Trajectory
 
 pytestmark = pytest.mark.integration

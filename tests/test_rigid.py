@@ -10,7 +10,8 @@ from qp_bank import AGREEMENT, qp_bank
 from wuerfel_cvx import simulate
 from wuerfel_cvx.errors import InputError
 from wuerfel_cvx.formulations import RigidFormulation, get_formulation, step_qp
-from wuerfel_cvx.formulations.rigid import body_rows, body_velocities
+from wuerfel_cvx.formulations.rigid import body_velocities
+from wuerfel_cvx.formulations.rows import body_rows
 from wuerfel_cvx.solve.paths import solve_step_qp
 from wuerfel_cvx.step.model import Model
 

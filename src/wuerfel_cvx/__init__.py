@@ -14,11 +14,12 @@ starts taking Ctrl-C before it imports anything heavy.
 
 from __future__ import annotations
 
+import importlib
 import sys
 import types
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
-from ._lazy import lazy_names
 from .errors import InputError, Interrupted, StepFailure, WuerfelError
 
 if TYPE_CHECKING:
@@ -41,7 +42,34 @@ _LAZY = {"Box": "scenes.scene", "Scene": "scenes.scene", "Square": "scenes.scene
 """Each public name imported on first use, and its module."""
 
 
-__getattr__, __dir__ = lazy_names(__name__, _LAZY, __all__)
+def _lazy_names(package: str, modules: Mapping[str, str], public: Sequence[str],
+                ) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
+    """``__getattr__`` and ``__dir__`` for ``package``, whose ``modules`` map names to modules.
+
+    Public names of a package imported on first use (PEP 562): a package whose public
+    names live in heavy modules (cvxpy, the solvers) declares them in a table and takes its
+    module-level ``__getattr__`` and ``__dir__`` from here (this package and
+    :mod:`wuerfel_cvx.solve`).  Importing the package then imports none of them, and the
+    first use of a name imports its module and keeps the name.  ``modules`` maps each
+    lazily imported name to its module relative to ``package``; ``public`` is the
+    package's ``__all__``.
+    """
+
+    def getattr_(name: str) -> Any:
+        module = modules.get(name)
+        if module is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(f".{module}", package), name)
+        setattr(sys.modules[package], name, value)
+        return value
+
+    def dir_() -> list[str]:
+        return sorted({*vars(sys.modules[package]), *public})
+
+    return getattr_, dir_
+
+
+__getattr__, __dir__ = _lazy_names(__name__, _LAZY, __all__)
 
 
 class _Package(types.ModuleType):

@@ -10,7 +10,7 @@ import argparse
 import re
 from typing import TYPE_CHECKING
 
-from ._entry import PROG
+from .__main__ import PROG
 from .formulations import FORMULATIONS, FRICTION_MODELS
 from .solve.registry import TOLERANCE_PRESETS, available_solvers
 

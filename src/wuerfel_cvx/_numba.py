@@ -1,13 +1,13 @@
 """The decorator that compiles the step path's kernels with numba (a core dependency).
 
-The kernels (:mod:`~wuerfel_cvx.step.contact_kernel`, :mod:`~wuerfel_cvx.formulations.row_kernel`,
-:mod:`~wuerfel_cvx.formulations.motion_kernel`, :mod:`~wuerfel_cvx.solve.residual_kernel`,
-:func:`~wuerfel_cvx._sparse.add_rows`, the contact matcher of :mod:`~wuerfel_cvx.step.identity`) are
-plain Python functions over arrays; :func:`compiled` hands them to ``numba.njit`` with its
-default strict IEEE semantics (no fast-math: no reassociation, no fused multiply-add), so
-each operation rounds as NumPy's does.  The
-machine code is cached on disk (next to the sources, or in ``NUMBA_CACHE_DIR``), so only a
-process that finds no cache pays the compilation.  The NumPy versions they replaced are
+The kernels (the compiled loops of :mod:`~wuerfel_cvx.step.contacts`, the contact search and
+the contact matcher, of :mod:`~wuerfel_cvx.formulations.rows` and
+:mod:`~wuerfel_cvx.formulations.motion`, :mod:`~wuerfel_cvx.solve.residual_kernel` and
+:func:`~wuerfel_cvx._sparse.add_rows`) are plain Python functions over arrays;
+:func:`compiled` hands them to ``numba.njit`` with its default strict IEEE semantics (no
+fast-math: no reassociation, no fused multiply-add), so each operation rounds as NumPy's
+does.  The machine code is cached on disk (next to the sources, or in ``NUMBA_CACHE_DIR``),
+so only a process that finds no cache pays the compilation.  The NumPy versions they replaced are
 kept in ``tests/reference_kernels.py`` and checked against them bit for bit.
 """
 

@@ -2,7 +2,7 @@
 
 ``scipy.sparse.csr_array((data, indices, indptr), shape=...)`` checks and converts its
 input on every call: 15 to 25 us, more than the compiled loops that wrote the arrays on a
-small scene (:mod:`wuerfel_cvx.formulations.row_kernel`).  The step path's rows are written in
+small scene (:mod:`wuerfel_cvx.formulations.rows`).  The step path's rows are written in
 canonical form by construction (each row's columns sorted, one entry per cell), so
 :func:`canonical_csr` hands the arrays to a new ``csr_array`` directly, with the index
 dtype the constructor would choose (int64 if either index array is int64, else int32).

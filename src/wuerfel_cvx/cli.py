@@ -23,8 +23,8 @@ from typing import TextIO
 
 from tqdm.auto import tqdm
 
+from .__main__ import INTERRUPTED, PROG
 from ._cli_parser import build_parser
-from ._entry import INTERRUPTED, PROG
 from .errors import InputError, Interrupted, StepFailure
 from .friction.forces import body_friction
 from .scenes.library import ENTRIES
@@ -309,6 +309,6 @@ def _save(trajectory: Trajectory, out: str) -> Path:
 
 
 if __name__ == "__main__":  # ``python -m wuerfel_cvx`` also takes a Ctrl-C during start-up
-    from ._entry import main as entry
+    from .__main__ import main as entry
 
     sys.exit(entry())

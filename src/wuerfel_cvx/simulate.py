@@ -136,7 +136,7 @@ def _noticing_ctrl_c() -> Iterator[threading.Event]:
     :class:`KeyboardInterrupt` and return a failed status instead; the event tells the loop
     that the user, not the solver, stopped the step.  (A library that installs its own
     SIGINT handler, as OSQP and SCS do, takes the signal before Python sees it; the command
-    line relays Ctrl-C so that none can, :mod:`wuerfel_cvx._entry`.)  Only the main thread
+    line relays Ctrl-C so that none can, :mod:`wuerfel_cvx.__main__`.)  Only the main thread
     can handle signals, and a handler someone else installed is left in place.
     """
     noticed = threading.Event()

@@ -9,9 +9,8 @@ from functools import partial
 from ..errors import InputError
 from ..step.contacts import find_contacts
 from ..step.model import Model, State
-from .base import Formulation
 from .motion import rigid_step
-from .qp import StepQP, declare_qp
+from .qp import Formulation, StepQP, declare_qp
 from .rigid import RigidFormulation
 from .seed import SeedFormulation
 from .velocity import VelocityFormulation

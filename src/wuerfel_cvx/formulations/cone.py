@@ -39,8 +39,7 @@ from ..friction.forces import contact_friction
 from ..scenes.geometry import FloatArray, edge_parameter
 from ..step.contacts import Contacts
 from ..step.model import IntArray, Model
-from .qp import point_rows
-from .rows import n_unknown_points, unknown_index
+from .rows import n_unknown_points, point_rows, unknown_index
 
 
 @dataclass(frozen=True)

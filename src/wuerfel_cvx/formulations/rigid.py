@@ -23,18 +23,17 @@ from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
-import scipy.sparse as sp
 
-from .._sparse import canonical_csr, empty_rows
+from .._sparse import empty_rows
 from ..errors import InputError
 from ..scenes.geometry import FloatArray, corner_mean, cross
 from ..step.contacts import Contacts
 from ..step.model import Model, State
-from . import motion_kernel, row_kernel
-from .base import FrictionSettings, RowUnits, SinglePass, velocity_rows
+from . import motion
 from .cone import contact_cones
 from .motion import rigid_step
-from .qp import StepQP, declare_qp
+from .qp import FrictionSettings, RowUnits, SinglePass, StepQP, declare_qp, velocity_rows
+from .rows import body_rows
 from .velocity import VelocityFormulation
 
 
@@ -90,9 +89,9 @@ class RigidFormulation(SinglePass, FrictionSettings):
         """The corner velocities ``(4 n, 2)`` (m/s) of the new body velocities.
 
         ``u + omega rot90(r)`` per corner, ``r`` its offset from its box's centroid, by a
-        compiled loop (:func:`wuerfel_cvx.formulations.motion_kernel.corner_velocities`).
+        compiled loop (:func:`wuerfel_cvx.formulations.motion.corner_velocities`).
         """
-        return motion_kernel.corner_velocities(state.points, solution.reshape(-1, 3))
+        return motion.corner_velocities(state.points, solution.reshape(-1, 3))
 
     def advance(self, model: Model, state: State, solution: FloatArray, dt: float) -> State:
         """Move each square rigidly with its new centre and angular velocity."""
@@ -105,33 +104,11 @@ def rigid_objective(model: Model, state: State, dt: float) -> tuple[FloatArray, 
 
     ``I`` from the exact squares, not the current corners: constant weights keep the
     compiled-problem cache's key constant.  ``u0`` and ``omega0`` as :func:`body_velocities`
-    gives them; by a compiled loop (:func:`wuerfel_cvx.formulations.motion_kernel.rigid_objective`).
+    gives them; by a compiled loop (:func:`wuerfel_cvx.formulations.motion.rigid_objective`).
     """
-    return motion_kernel.rigid_objective(state.points, state.velocities,
+    return motion.rigid_objective(state.points, state.velocities,
                                          model.point_masses.reshape(-1, 4),
                                          model.reference_corners, dt * model.gravity)
-
-
-def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
-    """``corner_rows`` times the corner map ``v_i = u + omega rot90(r_i)``, written directly.
-
-    ``corner_rows`` (canonical CSR, one column per square-corner coordinate) in the
-    unknowns ``(u_x, u_y, omega)`` of each square: an entry ``v`` in the column of corner
-    ``c`` (axis ``a``) of square ``b`` adds ``v`` to column ``3 b + a`` and
-    ``v rot90(r_c)_a`` to column ``3 b + 2``.  The entries of a cell are summed from 0 in
-    the row's column order, as scipy's sparse product sums them, so the values are bit
-    for bit those of the sparse product with the ``(8 n, 3 n)`` corner map.  Unlike that
-    product, no entry that cancels to 0.0 is dropped (a contact normal through a square's
-    centre has no torque): the sparsity pattern, and with it the compiled-problem cache's
-    key, stays the same from step to step.  Written by compiled loops
-    (:func:`wuerfel_cvx.formulations.row_kernel.body_rows`).
-    """
-    n_rows = corner_rows.shape[0]
-    n_cols = 3 * (corner_rows.shape[1] // 8)
-    return canonical_csr(*row_kernel.body_rows(corner_rows.data, corner_rows.indices,
-                                               corner_rows.indptr,
-                                               motion_kernel.turned_offsets(points)),
-                         shape=(n_rows, n_cols))
 
 
 def body_velocities(points: FloatArray, velocities: FloatArray,

@@ -45,9 +45,14 @@ import scipy.sparse as sp
 from ..scenes.geometry import FloatArray, side_rate, side_value, side_velocity_product
 from ..step.contacts import TIE_TOLERANCE, Contacts, pair_distances
 from ..step.model import Model, State
-from .base import RowUnits, SinglePass
-from .qp import StepQP, declare_qp, point_rows
-from .rows import held_table_blocks, n_unknown_points, seed_side_blocks, unknown_masses
+from .qp import RowUnits, SinglePass, StepQP, declare_qp
+from .rows import (
+    held_table_blocks,
+    n_unknown_points,
+    point_rows,
+    seed_side_blocks,
+    unknown_masses,
+)
 
 
 @dataclass(frozen=True)

@@ -63,8 +63,7 @@ from ..errors import InputError
 from ..formulations import Formulation, StepQP
 from ..scenes.geometry import FloatArray
 from ..solve.paths import StepSolution
-from ..step.contacts import Contacts
-from ..step.identity import ContactIndex
+from ..step.contacts import ContactIndex, Contacts
 from ..step.model import IntArray, Model, State
 from ..trajectory import NULLABLE_COLUMNS
 from .forces import ContactForces

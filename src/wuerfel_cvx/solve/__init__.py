@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from .._lazy import lazy_names
+from .. import _lazy_names
 
 if TYPE_CHECKING:
     from .kkt import Residuals, kkt_residuals
@@ -43,4 +43,4 @@ _LAZY = {**dict.fromkeys(["SOLVE_PATHS", "VERIFY_FACTOR", "SolvePath", "StepSolu
 """Each public name imported on first use, and its module."""
 
 
-__getattr__, __dir__ = lazy_names(__name__, _LAZY, __all__)
+__getattr__, __dir__ = _lazy_names(__name__, _LAZY, __all__)

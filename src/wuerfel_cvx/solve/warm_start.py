@@ -1,7 +1,7 @@
 """Warm starts across steps: last step's solution mapped onto this step's rows.
 
 A contact keeps its identity from step to step: its ids, the point and the edge's two
-corners (:mod:`wuerfel_cvx.step.identity`), name it, whatever its place among the rows.  A step
+corners (:mod:`wuerfel_cvx.step.contacts`), name it, whatever its place among the rows.  A step
 QP's inequality rows are its contacts' rows, one block of rows per contact after another
 (the closest-approach rows of ``velocity``: all rate rows, then all approach rows), so each
 row is named by ``(block, contact)``: row ``block * count + k`` of a QP with ``count``
@@ -11,7 +11,7 @@ contacts is its contact ``k``'s row of that block (:func:`row_blocks`).  The nex
 * the unknowns: the last solution (the same bodies, so the same unknowns);
 * the equality multipliers: the last ones when the equalities are the same rows (rods);
 * each inequality multiplier: that of the row of the same block and contact in the last QP
-  (the contact found among the last QP's by :class:`~wuerfel_cvx.step.identity.ContactIndex`),
+  (the contact found among the last QP's by :class:`~wuerfel_cvx.step.contacts.ContactIndex`),
   0 for a contact that is new.
 
 A warm start changes where a solver starts, never the problem: an iterative solver
@@ -34,7 +34,7 @@ import numpy as np
 
 from ..formulations.qp import StepQP
 from ..scenes.geometry import FloatArray
-from ..step.identity import ContactIndex, carry_rows
+from ..step.contacts import ContactIndex, carry_rows
 
 
 def row_blocks(qp: StepQP) -> int | None:

@@ -24,7 +24,7 @@ Maximum dissipation (friction opposes the slip, at the cone's edge while slippin
 Push at a distance, row by row
     The same law on the QP's own rows: a row's slack ``s`` turned into the gap it opens
     over the step, and its multiplier into the impulse it carries
-    (:class:`~wuerfel_cvx.formulations.base.RowUnits`).  ``push_at_distance_Ns`` is the
+    (:class:`~wuerfel_cvx.formulations.qp.RowUnits`).  ``push_at_distance_Ns`` is the
     largest impulse on a row whose gap opens by more than :data:`OPEN_GAP_M`, and
     ``push_gap_product_Nsm`` the largest gap times impulse.  An exact answer of the QP
     has both 0 (complementarity); an inexact one pushes at a distance by what its solver
@@ -45,8 +45,7 @@ import math
 
 import numpy as np
 
-from ..formulations.base import RowUnits
-from ..formulations.qp import StepQP
+from ..formulations.qp import RowUnits, StepQP
 from ..friction.forces import ContactForces
 from ..scenes.geometry import FloatArray, cross
 from ..solve.paths import VERIFY_FACTOR, StepSolution

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
 
-from ..._entry import relayed_presses
+from ...__main__ import relayed_presses
 
 
 @contextmanager
@@ -23,7 +23,7 @@ def held_ctrl_c() -> Iterator[threading.Event]:
 
     In the main thread only (elsewhere no signal arrives); the handler in place before is
     put back afterwards, and the caller decides what a press means.  Under the command
-    line's relay (:mod:`wuerfel_cvx._entry`) Ctrl-C is ignored within the block, and the
+    line's relay (:mod:`wuerfel_cvx.__main__`) Ctrl-C is ignored within the block, and the
     relay counts the presses: a process started within (a Dask worker) inherits the
     ignoring from its first instruction.  Without it, a press is noted by a handler, and
     the event is set as it comes.

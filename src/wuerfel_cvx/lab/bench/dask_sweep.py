@@ -124,7 +124,7 @@ def _start_resource_tracker() -> None:
     Starting it unblocks SIGINT in the thread that does (``resource_tracker.ensure_running``
     in CPython); left to the cluster's first worker process, that is a thread of Dask's,
     which would then take the Ctrl-C that the command line's relay must get
-    (:mod:`wuerfel_cvx._entry`).  Once it runs, later starts leave every mask alone.
+    (:mod:`wuerfel_cvx.__main__`).  Once it runs, later starts leave every mask alone.
     """
     from multiprocessing import resource_tracker
 

@@ -261,7 +261,7 @@ def _run_all(tasks: list[Task], jobs: int) -> Generator[tuple[Any, Any], None, N
         pending: dict[Future[Any], Any] = {pool.submit(function, *args): label
                                            for label, function, args in tasks}
         while pending:
-            # with a timeout: a Ctrl-C relayed to this thread (wuerfel_cvx._entry) is
+            # with a timeout: a Ctrl-C relayed to this thread (wuerfel_cvx.__main__) is
             # acted on within it, not only when the next point finishes
             finished, _ = wait(pending, timeout=WAIT_POLL, return_when=FIRST_COMPLETED)
             for future in finished:

@@ -40,7 +40,7 @@ Penetration, ``linearisation="start"`` (``velocity-baumgarte``)
 Penetration, ``linearisation="closest-approach"`` (``velocity``, the default)
     A step is accepted only once, along the accepted solution's own rigid motion (the one
     :func:`~wuerfel_cvx.formulations.motion.rigid_step` performs), no contact's gap falls
-    below its ramp by more than ``gap_tolerance`` (:mod:`~wuerfel_cvx.formulations.approach`;
+    below its ramp by more than ``gap_tolerance`` (:mod:`~wuerfel_cvx.formulations.velocity`;
     the end of the step is one of the sampled times).  The ramp ends at
     ``c = min(0, phi_0 + dt u_push)`` with ``phi_0 >= -depth_{k-1}``, so every contact's depth
     after step ``k`` is at most::
@@ -93,7 +93,7 @@ Energy, ``linearisation="closest-approach"``
     The same identity holds with the rows of the last pass (two per contact).  A rate row
     ``G_0 v >= r'`` with ``r' = (c - phi_0) / dt`` is, when active, ``G_0 v+ = r'``.  An
     approach row at ``tau*`` has right-hand side ``min(G_1 v0 - psi(tau*; v0) / tau*, r')
-    <= r'`` (:mod:`~wuerfel_cvx.formulations.approach`), so when active ``G_1 v+ <= r'``
+    <= r'`` (:mod:`~wuerfel_cvx.formulations.velocity`), so when active ``G_1 v+ <= r'``
     too.  ``r' <= 0`` for a point outside; for one inside it is the push-out rate
     ``min(depth, dt u_push) / dt``.  So ``nu . h`` is at most the push-out's work, which is
     bounded as (a) above with ``u = n min(depth / dt, u_push)`` in place of ``n beta P / dt``
@@ -111,8 +111,7 @@ import numpy as np
 
 from ...formulations import VelocityFormulation, get_formulation
 from ...formulations.rigid import body_velocities
-from ...scenes.bodies import half_diagonal
-from ...scenes.scene import Scene
+from ...scenes.scene import Scene, half_diagonal
 from ...step.metrics import deepest_penetration
 from ...step.model import Model
 from ...trajectory import Trajectory

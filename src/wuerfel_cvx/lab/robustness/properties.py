@@ -44,9 +44,8 @@ import numpy as np
 
 from ...errors import StepFailure
 from ...formulations import VelocityFormulation
-from ...scenes.bodies import half_diagonal
 from ...scenes.library import FLOOR
-from ...scenes.scene import Box, Scene, Square
+from ...scenes.scene import Box, Scene, Square, half_diagonal
 from ...simulate import simulate
 from ...step.metrics import total_energy
 from ...step.model import Model, State

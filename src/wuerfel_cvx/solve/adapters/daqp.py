@@ -53,7 +53,7 @@ def daqp_form(qp: StepQP) -> tuple[FloatArray, FloatArray, FloatArray, FloatArra
     """``qp`` as DAQP's dense ``H, f, A, bupper, blower, sense``.
 
     The dense arrays are written straight from the step QP's canonical CSR rows (one entry
-    per cell, :func:`~wuerfel_cvx.formulations.qp.step_qp`), without scipy's constructors:
+    per cell, :func:`~wuerfel_cvx.formulations.step_qp`), without scipy's constructors:
     the same numbers as ``toarray()`` of the stacked and summed sparse matrices.
     """
     n_eq, n_ineq = qp.n_equalities, qp.n_inequalities
