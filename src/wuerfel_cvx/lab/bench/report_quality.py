@@ -83,7 +83,9 @@ def accuracy_section(results: pd.DataFrame, images: dict[str, list[Path]],
              "Over the completed grid points (status ok).  Trajectory error: largest corner "
              "distance to the reference: the same formulation at dt/8 (same scene, CLARABEL "
              "at tol high, fixed tables and five rods; for peers the velocity formulation), "
-             "or the resting initial state; over the points that have a reference.  "
+             "or the initial state of a scene that starts at rest, or for one that starts "
+             "apart the state after its settling time (from then on); over the points that "
+             "have a reference.  "
              "Energy gain: largest E(t) − E(0); positive means the step made energy."]
     if table.empty:
         parts.append("No grid point completed.")
