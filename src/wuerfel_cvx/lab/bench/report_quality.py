@@ -120,11 +120,13 @@ def _pareto_parts(results: pd.DataFrame, images: dict[str, list[Path]],
              f"Left out: {left_out} grid points that did not complete (status not ok) or "
              "have no trajectory error (no reference).")
     caption = ("x: wall time per simulated second (s of computing per s simulated), y: "
-               "trajectory error (m), both logarithmic; lower left is better.  Thin solid "
-               "lines join one configuration across tolerance presets, dotted lines across "
-               "time steps; the black step line is the Pareto front (no other point is both "
-               "faster and more accurate).  Errors of exactly 0 are drawn on the labelled "
-               f"floor.  {shown}")
+               "trajectory error (m), both logarithmic; lower left is better.  Colour: "
+               "solver or peer engine; marker: formulation (each peer engine its own); "
+               "hollow: the `coulomb` friction model.  Thin solid lines join one "
+               "configuration across tolerance presets, dotted lines across time steps; the "
+               "black step line through ringed points is the Pareto front (no other point is "
+               "both faster and more accurate).  Errors of exactly 0 are drawn on the "
+               f"labelled floor.  {shown}")
     parts = ["### Speed against accuracy"]
     if headline:
         if headline_scene is not None:
