@@ -187,7 +187,8 @@ def test_view_holds_the_wall_and_every_bodys_path() -> None:
 
 
 def test_view_holds_a_tilted_and_a_far_table() -> None:
-    tables = (Table(center=(0.0, -0.5), size=(4.0, 1.0), angle=0.3),
+    # Each smaller than the square's view (2 m): held whole, however far.
+    tables = (Table(center=(0.0, -0.5), size=(3.0, 0.5), angle=0.3),
               Table(center=(6.0, 5.0), size=(1.0, 1.0), angle=0.7))
     scene = Scene("far", (Square(center=(0.0, 2.0)),), tables)
     trajectory = simulate(scene, steps=3)
@@ -205,6 +206,31 @@ def test_a_long_floor_fills_the_view_without_shrinking_the_bodies() -> None:
     assert x0 == pytest.approx(bodies[:, 0].min() - 0.5)
     assert x1 == pytest.approx(bodies[:, 0].max() + 0.5)
     assert y0 <= floor[:, 1].min()  # its full thickness is in view
+
+
+def test_a_deep_ground_is_cropped_to_the_margin_under_the_bodies() -> None:
+    # The card house (1.8 m tall) stands on a ground 80 m wide and 4 m deep: the view is
+    # the house and its margin, not two thirds ground.
+    trajectory = simulate("card-house", dt=1.0 / 60.0, steps=1)
+    (x0, x1), (y0, y1) = view_limits(trajectory, np.arange(trajectory.n_steps + 1))
+    bodies = trajectory.points.reshape(-1, 2)
+    low, high = bodies.min(axis=0), bodies.max(axis=0)
+    margin = 0.5  # at least 0.5 m, a tenth of the bodies' extent above that
+    assert (x0, x1) == (pytest.approx(low[0] - margin), pytest.approx(high[0] + margin))
+    assert (y0, y1) == (pytest.approx(low[1] - margin), pytest.approx(high[1] + margin))
+    ground = _table_corners(trajectory)
+    assert ground[:, 1].min() == pytest.approx(-4.0) and ground[:, 1].max() == pytest.approx(0.0)
+    assert (high[1] - low[1]) / (y1 - y0) > 0.6  # the house fills the frame's height
+
+
+def test_a_table_as_long_as_the_view_beside_it_is_held_whole() -> None:
+    # A 1 m square on a floor 2 m deep: the floor's part below the square's view (1.5 m)
+    # is shorter than the view (2 m), so all of it is shown; 3 m deep, it is cropped.
+    for depth, whole in ((2.0, True), (3.0, False)):
+        floor = Table(center=(0.0, -depth / 2), size=(3.0, depth))
+        trajectory = simulate(Scene("floor", (Square(center=(0.0, 0.5)),), (floor,)), steps=1)
+        (_, _), (y0, _) = view_limits(trajectory, np.arange(trajectory.n_steps + 1))
+        assert y0 == (pytest.approx(-depth - 0.1) if whole else pytest.approx(-0.5))
 
 
 # -------------------------------------------------------------------- GIFs

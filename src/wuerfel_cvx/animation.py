@@ -4,7 +4,8 @@ A frame shows the moving bodies as polygons, the tables filled, the *active cont
 (corners within :data:`CONTACT_MARGIN` of a foreign body's edge, found by the package's
 own contact search :func:`~wuerfel_cvx.step.contacts.find_contacts`) as dots, and the time and
 step in a band above the axes.  Axes are in metres with equal aspect, fixed over an
-animation, and hold every body and table (:func:`view_limits`).
+animation, and frame the bodies with a margin and the tables near them, cropping a table
+much larger than the bodies (:func:`view_limits`).
 
 A long trajectory is subsampled: frames are taken at ``fps`` frames per second of
 simulated time (nearest stored state) and at most ``max_frames`` of them, so an
@@ -169,20 +170,24 @@ class Frame:
         self.label.set_text(f"t = {self.trajectory.times[index]:.3f} s   step {index}")
 
 
-LONG_TABLE = 5.0
-"""A table longer along x (or y) than this many times the bodies' view (their extent and
-margin) is a floor (or wall) running on: the view holds only its part near them."""
+LONG_TABLE = 1.0
+"""Along x (or y), a table whose part outside the bodies' view (their extent and margin)
+is longer than this many times that view is cropped there: a 40 m floor under a 1 m
+square, or the card house's ground, 4 m deep under a 1.8 m house.  The view then holds
+the bodies, with the table's part next to them, and reaches the table's nearest end if
+it lies wholly beside them."""
 
 Limits = tuple[tuple[float, float], tuple[float, float]]
 
 
 def view_limits(trajectory: Trajectory, indices: IntArray) -> Limits:
-    """Limits (m) of x and y that hold the bodies of the shown states and the tables.
+    """Limits (m) of x and y that hold the bodies of the shown states and the tables near them.
 
     The bodies of every state in ``indices`` are inside with a margin (at least 0.5 m), and
-    every table with a fifth of it, except along an axis where a table is longer than
-    :data:`LONG_TABLE` times the bodies' view (a 40 m floor under a 1 m square): there the
-    view holds the bodies, and reaches the table's nearest end if it lies beside them.
+    every table with a fifth of it, except along an axis where the table's part outside
+    the bodies' view is longer than :data:`LONG_TABLE` times that view: there the view
+    holds the bodies with their margin (which shows the table next to them), and reaches
+    the table's nearest end if it lies wholly beside them.
     """
     bodies = np.asarray(trajectory.points)[indices].reshape(-1, 2)
     tables = np.asarray(trajectory.table_points, dtype=np.float64).reshape(-1, 4, 2)
@@ -194,14 +199,16 @@ def view_limits(trajectory: Trajectory, indices: IntArray) -> Limits:
     else:
         low, high = t_low.min(axis=0), t_high.max(axis=0)
     pad = max(0.5, 0.1 * float(np.max(high - low)))
-    short = (t_high - t_low) <= LONG_TABLE * (high - low + 2 * pad)
-    # Bodies get the whole margin, tables a fifth of it: a floor's underside needs no air.
-    low = np.min(np.vstack([low - pad, np.where(short, t_low - pad / 5, np.inf)]), axis=0)
-    high = np.max(np.vstack([high + pad, np.where(short, t_high + pad / 5, -np.inf)]), axis=0)
-    # A long table wholly beside that view: the view reaches its nearest end.
-    low = np.min(np.vstack([low, np.clip(low, t_low, t_high)]), axis=0)
-    high = np.max(np.vstack([high, np.clip(high, t_low, t_high)]), axis=0)
-    return (float(low[0]), float(high[0])), (float(low[1]), float(high[1]))
+    low, high = low - pad, high + pad  # the bodies' view
+    inside = np.clip(np.minimum(t_high, high) - np.maximum(t_low, low), 0.0, None)
+    whole = (t_high - t_low) - inside <= LONG_TABLE * (high - low)  # (tables, 2)
+    # A table held whole gets a fifth of the margin: a floor's underside needs no air.
+    low_all = np.min(np.vstack([low, np.where(whole, t_low - pad / 5, np.inf)]), axis=0)
+    high_all = np.max(np.vstack([high, np.where(whole, t_high + pad / 5, -np.inf)]), axis=0)
+    # A cropped table wholly beside that view: the view reaches its nearest end.
+    low_all = np.min(np.vstack([low_all, np.clip(low, t_low, t_high)]), axis=0)
+    high_all = np.max(np.vstack([high_all, np.clip(high, t_low, t_high)]), axis=0)
+    return (float(low_all[0]), float(high_all[0])), (float(low_all[1]), float(high_all[1]))
 
 
 def draw_frame(trajectory: Trajectory, index: int, ax: Axes | None = None, *,

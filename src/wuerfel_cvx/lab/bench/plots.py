@@ -45,20 +45,25 @@ from .selection import (
 )
 from .styles import (
     FORMULATION_LINESTYLES,
+    FORMULATION_MARKERS,
     SOLVER_STYLES,
     formulation_linestyle,
+    formulation_marker,
     series_label,
+    series_style,
     solver_style,
 )
 
 __all__ = [
     "FORMULATION_LINESTYLES",
+    "FORMULATION_MARKERS",
     "PLOT_STEMS",
     "SOLVER_STYLES",
     "TOL_ORDER",
     "as_float",
     "fitted_exponent",
     "formulation_linestyle",
+    "formulation_marker",
     "headline_scene",
     "is_value",
     "log_floor",
@@ -79,6 +84,7 @@ __all__ = [
     "scaling_table",
     "series_label",
     "series_points",
+    "series_style",
     "solver_style",
     "timing_breakdown",
     "variant_labels",

@@ -11,7 +11,14 @@ from matplotlib.axes import Axes
 from matplotlib.lines import Line2D
 from matplotlib.typing import LineStyleType
 
-from .figures import many_formulations, new_figure, pairs, save_figure, solver_handles, subplot_grid
+from .figures import (
+    new_figure,
+    plain_log_ticks,
+    save_figure,
+    series_handles,
+    series_keys,
+    subplot_grid,
+)
 from .selection import (
     TOL_ORDER,
     headline_scene,
@@ -22,15 +29,20 @@ from .selection import (
     series_points,
     variant_labels,
 )
-from .styles import formulation_linestyle, solver_style
+from .styles import series_label, series_style, solver_style
+
+ZERO_LABEL_ROOM = 0.09
+"""Share of a speed/accuracy panel's decades kept below the floor line for its label."""
 
 
 def plot_pareto(results: pd.DataFrame, out_dir: str | Path, stem: str = "pareto") -> list[Path]:
     """Speed against accuracy, one panel per scene; returns the PNG and SVG paths.
 
-    x: wall time per simulated second (s/s, log), y: trajectory error (m, log).  Thin solid
-    lines join a configuration across tolerance presets, dotted ones across time steps; the
-    black step line is each panel's Pareto front.  Errors of 0 sit on the labelled floor.
+    x: wall time per simulated second (s/s, log), y: trajectory error (m, log).  Colour:
+    solver; marker: formulation; hollow: ``coulomb`` (:mod:`.styles`).  Thin solid lines
+    join a configuration across tolerance presets, dotted ones across time steps; the black
+    step line through ringed points is each panel's Pareto front.  Errors of 0 sit on the
+    labelled floor.
     """
     points = pareto_points(results)
     if points.empty:
@@ -47,6 +59,8 @@ def plot_pareto(results: pd.DataFrame, out_dir: str | Path, stem: str = "pareto"
         axis.set_title(scene, fontsize=10)
     for axis in axes:
         axis.label_outer()
+    if "zero" in drawn:
+        _room_under_floor(axes[0], floor)  # one y axis, shared by the panels
     handles = _pareto_legend(points, drawn)
     figure.legend(handles=handles, loc="outside lower center", ncols=min(6, len(handles)),
                   fontsize=8, frameon=False)
@@ -57,53 +71,80 @@ def plot_pareto(results: pd.DataFrame, out_dir: str | Path, stem: str = "pareto"
 
 def plot_pareto_headline(results: pd.DataFrame, out_dir: str | Path, scene: str | None = None,
                          stem: str = "pareto-headline") -> list[Path]:
-    """Speed against accuracy for one scene (default :func:`headline_scene`), larger."""
+    """Speed against accuracy for one scene (default :func:`headline_scene`), larger.
+
+    The legend stands right of the axes, beside the points rather than over them.
+    """
     scene = scene or headline_scene(results)
     points = pareto_points(results)
     points = points[is_value(points["scene"], scene)] if scene else points.iloc[0:0]
     if points.empty:
         return []
-    figure = new_figure(7.5, 5.2)
+    figure = new_figure(9.5, 5.2)
     axis = figure.subplots()
-    drawn = _pareto_panel(axis, points, log_floor(points["trajectory_error"]))
+    floor = log_floor(points["trajectory_error"])
+    drawn = _pareto_panel(axis, points, floor)
+    if "zero" in drawn:
+        _room_under_floor(axis, floor)
     axis.set_title(f"Speed against accuracy: {scene}", fontsize=11)
-    axis.legend(handles=_pareto_legend(points, drawn), loc="best", fontsize=8)
+    figure.legend(handles=_pareto_legend(points, drawn), loc="outside right upper",
+                  fontsize=8, frameon=False)
     return save_figure(figure, Path(out_dir), stem)
 
 
 def _pareto_panel(axis: Axes, points: pd.DataFrame, floor: float) -> set[str]:
-    """Draw one panel; returns the kinds of line drawn (``tol``, ``dt``, ``front``)."""
+    """Draw one panel; returns what was drawn (lines ``tol``, ``dt``, ``front``; ``zero``)."""
     x = points["wall_time_per_simulated_second"].to_numpy(dtype=float)
     y = np.maximum(points["trajectory_error"].to_numpy(dtype=float), floor)
     plotted = points.assign(_x=x, _y=y, _variant=variant_labels(points).to_numpy())
     drawn = _sweep_lines(axis, plotted)
-    for (formulation, solver), group in plotted.groupby(["formulation", "solver"]):
-        colour, marker = solver_style(str(solver))
-        axis.scatter(group["_x"], group["_y"], marker=marker, s=36, zorder=3,
-                     edgecolors=colour, linewidths=1.2,
-                     facecolors="none" if formulation == "seed" else colour)
+    models = plotted["friction_model"].astype(object).where(plotted["friction_model"].notna(),
+                                                            None)
+    for formulation, solver, model in series_keys(plotted):
+        group = plotted[(plotted["formulation"] == formulation) & (plotted["solver"] == solver)
+                        & (models.isna() if model is None else models.eq(model))]
+        style = series_style(solver, formulation, model)
+        axis.scatter(group["_x"], group["_y"], marker=style.marker, s=36, zorder=3,
+                     edgecolors=style.colour, linewidths=1.2, facecolors=style.face,
+                     label=series_label(solver, formulation, friction_model=model))
     front = pareto_front(x, y)
-    if len(front):
-        axis.plot(x[front], y[front], drawstyle="steps-post", color="black", linewidth=1.4,
-                  alpha=0.8, zorder=2)
+    if len(front):  # a line and rings: seen also where it runs along other lines or points
+        axis.plot(x[front], y[front], drawstyle="steps-post", color="black", linewidth=1.6,
+                  alpha=0.85, zorder=2.5)
+        axis.scatter(x[front], y[front], s=130, facecolors="none", edgecolors="black",
+                     linewidths=1.1, zorder=4, label="Pareto front")
         drawn.add("front")
-    if bool(np.any(points["trajectory_error"].to_numpy(dtype=float) <= floor)):
-        axis.axhline(floor, color="grey", linestyle=(0, (1, 2)), linewidth=0.8)
-        axis.annotate(f"error 0 (drawn at {floor:.0e} m)", (0.01, floor), fontsize=7,
-                      color="grey", xycoords=("axes fraction", "data"),
-                      xytext=(0, 3), textcoords="offset points")
     axis.set_xscale("log")
     axis.set_yscale("log")
+    if bool(np.any(points["trajectory_error"].to_numpy(dtype=float) <= floor)):
+        axis.axhline(floor, color="grey", linestyle=(0, (1, 2)), linewidth=0.8)
+        # Under the floor line (in room kept by _room_under_floor), not over its points.
+        drawn.add("zero")
+        axis.annotate(f"error 0 (drawn at {floor:.0e} m)", (0.01, floor), fontsize=7,
+                      color="grey", xycoords=("axes fraction", "data"), va="top",
+                      xytext=(0, -3), textcoords="offset points")
+    plain_log_ticks(axis)
     axis.set_xlabel("wall time per simulated second (s/s)")
     axis.set_ylabel("trajectory error (m)")
     axis.grid(True, which="major", linewidth=0.3, alpha=0.6)
     return drawn
 
 
+def _room_under_floor(axis: Axes, floor: float) -> None:
+    """Lower the y axis so that the label under the floor line has room below it.
+
+    Called once every panel sharing the axis is drawn: the limits are then final.
+    """
+    bottom, top = axis.get_ylim()
+    decades = math.log10(max(top, floor) / floor)
+    axis.set_ylim(bottom=min(bottom, floor / 10.0 ** max(0.1, ZERO_LABEL_ROOM * decades)),
+                  top=top)
+
+
 def _sweep_lines(axis: Axes, plotted: pd.DataFrame) -> set[str]:
     """Join configurations across tolerances and across time steps; returns which were."""
     drawn: set[str] = set()
-    base = ["formulation", "solver", "_variant"]
+    base = ["formulation", "solver", "_variant"]  # a friction model is a variant
     sweeps = ((["dt", *base], "tol", "-"), (["tol", *base], "dt", ":"))
     for keys, along, style in sweeps:
         for _, group in plotted.groupby(keys, dropna=False):
@@ -119,20 +160,22 @@ def _sweep_lines(axis: Axes, plotted: pd.DataFrame) -> set[str]:
     return drawn
 
 
-_PARETO_LINES: dict[str, tuple[str, float, LineStyleType, str]] = {
-    "tol": ("grey", 0.9, "-", "across tol presets"),
-    "dt": ("grey", 0.9, ":", "across dt"),
-    "front": ("black", 1.4, "-", "Pareto front"),
+_PARETO_LINES: dict[str, tuple[str, float, LineStyleType, str, str]] = {
+    "tol": ("grey", 0.9, "-", "", "across tol presets"),
+    "dt": ("grey", 0.9, ":", "", "across dt"),
+    "front": ("black", 1.6, "-", "o", "Pareto front"),
 }
-"""Colour, width, style and legend text of each kind of line in the speed/accuracy plots."""
+"""Colour, width, style, marker and legend text of each kind of line in the speed/accuracy
+plots (the front's points are ringed)."""
 
 
 def _pareto_legend(points: pd.DataFrame, drawn: set[str]) -> list[Line2D]:
-    """Entries for the solvers of ``points`` and for the kinds of line ``drawn``."""
-    handles = solver_handles(pairs(points), many_formulations(points), lines=False)
+    """Entries for the series of ``points`` and for the kinds of line ``drawn``."""
+    handles = series_handles(points, lines=False)
     return handles + [Line2D([], [], color=colour, linewidth=width, linestyle=style,
+                             marker=marker, markersize=10, markerfacecolor="none",
                              label=label)
-                      for kind, (colour, width, style, label) in _PARETO_LINES.items()
+                      for kind, (colour, width, style, marker, label) in _PARETO_LINES.items()
                       if kind in drawn]
 
 
@@ -171,8 +214,8 @@ def plot_drift_penetration(results: pd.DataFrame, series_dir: str | Path, out_di
     for axis in axes[-1]:
         axis.set_xlabel("time (s)")
     dt = float(rows["dt"].iloc[0])
-    figure.legend(handles=solver_handles(pairs(rows), many_formulations(rows), lines=True),
-                  loc="outside lower center", ncols=6, fontsize=8, frameon=False)
+    figure.legend(handles=series_handles(rows, lines=True), loc="outside lower center",
+                  ncols=6, fontsize=8, frameon=False)
     figure.suptitle(f"Rod drift and penetration over time (tol default, dt = {dt:g} s)",
                     fontsize=11)
     return save_figure(figure, Path(out_dir), stem)
@@ -194,13 +237,14 @@ def _series_panel(axis: Axes, rows: pd.DataFrame, frames: dict[str, pd.DataFrame
         frame = frames[str(row.point_id)]
         values = frame[metric].to_numpy(dtype=float)
         clipped |= bool(np.any(values <= floor))
-        colour, marker = solver_style(str(row.solver))
+        model = row.friction_model if isinstance(row.friction_model, str) else None
+        style = series_style(str(row.solver), str(row.formulation), model)
         axis.plot(frame["time_s"].to_numpy(dtype=float), np.maximum(values, floor),
-                  color=colour, linestyle=formulation_linestyle(str(row.formulation)),
-                  linewidth=1.2, marker=marker, markersize=4,
-                  markevery=max(1, len(values) // 6),
-                  markerfacecolor="none" if row.formulation == "seed" else colour)
+                  color=style.colour, linestyle=style.linestyle, linewidth=1.2,
+                  marker=style.marker, markersize=4, markevery=max(1, len(values) // 6),
+                  markerfacecolor=style.face)
     axis.set_yscale("log")
+    plain_log_ticks(axis)
     axis.grid(True, linewidth=0.3, alpha=0.6)
     if clipped:
         axis.axhline(floor, color="grey", linestyle=(0, (1, 2)), linewidth=0.8)

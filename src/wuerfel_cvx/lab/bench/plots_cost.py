@@ -11,7 +11,7 @@ from matplotlib.axes import Axes
 from matplotlib.patches import Patch
 from matplotlib.ticker import FuncFormatter
 
-from .figures import new_figure, save_figure
+from .figures import new_figure, plain_log_ticks, save_figure
 from .selection import (
     as_float,
     fitted_exponent,
@@ -19,16 +19,16 @@ from .selection import (
     scaling_table,
     timing_breakdown,
 )
-from .styles import formulation_linestyle, series_label, solver_style
+from .styles import series_label, series_style, solver_style
 
 
 def plot_scaling(results: pd.DataFrame, out_dir: str | Path,
                  stem: str = "scaling") -> list[Path]:
     """Median wall time per step (s) against the number of squares, log-log.
 
-    One line per solver and formulation; the legend gives the fitted exponent ``k`` of
-    ``t ~ n^k`` (:func:`fitted_exponent`).  Nothing is drawn unless some line has at least
-    two distinct numbers of squares.
+    One line per solver (colour) and formulation (marker and line style); the legend,
+    below each panel, gives the fitted exponent ``k`` of ``t ~ n^k`` (:func:`fitted_exponent`).
+    Nothing is drawn unless some line has at least two distinct numbers of squares.
     """
     table = scaling_table(results)
     groups = [(key, group) for key, group in table.groupby(["family", "formulation", "solver"])
@@ -36,26 +36,27 @@ def plot_scaling(results: pd.DataFrame, out_dir: str | Path,
     families = sorted({str(key[0]) for key, _ in groups})
     if not groups:
         return []
-    figure = new_figure(6.0 * len(families), 5.0)
+    figure = new_figure(6.0 * len(families), 6.2)
     axes = np.atleast_1d(figure.subplots(1, len(families), sharey=True))
     many = table["formulation"].nunique() > 1
     for axis, family in zip(axes, families, strict=True):
         mine = [item for item in groups if item[0][0] == family]
         mine.sort(key=lambda item: (item[0][1] == "peer", item[0]))
         for (_, formulation, solver), group in mine:
-            colour, marker = solver_style(str(solver))
+            style = series_style(str(solver), str(formulation))
             exponent = fitted_exponent(group["n_squares"], group["wall_time_per_step_median"])
-            axis.plot(group["n_squares"], group["wall_time_per_step_median"], color=colour,
-                      marker=marker, linestyle=formulation_linestyle(str(formulation)),
+            axis.plot(group["n_squares"], group["wall_time_per_step_median"],
+                      color=style.colour, marker=style.marker, linestyle=style.linestyle,
                       label=f"{series_label(str(solver), str(formulation), many)}: "
                             f"k = {exponent:.2f}")
         axis.set_xscale("log")
         axis.set_yscale("log")
-        axis.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+        plain_log_ticks(axis)
         axis.set_xlabel("number of squares")
         axis.set_title(f"{family}-N (fitted t ~ n^k)", fontsize=11)
         axis.grid(True, which="both", linewidth=0.3, alpha=0.5)
-        axis.legend(fontsize=8)
+        axis.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.11), ncols=2,
+                    frameon=False)  # below the panel: over no line
     axes[0].set_ylabel("median wall time per step (s)")
     return save_figure(figure, Path(out_dir), stem)
 
@@ -67,6 +68,19 @@ def _sorted_with_labels(table: pd.DataFrame) -> tuple[pd.DataFrame, list[str]]:
     labels = [series_label(s, f, many, "\n") for f, s in zip(table["formulation"],
                                                               table["solver"], strict=True)]
     return table, labels
+
+
+LONG_TICK_LABEL = 11
+"""Characters in a tick label's longest line above which the bars' labels are slanted."""
+
+
+def _bar_labels(axis: Axes, labels: list[str]) -> None:
+    """The bars' labels under them, slanted when long ones would run into each other."""
+    longest = max((len(line) for label in labels for line in label.split("\n")), default=0)
+    slanted = longest > LONG_TICK_LABEL
+    axis.set_xticks(range(len(labels)), labels, fontsize=8, rotation=30 if slanted else 0,
+                    ha="right" if slanted else "center",
+                    rotation_mode="anchor" if slanted else "default")
 
 
 def plot_success_rates(results: pd.DataFrame, out_dir: str | Path,
@@ -95,7 +109,7 @@ def plot_success_rates(results: pd.DataFrame, out_dir: str | Path,
         else:
             _rate_bar(axis, position + width / 2, width, verified, colour, "///",
                       f"{row.verified}/{row.checked}")
-    axis.set_xticks(positions, labels, fontsize=8)
+    _bar_labels(axis, labels)
     axis.set_xlim(-0.7, len(labels) - 0.3)
     axis.set_ylim(0, 1.3)
     axis.set_yticks(np.linspace(0.0, 1.0, 6))
@@ -185,7 +199,7 @@ def plot_timing_breakdown(results: pd.DataFrame, out_dir: str | Path,
         axis.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
         axis.yaxis.set_minor_formatter(FuncFormatter(  # 2 and 5 of each decade
             lambda value, _: f"{value:g}" if f"{value:.0e}"[0] in "25" else ""))
-    axis.set_xticks(range(len(labels)), labels, fontsize=8)
+    _bar_labels(axis, labels)
     axis.set_ylabel("median time per step (ms)" + (", log scale" if peers else ""))
     axis.legend(handles=[patch for kind, patches in _TIMING_LEGEND.items() if kind in kinds
                          for patch in patches], fontsize=8, loc="upper left",

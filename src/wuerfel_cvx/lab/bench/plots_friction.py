@@ -15,7 +15,7 @@ import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.lines import Line2D
 
-from .figures import new_figure, save_figure
+from .figures import new_figure, plain_log_ticks, save_figure
 from .selection import is_value, log_floor
 from .styles import solver_style
 
@@ -85,6 +85,7 @@ def _criterion_panel(axis: Axes, points: pd.DataFrame, column: str,
     top = max([floor, *values[np.isfinite(values)]])
     axis.set_ylim(floor / 3.0, top * 10.0)  # a decade of room, also when every value is 0
     axis.set_yscale("log")
+    plain_log_ticks(axis)
     axis.set_xticks(range(len(solvers)), solvers, fontsize=8)
     axis.set_xlim(-0.6, len(solvers) - 0.4)
     axis.grid(True, axis="y", which="major", linewidth=0.3, alpha=0.5)

@@ -67,9 +67,11 @@ def friction_section(results: pd.DataFrame, images: dict[str, list[Path]],
                   "(filled: ccp, hollow: coulomb); logarithmic axis, exact zeros on the "
                   "dotted floor line."]
     parts += ["### Each grid point with friction",
-              "*Moved / error*: for a resting scene (reference *rest*) the largest corner "
-              "distance from the start; otherwise the distance to the same formulation "
-              "and friction model at dt/8 (*dt/8*).", _point_table(rows)]
+              "*Moved / error*: for a scene that starts at rest (reference *rest*) the "
+              "largest corner distance from the start; for one that starts apart and falls "
+              "together (*settled S s*) the largest corner distance from where it was after "
+              "S s; otherwise the distance to the same formulation and friction model at "
+              "dt/8 (*dt/8*).", _point_table(rows)]
     return "\n\n".join(parts)
 
 
@@ -152,7 +154,8 @@ def _error_text(error: object, kind: object) -> str:
     if value == MISSING:
         return value
     reference = cell_text(kind)
-    return f"{value} ({reference})" if reference in ("rest", "dt/8") else value
+    named = reference in ("rest", "dt/8") or reference.startswith("settled ")
+    return f"{value} ({reference})" if named else value
 
 
 def _fraction_text(fraction: object) -> str:

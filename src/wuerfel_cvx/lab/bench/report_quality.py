@@ -83,7 +83,9 @@ def accuracy_section(results: pd.DataFrame, images: dict[str, list[Path]],
              "Over the completed grid points (status ok).  Trajectory error: largest corner "
              "distance to the reference: the same formulation at dt/8 (same scene, CLARABEL "
              "at tol high, fixed tables and five rods; for peers the velocity formulation), "
-             "or the resting initial state; over the points that have a reference.  "
+             "or the initial state of a scene that starts at rest, or for one that starts "
+             "apart the state after its settling time (from then on); over the points that "
+             "have a reference.  "
              "Energy gain: largest E(t) − E(0); positive means the step made energy."]
     if table.empty:
         parts.append("No grid point completed.")
@@ -118,11 +120,13 @@ def _pareto_parts(results: pd.DataFrame, images: dict[str, list[Path]],
              f"Left out: {left_out} grid points that did not complete (status not ok) or "
              "have no trajectory error (no reference).")
     caption = ("x: wall time per simulated second (s of computing per s simulated), y: "
-               "trajectory error (m), both logarithmic; lower left is better.  Thin solid "
-               "lines join one configuration across tolerance presets, dotted lines across "
-               "time steps; the black step line is the Pareto front (no other point is both "
-               "faster and more accurate).  Errors of exactly 0 are drawn on the labelled "
-               f"floor.  {shown}")
+               "trajectory error (m), both logarithmic; lower left is better.  Colour: "
+               "solver or peer engine; marker: formulation (each peer engine its own); "
+               "hollow: the `coulomb` friction model.  Thin solid lines join one "
+               "configuration across tolerance presets, dotted lines across time steps; the "
+               "black step line through ringed points is the Pareto front (no other point is "
+               "both faster and more accurate).  Errors of exactly 0 are drawn on the "
+               f"labelled floor.  {shown}")
     parts = ["### Speed against accuracy"]
     if headline:
         if headline_scene is not None:

@@ -230,7 +230,7 @@ def _configuration(point: GridPoint) -> dict[str, Any]:
         "solve_path": point.solve_path, "polish": point.polish,
         "solver_version": _solver_version(point.solver), **machine(),
         "finished_at": dt_module.datetime.now(dt_module.UTC).isoformat(timespec="seconds"),
-        "reference_kind": point.reference,
+        "reference_kind": point.reference_label,
     }
 
 
@@ -347,6 +347,11 @@ def _accuracy(trajectory: Trajectory, point: GridPoint,
     if point.reference == "rest":
         accuracy["trajectory_error"] = largest_corner_distance(trajectory.points,
                                                                 trajectory.points[:1])
+    elif point.reference == "settled":
+        settled = round(point.settle / point.dt)
+        if settled < len(trajectory.points):  # a run that failed before has no error
+            after = trajectory.points[settled:]
+            accuracy["trajectory_error"] = largest_corner_distance(after, after[:1])
     elif point.reference == "dt/8" and reference is not None:
         if reference.complete:
             accuracy["trajectory_error"] = largest_corner_distance(trajectory.points,

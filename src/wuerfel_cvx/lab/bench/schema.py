@@ -163,9 +163,11 @@ COLUMNS: tuple[Column, ...] = (
     _c("max_step_energy_rise", "float", "J", "largest rise of total energy in one step"),
     _c("reference_kind", "str", "",
        "'dt/8' (same scene and formulation at dt/8, tightest CLARABEL), 'rest' (the exact "
-       "solution is rest), or 'none'"),
+       "solution is the initial state: a scene that starts at rest), 'settled S s' (the state "
+       "after S s of settling: a scene that starts apart), or 'none'"),
     _c("trajectory_error", "float", "m",
-       "largest corner distance to the reference over the common instants"),
+       "largest corner distance to the reference over the common instants (for 'settled': "
+       "from the settling time on)"),
     _c("reference_disagreement", "float", "m/s",
        "largest |x - x_ref| (inf-norm) between this solver's step solution and the "
        "tightest CLARABEL's on the same step QP (m/s for velocity, m/s^2 for seed)"),

@@ -21,7 +21,8 @@ Cartesian product of its lists::
     solve_paths = ["native"]            # "native", "compiled", "declared" (wuerfel_cvx.solve.paths)
     polishing = [true]                  # false: answers as the solvers gave them (no polish)
     peers = []                          # peer engines; names unknown here are left out
-    reference = "dt/8"                  # "dt/8", "rest" or "none"
+    reference = "dt/8"                  # "dt/8", "rest", "settled" or "none"
+    settle = 0.0                        # with "settled": time (s) given to settle first
     compare_every = 1                   # steps between re-solves by the reference solver
     time_limit = 600.0                  # wall seconds per grid point before it is stopped
 
@@ -54,9 +55,12 @@ from ...solve.paths import SOLVE_PATHS
 from ...step.sleep import SleepSettings
 from ..peers import PEER_ENGINES
 
-REFERENCE_KINDS = ("dt/8", "rest", "none")
+REFERENCE_KINDS = ("dt/8", "rest", "settled", "none")
 """``dt/8``: the same scene and formulation at dt/8 with CLARABEL at ``high`` tolerance;
-``rest``: the exact solution is the initial state (resting scenes); ``none``: no reference."""
+``rest``: the exact solution is the initial state (a scene that starts at rest: every body
+supported, in equilibrium); ``settled``: the state after the grid point's ``settle``
+seconds, for a scene that starts apart and falls together (the error is how far it moves
+after settling); ``none``: no reference."""
 
 REFERENCE_REFINEMENT = 8
 """The reference runs at ``dt / REFERENCE_REFINEMENT``."""
@@ -76,14 +80,14 @@ _LIST_KEYS = {"scenes": str, "formulations": str, "solvers": str, "tols": str,
               "dts": float, "table_masses": (str, float), "extra_rods": bool,
               "sleeps": bool, "islands": bool, "friction_models": str, "peers": str,
               "solve_paths": str, "polishing": bool}
-_SCALAR_KEYS = {"duration": float, "reference": str, "compare_every": int,
+_SCALAR_KEYS = {"duration": float, "reference": str, "settle": float, "compare_every": int,
                 "time_limit": float}
 _DEFAULTS: dict[str, Any] = {
     "formulations": ["velocity"], "solvers": ["CLARABEL"], "tols": ["default"],
     "dts": [0.01], "table_masses": ["fixed"], "extra_rods": [False], "sleeps": [False],
     "islands": [False], "friction_models": [DEFAULT_FRICTION_MODEL], "peers": [],
     "solve_paths": [NATIVE], "polishing": [True],
-    "reference": "dt/8",
+    "reference": "dt/8", "settle": 0.0,
     "compare_every": 1, "time_limit": 600.0,
 }
 
@@ -127,6 +131,9 @@ class GridPoint:
     scene_file: str | None = None
     """The scene's TOML file, absolute, when ``scene`` names one: found relative to the suite
     file as the suite was read.  ``scene`` stays as the suite wrote it, in the point's id."""
+    settle: float = 0.0
+    """With reference ``settled``: the time (s) the scene is given to come to rest; the
+    trajectory error is measured from the state at that time on.  0 otherwise."""
 
     def settings(self) -> Settings:
         """The run's :class:`~wuerfel_cvx.settings.Settings` (not for a peer point)."""
@@ -172,6 +179,13 @@ class GridPoint:
         if not self.polish:
             parts.append("unpolished")
         return "|".join(parts)
+
+    @property
+    def reference_label(self) -> str:
+        """The results' ``reference_kind``: the kind, and for ``settled`` its time."""
+        if self.reference == "settled":
+            return f"settled {self.settle:g} s"
+        return self.reference
 
     @property
     def reference_key(self) -> ReferenceKey | None:
@@ -329,6 +343,7 @@ def _expand(suite: str, s: dict[str, Any], source: str, where: str,
     if s["reference"] not in REFERENCE_KINDS:
         raise InputError(f"must be one of {', '.join(REFERENCE_KINDS)}", source=source,
                          field=f"{where}.reference")
+    _check_settle(s["reference"], float(s["settle"]), float(duration), source, where)
     if not s["time_limit"] > 0:
         raise InputError("must be positive (s)", source=source, field=f"{where}.time_limit")
     if s["compare_every"] < 0:
@@ -359,9 +374,23 @@ def _expand(suite: str, s: dict[str, Any], source: str, where: str,
                           float(duration), mass, bool(rod), bool(sleep), s["reference"],
                           s["compare_every"], float(s["time_limit"]), islands=bool(islands),
                           friction_model=friction_model, solve_path=path,
-                          polish=bool(polish), scene_file=files[scene])
+                          polish=bool(polish), scene_file=files[scene],
+                          settle=float(s["settle"]))
         points.setdefault(point.point_id, point)
     return list(points.values())
+
+
+def _check_settle(reference: str, settle: float, duration: float, source: str,
+                  where: str) -> None:
+    """A ``settled`` reference needs a settling time inside the run; no other kind takes one."""
+    field = f"{where}.settle"
+    if reference == "settled":
+        if not (math.isfinite(settle) and 0 < settle < duration):
+            raise InputError(f"reference 'settled' needs 0 < settle < duration ({duration:g} s), "
+                             f"got {settle:g}", source=source, field=field)
+    elif settle != 0:
+        raise InputError(f"only with reference 'settled' (this block's is '{reference}')",
+                         source=source, field=field)
 
 
 def _scene_file(scene: str, folder: Path, source: str, field: str) -> str | None:
