@@ -190,3 +190,30 @@ def test_without_polishing_an_interior_point_answer_pushes_at_a_distance() -> No
     assert (xs[-1].max() - xs[-1].min()) - (xs[0].max() - xs[0].min()) > 1e-4
     assert (traj.metrics["polish"] == "kept").all()
     assert traj.metrics["push_gap_product_Nsm"].max() > 0.0
+
+
+def test_the_report_counts_polished_steps_and_pairs_the_runs() -> None:
+    import pandas as pd
+
+    from wuerfel_cvx.lab.bench.report_polish import polish_section
+
+    base = {"engine": "wuerfel_cvx", "status": "ok", "formulation": "velocity", "dt": 0.01,
+            "friction_model": "ccp", "tol": "low"}
+    rows = [
+        base | {"scene": "a", "solver": "OSQP", "polish": True, "polished_fraction": 1.0,
+                "steps_completed": 100, "polish_rejected_steps": 0, "polish_rejections": None,
+                "trajectory_error": 1e-12, "wall_time_per_step_median": 2e-3},
+        base | {"scene": "b", "solver": "OSQP", "polish": True, "polished_fraction": 0.5,
+                "steps_completed": 300, "polish_rejected_steps": 150,
+                "polish_rejections": "active set: 140, worse: 10",
+                "trajectory_error": 1e-9, "wall_time_per_step_median": 4e-3},
+        base | {"scene": "a", "solver": "OSQP", "polish": False, "polished_fraction": None,
+                "steps_completed": 100, "polish_rejected_steps": None,
+                "polish_rejections": None, "trajectory_error": 1e-6,
+                "wall_time_per_step_median": 1e-3},
+    ]
+    text = polish_section(pd.DataFrame(rows))
+    assert "| OSQP | low | 2 | 400 | 62.50 % | 150 | active set: 140, worse: 10 |" in text
+    # scene a ran both ways: error 1e-6 -> 1e-12 m, step 1 -> 2 ms
+    assert "| OSQP | low | 1 | 1e-06 | 1e-12 | 1 | 2 | 2.00x |" in text
+    assert polish_section(pd.DataFrame([rows[2]])) == ""

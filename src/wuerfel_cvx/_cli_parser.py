@@ -69,6 +69,9 @@ def _add_simulate_parser(commands: Commands) -> None:
                                                                 "declared"),
                      help="how the QPs reach the solver: its own API (native, the default), "
                           "a cvxpy problem compiled per structure, or one declared per step")
+    run.add_argument("--polish", action=argparse.BooleanOptionalAction, default=True,
+                     help="polish every answer on its active set (default on; --no-polish: "
+                          "the answers as the solver gave them)")
     run.add_argument("--table-mass", type=float, default=None,
                      help="the seed's heavy table: table corners as variables of this mass "
                           "(kg), held still by equalities (a larger QP; the tables do not "

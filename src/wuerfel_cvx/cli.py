@@ -89,7 +89,7 @@ def _simulate(args: argparse.Namespace) -> int:
         print(f"{PROG}: note: {note}", file=sys.stderr)
     try:
         settings = Settings(dt=args.dt, solver=args.solver, formulation=args.formulation,
-                            tol=args.tol, solve_path=args.solve_path,
+                            tol=args.tol, solve_path=args.solve_path, polish=args.polish,
                             friction_model=args.friction_model, table_mass=args.table_mass,
                             sleep=SleepSettings() if args.sleep else None,
                             islands=args.islands, fallback=tuple(args.fallback))

@@ -179,14 +179,27 @@ def _bodies_text(squares: int, boxes: int) -> str:
 
 
 def _friction_lines(info: dict[str, Any], metrics: pd.DataFrame) -> list[str]:
-    """The summary's line on the friction criteria, if any step had a contact with friction."""
-    columns = ("coulomb_violation_Ns", "dissipation_violation_J", "signorini_violation_Nsm")
-    if not set(columns) <= set(metrics.columns) or metrics[list(columns)].isna().all().all():
-        return []
-    worst = metrics[list(columns)].max()
-    return [f"friction ({info.get('friction_model')}): largest Coulomb excess "
-            f"{worst.iloc[0]:.2e} N s, dissipation gap {worst.iloc[1]:.2e} J, "
-            f"Signorini gap x impulse {worst.iloc[2]:.2e} N s m"]
+    """The summary's lines on the contact criteria: pushes at a distance, and friction's.
+
+    The push line when any step had a contact; the friction line when any step had a
+    contact with friction.
+    """
+    lines = []
+    pushes = ("signorini_violation_Nsm", "push_gap_product_Nsm")
+    if set(pushes) <= set(metrics.columns) and not metrics[list(pushes)].isna().all().all():
+        worst = metrics[list(pushes)].max()
+        outcomes = metrics["polish"].astype("string").value_counts() if "polish" in metrics \
+            else pd.Series(dtype=int)
+        polish = ", ".join(f"{count} {outcome}" for outcome, count in outcomes.items()
+                           if outcome != "asleep" and outcome)
+        lines.append(f"pushes at a distance Signorini gap x impulse {worst.iloc[0]:.2e} N s m, "
+                     f"rows {worst.iloc[1]:.2e} N s m; answers: {polish or 'none'}")
+    columns = ("coulomb_violation_Ns", "dissipation_violation_J")
+    if set(columns) <= set(metrics.columns) and not metrics[list(columns)].isna().all().all():
+        worst = metrics[list(columns)].max()
+        lines.append(f"friction ({info.get('friction_model')}): largest Coulomb excess "
+                     f"{worst.iloc[0]:.2e} N s, dissipation gap {worst.iloc[1]:.2e} J")
+    return lines
 
 
 def _coulomb_lines(metrics: pd.DataFrame) -> list[str]:

@@ -7,7 +7,8 @@ a header stamped with the machine and versions that produced the rows, time per 
 and verified rates, accuracy, the plots that have data, and every failed or errored grid
 point.  The sections are written by :mod:`~wuerfel_cvx.lab.bench.report_time`,
 :mod:`~wuerfel_cvx.lab.bench.report_quality` and :mod:`~wuerfel_cvx.lab.bench.report_friction`
-(shown when the results have friction), in the Markdown of
+(shown when the results have friction) and :mod:`~wuerfel_cvx.lab.bench.report_polish`
+(shown when some rows were polished), in the Markdown of
 :mod:`~wuerfel_cvx.lab.bench.markdown`; their public names can be imported from here.
 """
 
@@ -31,6 +32,7 @@ from .markdown import (
     markdown_table,
 )
 from .report_friction import friction_section
+from .report_polish import polish_section
 from .report_quality import (
     accuracy_section,
     accuracy_table,
@@ -119,6 +121,7 @@ def render_report(results: pd.DataFrame, suite: str, images: dict[str, list[Path
         success_section(results, images, out_dir),
         accuracy_section(results, images, out_dir, headline=headline),
         friction_section(results, images, out_dir),
+        polish_section(results),
         scaling_section(results, images, out_dir),
         failures_section(results),
         "## Appendix: columns of results.csv\n\n" + schema.describe(),

@@ -1,0 +1,99 @@
+"""The report's polish section: how often answers were polished, and what it bought.
+
+Shown when the results hold polished rows (``polish`` true, ``polished_fraction`` set):
+the share of steps whose answers were polished per solver and tolerance (weighted by the
+steps each point completed) with the reasons of the rejections, and, where the same points
+ran unpolished too, the trajectory error and the whole step's time with and without.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .markdown import format_ms, format_number, markdown_table
+
+CONFIGURATION = ["scene", "formulation", "solver", "tol", "dt", "friction_model"]
+"""The columns that identify a point apart from its polish."""
+
+
+def polish_section(results: pd.DataFrame) -> str:
+    """The Markdown section; ``""`` when no row was polished."""
+    if "polish" not in results.columns or "polished_fraction" not in results.columns:
+        return ""
+    ours = results[results["engine"].eq("wuerfel_cvx") & results["status"].eq("ok")]
+    polished = ours[ours["polish"].astype("boolean").fillna(False).astype(bool)]
+    if polished["polished_fraction"].dropna().empty:
+        return ""
+    parts = ["## Active-set polish", _acceptance(polished)]
+    paired = _paired(ours)
+    if len(paired):
+        parts.append(_effect(paired))
+    return "\n\n".join(parts)
+
+
+def _acceptance(polished: pd.DataFrame) -> str:
+    rows = []
+    for (solver, tol), group in polished.groupby(["solver", "tol"], sort=True):
+        steps = group["steps_completed"].astype(float)
+        share = float(np.sum(group["polished_fraction"].astype(float) * steps) / steps.sum())
+        rejected = int(group["polish_rejected_steps"].fillna(0).astype(int).sum())
+        reasons = _reasons(group["polish_rejections"])
+        rows.append([solver, tol, len(group), int(steps.sum()), f"{100 * share:.2f} %",
+                     rejected, reasons or "-"])
+    table = markdown_table(["solver", "tol", "points", "steps", "steps polished",
+                            "steps with a rejected polish", "reasons (steps)"], rows)
+    return ("Share of the steps whose answers were all polished (a step counts as polished "
+            "only if every QP it solved was), over the points that ran polished:\n\n" + table)
+
+
+def _reasons(column: pd.Series) -> str:
+    """``'active set: 12, worse: 3'`` summed over the rows' ``polish_rejections``."""
+    counts: dict[str, int] = {}
+    for cell in column.dropna().astype(str):
+        for part in cell.split(", "):
+            reason, _, count = part.rpartition(": ")
+            counts[reason] = counts.get(reason, 0) + int(count)
+    return ", ".join(f"{reason}: {count}" for reason, count in sorted(counts.items()))
+
+
+def _paired(ours: pd.DataFrame) -> pd.DataFrame:
+    """One row per configuration run both ways: its error and step time, polished and not."""
+    keys = [column for column in CONFIGURATION if column in ours.columns]
+    frame = ours.assign(polish=ours["polish"].astype("boolean").fillna(False).astype(bool),
+                        friction_model=ours["friction_model"].fillna(""))
+    values = ["trajectory_error", "wall_time_per_step_median"]
+    wide = frame.pivot_table(index=keys, columns="polish", values=values, aggfunc="first")
+    wide.columns = [f"{pair[0]}_{'polished' if pair[1] else 'raw'}" for pair in wide.columns]
+    needed = ["wall_time_per_step_median_polished", "wall_time_per_step_median_raw"]
+    if not set(needed) <= set(wide.columns):
+        return pd.DataFrame()
+    return wide.dropna(subset=needed).reset_index()
+
+
+def _effect(paired: pd.DataFrame) -> str:
+    rows = []
+    for (solver, tol), group in paired.groupby(["solver", "tol"], sort=True):
+        error_polished = _geomean(group.get("trajectory_error_polished"))
+        error_raw = _geomean(group.get("trajectory_error_raw"))
+        time_polished = float(group["wall_time_per_step_median_polished"].median())
+        time_raw = float(group["wall_time_per_step_median_raw"].median())
+        rows.append([solver, tol, len(group), format_number(error_raw),
+                     format_number(error_polished), format_ms(time_raw),
+                     format_ms(time_polished), f"{time_polished / time_raw:.2f}x"])
+    table = markdown_table(["solver", "tol", "points", "error unpolished (m)",
+                            "error polished (m)", "step unpolished (ms)", "step polished (ms)",
+                            "step time ratio"], rows)
+    return ("The same points run both ways: geometric mean of the trajectory error over the "
+            "points with a reference (errors below 1e-15 m count as 1e-15 m), and the median "
+            "over points of the median whole step:\n\n" + table)
+
+
+def _geomean(values: pd.Series | None) -> float:
+    """Geometric mean of the positive errors, floored at 1e-15 m; NaN without any."""
+    if values is None:
+        return float("nan")
+    numbers = pd.to_numeric(values, errors="coerce").dropna().to_numpy(dtype=float)
+    if not numbers.size:
+        return float("nan")
+    return float(np.exp(np.mean(np.log(np.maximum(numbers, 1e-15)))))
