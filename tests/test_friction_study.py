@@ -69,7 +69,8 @@ def test_schema_6_row_with_friction_columns_round_trips(tmp_path: Path) -> None:
 
 def test_results_of_schema_version_5_are_read_with_the_frictionless_model(
         tmp_path: Path) -> None:
-    added = {name for version in (6, 7) for name in schema.ADDED_COLUMNS[version]}
+    added = {name for version in range(6, schema.SCHEMA_VERSION + 1)
+             for name in schema.ADDED_COLUMNS[version]}
     names = [name for name in schema.COLUMN_NAMES if name not in added]
     old = tmp_path / "results.csv"
     formulations = ["velocity", "rigid", "seed", "peer"]
@@ -184,17 +185,20 @@ def test_the_runner_fills_the_friction_columns_from_the_metrics() -> None:
         assert row[name] is None, name  # ccp runs no fixed point
 
 
-def test_a_run_without_friction_measures_no_criteria() -> None:
+def test_a_run_without_friction_measures_no_friction_criteria() -> None:
+    """No friction criterion without friction; Signorini is measured in every scene."""
     for formulation, model in (("velocity", "ccp"), ("seed", None)):
         point = GridPoint("t", "resting-square", formulation, "CLARABEL", "default", 0.01,
                           0.02, reference="none")
         row = runner.run_point(point, None)
         assert row["status"] == "ok" and row["friction_model"] == model
         assert row["friction_steps"] == 0
-        assert all(row[name] is None for name in ("max_signorini_violation",
-                                                   "max_coulomb_violation",
+        assert all(row[name] is None for name in ("max_coulomb_violation",
                                                    "max_dissipation_violation",
                                                    "friction_work"))
+        # a square resting on the table: its contacts carry its weight at no gap
+        assert row["max_signorini_violation"] is not None
+        assert 0.0 <= row["max_signorini_violation"] <= 1e-12
 
 
 def test_the_coulomb_columns_are_summarised_and_empty_without_them() -> None:

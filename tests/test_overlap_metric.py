@@ -86,7 +86,8 @@ def test_results_row_has_the_overlap_depth() -> None:
 def test_results_of_schema_version_4_are_read_without_the_overlap_depth(tmp_path: Path) -> None:
     row = schema.new_row(suite="t", point_id="p", scene="stack-3", max_penetration=1e-6,
                          max_overlap_depth=2e-6)
-    since = {name for version in (5, 6, 7) for name in schema.ADDED_COLUMNS[version]}
+    since = {name for version in range(5, schema.SCHEMA_VERSION + 1)
+             for name in schema.ADDED_COLUMNS[version]}
     names = [name for name in schema.COLUMN_NAMES if name not in since]
     old = tmp_path / "results.csv"
     with old.open("w", encoding="utf-8", newline="") as handle:

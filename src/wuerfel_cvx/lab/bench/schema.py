@@ -53,7 +53,7 @@ ADDED_COLUMNS: dict[int, dict[str, Any]] = {
         "coulomb_iterations_mean": None, "coulomb_iterations_max": None,
         "coulomb_converged_fraction": None, "coulomb_unconverged_steps": None},
     7: {"solve_path": None, "call_wall_time_per_step": None, "call_over_solver_mean": None},
-    8: {"polish": False, "polished_fraction": None, "polish_rejected_steps": None,
+    8: {"polish": None, "polished_fraction": None, "polish_rejected_steps": None,
         "polish_rejections": None, "max_push_at_distance": None, "max_push_gap_product": None},
 }
 """Per schema version, the columns it added and their value in the rows of older files:
@@ -64,7 +64,8 @@ criteria and fixed-point columns are missing and its ``friction_model`` is that 
 :func:`_old_friction_model`; version 6 had no ``solve_path`` (its runs solved repeated
 structures on a direct path that no longer exists: left empty) and did not time the whole
 ``simulate`` call; version 7 did not polish (``polish`` false) nor measure pushes at a
-distance row by row."""
+distance row by row (``polish`` left empty: the plots take such rows as plain, not as the
+unpolished variant of a newer run)."""
 
 ColumnType = Literal["str", "int", "float", "bool"]
 
