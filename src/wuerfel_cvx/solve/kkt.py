@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .._sparse import selected_rows
+from .._sparse import canonical_csc, selected_rows
 from ..formulations.qp import StepQP
 from ..scenes.geometry import FloatArray
 from . import residual_kernel
@@ -56,7 +56,7 @@ large enough that a rank-deficient active set still factors."""
 REFINEMENTS = 10
 """Most iterative-refinement sweeps of a polish (OSQP's ``polish_refine_iter`` is 3)."""
 
-REPAIRS = 3
+REPAIRS = 5
 """Most corrections of the guessed active set (rows dropped for a wrong-signed multiplier,
 rows added for a violated bound) before a polish gives up."""
 
@@ -231,7 +231,8 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     answer's own error.
 
     Then the guess is repaired: tight rows whose multiplier has the wrong sign are freed,
-    violated rows made tight, and the system solved again (at most :data:`REPAIRS` times).
+    violated rows made tight, and the system solved again (at most :data:`REPAIRS` times),
+    each time from the last point, so a row made tight starts with no multiplier.
     The polished point is returned as :data:`POLISHED` only if it is feasible and
     sign-consistent to :data:`ROUND_OFF` and its residuals are no worse than ``residuals``;
     else :data:`REJECTED` with the reason.
@@ -240,11 +241,12 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
         residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
     scales = _scales(qp, x, eq_dual, ineq_dual)
     active = guess_active_set(qp, x, ineq_dual, scales)
+    x_new, y_new, z_new = x, eq_dual, ineq_dual  # each solve starts from the last point
     for _ in range(REPAIRS + 1):
-        point = _solve_on(qp, active, x, eq_dual, ineq_dual)
+        point = _solve_on(qp, active, x_new, y_new, z_new)
         if point is None:
             return _rejected("singular", qp, x, eq_dual, ineq_dual, residuals, active)
-        x_new, y_new, z_new = point
+        x_new, y_new, z_new = point  # z_new is zero off the active set
         repaired = _repaired(qp, active, x_new, z_new, scales)
         if repaired is None:
             break
@@ -292,29 +294,47 @@ def _repaired(qp: StepQP, active: ActiveSet, x: FloatArray, z: FloatArray,
                      upper=np.flatnonzero(upper).astype(np.int64))
 
 
-def reduced_kkt(qp: StepQP, active: ActiveSet) -> tuple[sp.csc_array, FloatArray]:
+def reduced_kkt(qp: StepQP, active: ActiveSet) -> tuple[sp.csc_matrix, FloatArray]:
     """The KKT matrix of ``qp`` with the ``active`` rows as equalities, and its right side.
 
-    ``[[P, A'], [A, 0]]`` and ``[-q; b]``, as :func:`polish` describes them.
+    ``[[P, A'], [A, 0]]`` and ``[-q; b]``, as :func:`polish` describes them.  Every diagonal
+    entry is stored (zeros included), so a regularisation only changes numbers.  Assembled
+    from its entries in one sort (scipy's block assembly costs ten times the factorization
+    on a step's small system).
     """
-    hessian = sp.diags_array(2.0 * qp.weights)
+    n = qp.n_variables
     gradient_at_zero = -2.0 * qp.weights * qp.target
+    h_row: np.ndarray
+    h_col: np.ndarray
     if qp.cost_factor is not None and qp.n_cost_rows:
         coupling = 2.0 * (qp.cost_factor.T @ qp.cost_factor)
-        hessian = hessian + coupling
+        hessian = sp.coo_array(sp.diags_array(2.0 * qp.weights) + coupling)
+        h_row, h_col = hessian.row.astype(np.int64), hessian.col.astype(np.int64)
+        h_val = hessian.data
         gradient_at_zero = gradient_at_zero - coupling @ qp.target
+    else:
+        h_row = h_col = np.arange(n)
+        h_val = 2.0 * qp.weights
     if qp.linear is not None:
         gradient_at_zero = gradient_at_zero + qp.linear
-    # conversions by their own methods, not by format name: scipy's asformat builds the
-    # method's name afresh each call, and Python's type cache keeps such names
-    rows = sp.vstack([qp.eq_matrix, selected_rows(qp.ineq_matrix, active.lower),
-                      selected_rows(qp.ineq_matrix, active.upper)]).tocsr()
+    blocks = [qp.eq_matrix, selected_rows(qp.ineq_matrix, active.lower),
+              selected_rows(qp.ineq_matrix, active.upper)]
+    a_data = np.concatenate([block.data for block in blocks])
+    a_col = np.concatenate([block.indices for block in blocks]).astype(np.int64)
+    counts = np.concatenate([np.diff(block.indptr) for block in blocks])
+    m = counts.size
+    a_row = n + np.repeat(np.arange(m), counts)
+    rows = np.concatenate([h_row, a_row, a_col, n + np.arange(m)])
+    cols = np.concatenate([h_col, a_col, a_row, n + np.arange(m)])
+    values = np.concatenate([h_val, a_data, a_data, np.zeros(m)])
+    order = np.lexsort((rows, cols))
+    indptr = np.zeros(n + m + 1, dtype=np.int64)
+    np.add.accumulate(np.bincount(cols, minlength=n + m), out=indptr[1:])
+    matrix = canonical_csc(values[order], rows[order], indptr, (n + m, n + m))
     bounds = [qp.eq_rhs, qp.ineq_rhs[active.lower]]
     if active.upper.size:
         assert qp.ineq_upper is not None
         bounds.append(qp.ineq_upper[active.upper])
-    blocks: list[list[sp.sparray | None]] = [[hessian, rows.T], [rows, None]]
-    matrix: sp.csc_array = sp.block_array(blocks).tocsc()
     return matrix, np.concatenate([-gradient_at_zero, *bounds])
 
 
@@ -348,17 +368,23 @@ def _solve_on(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,
     return best[:n], best[n:n + n_eq], z
 
 
-def _regularised_solver(matrix: sp.csc_array,
+def _regularised_solver(matrix: sp.csc_matrix,
                         n: int) -> Callable[[FloatArray], FloatArray] | None:
-    """A solve with ``matrix + diag(delta_x I_n, -delta_y I)`` (see :data:`REGULARISATION`)."""
+    """A solve with ``matrix + diag(delta_x I_n, -delta_y I)`` (see :data:`REGULARISATION`).
+
+    ``matrix`` is :func:`reduced_kkt`'s, every diagonal entry stored.
+    """
     size = matrix.shape[0]
-    diagonal = matrix.diagonal()[:n]
-    hessian_scale = float(np.max(np.abs(diagonal))) if n and np.any(diagonal) else 1.0
-    row_scale = float(np.max(np.abs(matrix[n:, :n].data))) if size > n and matrix[n:, :n].nnz \
-        else 1.0
-    shift = np.concatenate([np.full(n, REGULARISATION * hessian_scale),
-                            np.full(size - n, -REGULARISATION * row_scale**2 / hessian_scale)])
-    regularised = (matrix + sp.diags_array(shift).tocsc()).tocsc()
+    column = np.repeat(np.arange(size), np.diff(matrix.indptr))
+    diagonal = np.flatnonzero(matrix.indices == column)
+    hessian_scale = float(np.max(np.abs(matrix.data[diagonal[:n]]))) if n else 1.0
+    hessian_scale = hessian_scale or 1.0
+    coupling = (column < n) & (matrix.indices >= n)
+    row_scale = float(np.max(np.abs(matrix.data[coupling]))) if coupling.any() else 1.0
+    data = matrix.data.copy()
+    data[diagonal[:n]] += REGULARISATION * hessian_scale
+    data[diagonal[n:]] -= REGULARISATION * row_scale**2 / hessian_scale
+    regularised = canonical_csc(data, matrix.indices, matrix.indptr, matrix.shape)
     try:
         factor = spla.splu(regularised)
     except RuntimeError:  # SuperLU: "Factor is exactly singular"
