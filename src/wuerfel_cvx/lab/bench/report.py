@@ -121,7 +121,7 @@ def render_report(results: pd.DataFrame, suite: str, images: dict[str, list[Path
         success_section(results, images, out_dir),
         accuracy_section(results, images, out_dir, headline=headline),
         friction_section(results, images, out_dir),
-        polish_section(results),
+        polish_section(results, out_dir),
         scaling_section(results, images, out_dir),
         failures_section(results),
         "## Appendix: columns of results.csv\n\n" + schema.describe(),

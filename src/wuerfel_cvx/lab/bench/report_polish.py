@@ -8,17 +8,28 @@ ran unpolished too, the trajectory error and the whole step's time with and with
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
-from .markdown import format_ms, format_number, markdown_table
+from .figures import new_figure, plain_log_ticks, save_figure
+from .markdown import format_ms, format_number, image_link, markdown_table
+from .styles import solver_style
+
+TOL_MARKERS = {"low": "v", "default": "o", "high": "^"}
+"""Marker of each tolerance preset in the polish plot (others: a square)."""
 
 CONFIGURATION = ["scene", "formulation", "solver", "tol", "dt", "friction_model"]
 """The columns that identify a point apart from its polish."""
 
 
-def polish_section(results: pd.DataFrame) -> str:
-    """The Markdown section; ``""`` when no row was polished."""
+def polish_section(results: pd.DataFrame, out_dir: Path | None = None) -> str:
+    """The Markdown section; ``""`` when no row was polished.
+
+    With ``out_dir``, the plot of where polishing moves each solver and tolerance
+    (:func:`plot_polish_moves`) is drawn there and shown.
+    """
     if "polish" not in results.columns or "polished_fraction" not in results.columns:
         return ""
     ours = results[results["engine"].eq("wuerfel_cvx") & results["status"].eq("ok")]
@@ -29,7 +40,55 @@ def polish_section(results: pd.DataFrame) -> str:
     paired = _paired(ours)
     if len(paired):
         parts.append(_effect(paired))
-    return "\n\n".join(parts)
+        if out_dir is not None:
+            images = {"polish-moves": plot_polish_moves(paired, out_dir)}
+            parts.append(image_link(images, "polish-moves", out_dir,
+                                    "error against step time, unpolished to polished"))
+    return "\n\n".join(part for part in parts if part)
+
+
+def _summary(paired: pd.DataFrame) -> pd.DataFrame:
+    """Per solver and tolerance: geometric-mean error and median step time, both ways."""
+    rows = []
+    for (solver, tol), group in paired.groupby(["solver", "tol"], sort=True):
+        rows.append({"solver": solver, "tol": tol, "points": len(group),
+                     "error_raw": _geomean(group.get("trajectory_error_raw")),
+                     "error_polished": _geomean(group.get("trajectory_error_polished")),
+                     "time_raw": float(group["wall_time_per_step_median_raw"].median()),
+                     "time_polished": float(
+                         group["wall_time_per_step_median_polished"].median())})
+    return pd.DataFrame(rows)
+
+
+def plot_polish_moves(paired: pd.DataFrame, out_dir: Path) -> list[Path]:
+    """Error against step time per solver and tolerance: an arrow from unpolished to polished.
+
+    Hollow markers unpolished, filled polished; colour the solver, marker the tolerance.
+    Only points with a reference (a finite error) are drawn; ``[]`` when none has one.
+    """
+    summary = _summary(paired).dropna(subset=["error_raw", "error_polished"])
+    if summary.empty:
+        return []
+    figure = new_figure(7.0, 4.8)
+    axes = figure.add_subplot()
+    for row in summary.to_dict("records"):
+        colour, _ = solver_style(str(row["solver"]))
+        marker = TOL_MARKERS.get(str(row["tol"]), "s")
+        start = (1e3 * float(row["time_raw"]), float(row["error_raw"]))
+        end = (1e3 * float(row["time_polished"]), float(row["error_polished"]))
+        axes.annotate("", xy=end, xytext=start,
+                      arrowprops={"arrowstyle": "->", "color": colour, "lw": 1.2})
+        axes.plot(*start, marker=marker, color=colour, markerfacecolor="none", ls="none")
+        axes.plot(*end, marker=marker, color=colour, ls="none",
+                  label=f"{row['solver']} {row['tol']}")
+    axes.set_xscale("log")
+    axes.set_yscale("log")
+    plain_log_ticks(axes)
+    axes.set_xlabel("median whole step (ms)")
+    axes.set_ylabel("trajectory error, geometric mean over scenes (m)")
+    axes.set_title("Where polishing moves each solver and tolerance (hollow: unpolished)")
+    axes.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=8)
+    return save_figure(figure, out_dir, "polish-moves")
 
 
 def _acceptance(polished: pd.DataFrame) -> str:
@@ -72,15 +131,11 @@ def _paired(ours: pd.DataFrame) -> pd.DataFrame:
 
 
 def _effect(paired: pd.DataFrame) -> str:
-    rows = []
-    for (solver, tol), group in paired.groupby(["solver", "tol"], sort=True):
-        error_polished = _geomean(group.get("trajectory_error_polished"))
-        error_raw = _geomean(group.get("trajectory_error_raw"))
-        time_polished = float(group["wall_time_per_step_median_polished"].median())
-        time_raw = float(group["wall_time_per_step_median_raw"].median())
-        rows.append([solver, tol, len(group), format_number(error_raw),
-                     format_number(error_polished), format_ms(time_raw),
-                     format_ms(time_polished), f"{time_polished / time_raw:.2f}x"])
+    rows = [[row["solver"], row["tol"], row["points"], format_number(row["error_raw"]),
+             format_number(row["error_polished"]), format_ms(row["time_raw"]),
+             format_ms(row["time_polished"]),
+             f"{float(row['time_polished']) / float(row['time_raw']):.2f}x"]
+            for row in _summary(paired).to_dict("records")]
     table = markdown_table(["solver", "tol", "points", "error unpolished (m)",
                             "error polished (m)", "step unpolished (ms)", "step polished (ms)",
                             "step time ratio"], rows)
