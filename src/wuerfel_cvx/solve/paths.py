@@ -36,7 +36,18 @@ from .cvxpy_forms import (
     declare,
     structure_key,
 )
-from .kkt import KEPT, POLISH_OUTCOMES, Residuals, kkt_residuals, polish
+from .kkt import (
+    KEPT,
+    POLISH_OUTCOMES,
+    POLISHED,
+    REUSED,
+    ActiveSet,
+    Polish,
+    Residuals,
+    kkt_residuals,
+    polish,
+    reuse_active_set,
+)
 
 __all__ = ["SOLVED", "SOLVE_PATHS", "VERIFY_FACTOR", "Residuals", "SolvePath", "StepSolution",
            "combine_solutions", "kkt_residuals", "solve_step_qp", "solve_with_fallback"]
@@ -63,7 +74,7 @@ the step QP's numbers (:mod:`wuerfel_cvx.solve.adapters`), a cvxpy problem compi
 structure, or a cvxpy problem declared afresh per QP (:mod:`wuerfel_cvx.solve.cvxpy_forms`)."""
 
 PATH_COUNTS = ("compiled_structures", "steps_reusing_a_compiled_structure",
-               "canonicalised_qps", "native_setups", "native_updates")
+               "canonicalised_qps", "native_setups", "native_updates", "reused_active_sets")
 """What a run's :class:`SolvePath` counted (its trajectory's ``info``; ``None`` for a peer)."""
 
 INVALID_DATA = "invalid_data"
@@ -131,6 +142,31 @@ class SolvePath:
         self.native_updates = 0
         """Native solves of a structure already set up (its solver updated in place)."""
         self._adapters: OrderedDict[tuple[object, ...], Adapter] = OrderedDict()
+        self._active_sets: OrderedDict[tuple[object, ...], tuple[
+            ActiveSet, FloatArray, FloatArray, FloatArray]] = OrderedDict()
+        self.reused_active_sets = 0
+        """QPs answered on the last polished answer's active set, without a solver."""
+
+    def reuse_active_set(self, qp: StepQP) -> Polish | None:
+        """``qp``'s exact answer on its structure's last polished active set, or ``None``.
+
+        See :func:`~wuerfel_cvx.solve.kkt.reuse_active_set`.
+        """
+        remembered = self._active_sets.get(structure_key(qp))
+        if remembered is None:
+            return None
+        reused = reuse_active_set(qp, *remembered)
+        self.reused_active_sets += reused is not None
+        return reused
+
+    def remember_active_set(self, qp: StepQP, polished: Polish) -> None:
+        """Keep ``polished``'s active set and point for the next QP of ``qp``'s structure."""
+        key = structure_key(qp)
+        self._active_sets[key] = (polished.active, polished.x, polished.eq_dual,
+                                  polished.ineq_dual)
+        self._active_sets.move_to_end(key)
+        if len(self._active_sets) > self.capacity:
+            self._active_sets.popitem(last=False)
 
     def solve(self, qp: StepQP, spec: SolverSpec, options: dict[str, object],
               warm: WarmStart | None) -> tuple[Answer, str]:
@@ -173,7 +209,8 @@ class SolvePath:
         return {"compiled_structures": self.compiled.compiled,
                 "steps_reusing_a_compiled_structure": self.compiled.reused,
                 "canonicalised_qps": self.compiled.canonicalised,
-                "native_setups": self.native_setups, "native_updates": self.native_updates}
+                "native_setups": self.native_setups, "native_updates": self.native_updates,
+                "reused_active_sets": self.reused_active_sets}
 
 
 def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "default",
@@ -201,21 +238,18 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     scale, weight_scale = _checked_scales(qp, step, spec.name)
     warm_starts = path.warm_starts if spec.takes_warm_start else None
     started = time.perf_counter()
-    try:
-        seen = scaled_qp(qp, scale, weight_scale)
-        warm = None if warm_starts is None else warm_starts.guess(spec.name, seen, scale)
-        answer, taken = path.solve(seen, spec, spec.options(eps), warm)
-    except cp.error.SolverError as exc:
-        raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
-    except Exception as exc:  # a solver library raising anything is a failed step
-        raise StepFailure(step, spec.name, "exception", f"{type(exc).__name__}: {exc}") from exc
+    seen = scaled_qp(qp, scale, weight_scale)
+    answer, taken, reused = _solve_or_reuse(seen, spec, eps, path, warm_starts, scale, step,
+                                            polishing)
     wall = time.perf_counter() - started
-    outcome, reason = KEPT, ""
-    if polishing:  # in the solver's units, so a power-of-two change of units changes no bit
+    outcome, reason = (REUSED, "") if reused else (KEPT, "")
+    if polishing and not reused:  # in the solver's units: a power-of-two change of units
         polished = polish(seen, *_answer_on_qp(answer, step, spec.name, 1.0, 1.0))
         outcome, reason = polished.outcome, polished.reason
         answer = dataclasses.replace(answer, x=polished.x, eq_dual=polished.eq_dual,
                                      ineq_dual=polished.ineq_dual)
+        if outcome == POLISHED:
+            path.remember_active_set(seen, polished)
     x, eq_dual, ineq_dual = _answer_on_qp(answer, step, spec.name, scale, scale / weight_scale)
     # checked on the original QP, whatever units the solver saw
     residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
@@ -234,6 +268,29 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
                         iterations=int(answer.iterations), ineq_dual=ineq_dual, path=taken,
                         eq_dual=eq_dual, polish=outcome, polish_reason=reason,
                         polish_time=time.perf_counter() - started - wall)
+
+
+def _solve_or_reuse(seen: StepQP, spec: SolverSpec, eps: float, path: SolvePath,
+                    warm_starts: WarmStarts | None, scale: float, step: int,
+                    polishing: bool) -> tuple[Answer, str, bool]:
+    """The answer to ``seen`` (in the solver's units), the path taken, and whether reused.
+
+    Reused: with ``polishing``, the last polished answer's active set gave ``seen``'s exact
+    answer, and no solver ran.  Raises :class:`StepFailure` for a solver that raises.
+    """
+    reused = path.reuse_active_set(seen) if polishing else None
+    if reused is not None:
+        return Answer(x=reused.x, eq_dual=reused.eq_dual, ineq_dual=reused.ineq_dual,
+                      status=cp.OPTIMAL, reported_time=0.0, iterations=0,
+                      native_time=0.0), path.name, True
+    try:
+        warm = None if warm_starts is None else warm_starts.guess(spec.name, seen, scale)
+        answer, taken = path.solve(seen, spec, spec.options(eps), warm)
+    except cp.error.SolverError as exc:
+        raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
+    except Exception as exc:  # a solver library raising anything is a failed step
+        raise StepFailure(step, spec.name, "exception", f"{type(exc).__name__}: {exc}") from exc
+    return answer, taken, False
 
 
 def _answer_on_qp(answer: Answer, step: int, solver: str, scale: float,

@@ -100,10 +100,11 @@ def _acceptance(polished: pd.DataFrame) -> str:
         reasons = _reasons(group["polish_rejections"])
         rows.append([solver, tol, len(group), int(steps.sum()), f"{100 * share:.2f} %",
                      rejected, reasons or "-"])
-    table = markdown_table(["solver", "tol", "points", "steps", "steps polished",
+    table = markdown_table(["solver", "tol", "points", "steps", "steps exact",
                             "steps with a rejected polish", "reasons (steps)"], rows)
-    return ("Share of the steps whose answers were all polished (a step counts as polished "
-            "only if every QP it solved was), over the points that ran polished:\n\n" + table)
+    return ("Share of the steps whose answers were all exact: polished, or found on the last "
+            "answer's active set without a solver (a step counts only if every QP it solved "
+            "was), over the points that ran polished:\n\n" + table)
 
 
 def _reasons(column: pd.Series) -> str:

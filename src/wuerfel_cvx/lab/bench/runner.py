@@ -274,7 +274,7 @@ def _polish_summary(trajectory: Trajectory) -> dict[str, Any]:
     rejected = outcomes[outcomes.str.startswith("rejected")]
     reasons = rejected.str.extract(r"\((.*)\)", expand=False).fillna("").value_counts()
     return summary | {
-        "polished_fraction": float(outcomes.eq("polished").mean()),
+        "polished_fraction": float(outcomes.isin(["polished", "reused"]).mean()),
         "polish_rejected_steps": len(rejected),
         "polish_rejections": ", ".join(f"{reason}: {count}" for reason, count in reasons.items())
         or None}

@@ -122,8 +122,8 @@ COLUMNS: tuple[Column, ...] = (
     _c("verified", "bool", "", "the independent KKT residual check held on every step"),
     _c("verified_fraction", "float", "1", "fraction of completed steps that were verified"),
     _c("polished_fraction", "float", "1",
-       "fraction of the steps that solved a QP whose answers were all polished; empty "
-       "without polishing"),
+       "fraction of the steps that solved a QP whose answers were all polished or found on "
+       "the last answer's active set (exact either way); empty without polishing"),
     _c("polish_rejected_steps", "int", "1", "steps with a polish rejected"),
     _c("polish_rejections", "str", "",
        "why polishes were rejected: 'reason: steps', ...; empty when none was"),
