@@ -79,10 +79,10 @@ def test_large_data_are_solved_on_every_path_to_the_exact_solution(solver: str) 
                            np.flatnonzero(np.abs(lhs - wide_qp().ineq_upper) < 1e-6))
     tolerance = agreement(qp, exact)
     assert tolerance < 1e-3 * LARGE  # a test of the answer, not of its order of magnitude
-    compiled = SolvePath("compiled", compile_after=1)
+    compiled = SolvePath("compiled", compile_after=1, reuse_active_sets=False)
     solutions = [solve_step_qp(large_qp(), solver, "high", path=SolvePath("declared"))]
     solutions += [solve_step_qp(large_qp(), solver, "high", path=compiled) for _ in range(2)]
-    native = SolvePath("native")
+    native = SolvePath("native", reuse_active_sets=False)
     solutions += [solve_step_qp(large_qp(), solver, "high", path=native) for _ in range(2)]
     adapted, only = SOLVERS[solver].adapter is not None, SOLVERS[solver].native_only
     expected = (["native"] * 5 if only else

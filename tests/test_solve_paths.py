@@ -42,7 +42,8 @@ PATH_AGREEMENT = 1e-6
 @pytest.mark.parametrize("solver", GOLDEN_SOLVERS)
 def test_the_golden_run_agrees_on_every_path(solver: str) -> None:
     runs = {path: simulate(GOLDEN_RUN.scene, dt=GOLDEN_RUN.dt, steps=GOLDEN_RUN.steps,
-                           solver=solver, tol=GOLDEN_RUN.tol, solve_path=path)
+                           solver=solver, tol=GOLDEN_RUN.tol, solve_path=path,
+                           reuse_active_sets=False)  # every QP through the path
             for path in SOLVE_PATHS}
     native = runs["native"]
     assert set(native.metrics["path"]) == {"native"}
@@ -54,7 +55,8 @@ def test_the_golden_run_agrees_on_every_path(solver: str) -> None:
 
 
 def test_a_resting_stack_keeps_one_native_solver_per_structure() -> None:
-    trajectory = simulate("stack-5", dt=0.01, steps=60, solver="OSQP", formulation="rigid")
+    trajectory = simulate("stack-5", dt=0.01, steps=60, solver="OSQP", formulation="rigid",
+                          reuse_active_sets=False)  # (with it, no solver after the first step)
     info = trajectory.info
     # the stack at rest repeats one structure: set up once, then updated in place
     assert info["native_setups"] <= 3
@@ -66,7 +68,7 @@ def test_solvers_without_an_adapter_go_compiled() -> None:
     if "SCS" not in available_solvers():
         pytest.skip("SCS is not installed")
     assert SOLVERS["SCS"].adapter is None
-    trajectory = simulate("stack-3", dt=0.01, steps=5, solver="SCS")
+    trajectory = simulate("stack-3", dt=0.01, steps=5, solver="SCS", reuse_active_sets=False)
     assert list(trajectory.metrics["path"]) == ["declared"] + ["compiled"] * 4
 
 
@@ -74,7 +76,7 @@ def test_a_large_structure_is_declared_not_compiled(monkeypatch: pytest.MonkeyPa
     # cvxpy reads a sparse parameter's dense value while solving: a structure beyond the
     # limit is declared afresh on every step, with memory growing with the nonzeros
     kwargs = {"dt": 0.01, "steps": 4, "solver": "CLARABEL", "solve_path": "compiled",
-              "formulation": "rigid"}
+              "formulation": "rigid", "reuse_active_sets": False}
     compiled = simulate("field-pyramid-10", **kwargs)  # type: ignore[arg-type]
     assert "compiled" in set(compiled.metrics["path"])
     monkeypatch.setattr(compiled_module, "DENSE_ENTRY_LIMIT", 100)

@@ -149,7 +149,7 @@ def test_every_solver_on_every_path_finds_the_exact_solution(solver: str, path_n
                                                              exact: Exact) -> None:
     # three solves of one structure on one path: a cvxpy declaration, then a compiled
     # problem (compile_after=2); or a native solver set up, then updated in place
-    path = SolvePath(path_name)
+    path = SolvePath(path_name, reuse_active_sets=False)  # the solver on every call
     solutions = [solve_step_qp(wide_qp(), solver, "high", path=path) for _ in range(3)]
     spec = SOLVERS[solver]
     native = spec.adapter is not None and (path_name == "native" or spec.native_only)
@@ -168,7 +168,7 @@ def test_every_solver_on_every_path_finds_the_exact_solution(solver: str, path_n
 
 @pytest.mark.parametrize("solver", ADAPTED)
 def test_new_numbers_in_the_same_structure_are_solved_anew(solver: str) -> None:
-    path = SolvePath("native")
+    path = SolvePath("native", reuse_active_sets=False)
     solve_step_qp(wide_qp(), solver, "high", path=path)
     moved = wide_qp()
     assert moved.ineq_upper is not None
@@ -328,7 +328,7 @@ def test_a_linear_cost_is_solved_exactly_on_every_path(solver: str, path_name: s
     # one structure on the path (declared then compiled; or set up then updated in place)
     for weight_scale, scale in [(1.0, 1.0), (4.0**-7, 1.0), (1.0, 2.0**14)]:
         exact = linear_exact(weight_scale, scale)
-        path = SolvePath(path_name)
+        path = SolvePath(path_name, reuse_active_sets=False)  # the solver on every call
         for _ in range(3):
             solution = solve_step_qp(linear_qp(weight_scale, scale), solver, "high", path=path)
             case = (solution.path, weight_scale, scale)

@@ -67,6 +67,10 @@ class Settings:
     """Polish every solver's answer on its active set (:func:`wuerfel_cvx.solve.kkt.polish`):
     exact to round-off where the active set is right; the metrics column ``polish`` says
     what became of each step's answer."""
+    reuse_active_sets: bool = True
+    """With ``polish``: try each QP first on the last polished active set of its structure
+    (:func:`wuerfel_cvx.solve.kkt.reuse_active_set`), so a resting pile skips the solver;
+    off, every QP goes to the solver (to time or compare solvers)."""
 
     def __post_init__(self) -> None:
         set_field = object.__setattr__  # normalised once, on a frozen object

@@ -129,7 +129,7 @@ class SolvePath:
     """
 
     def __init__(self, name: str = NATIVE, *, warm_start: bool = True, capacity: int = 64,
-                 compile_after: int = 2):
+                 compile_after: int = 2, reuse_active_sets: bool = True):
         if name not in SOLVE_PATHS:
             raise InputError(f"unknown solve path '{name}' (one of {', '.join(SOLVE_PATHS)})",
                              field="solve_path")
@@ -144,6 +144,9 @@ class SolvePath:
         self._adapters: OrderedDict[tuple[object, ...], Adapter] = OrderedDict()
         self._active_sets: OrderedDict[tuple[object, ...], tuple[
             ActiveSet, FloatArray, FloatArray, FloatArray]] = OrderedDict()
+        self.reuse_active_sets = reuse_active_sets
+        """Whether a polished run first tries each structure's last active set
+        (:meth:`reuse_active_set`); off, every QP goes to its solver."""
         self.reused_active_sets = 0
         """QPs answered on the last polished answer's active set, without a solver."""
 
@@ -152,7 +155,8 @@ class SolvePath:
 
         See :func:`~wuerfel_cvx.solve.kkt.reuse_active_set`.
         """
-        remembered = self._active_sets.get(structure_key(qp))
+        remembered = (self._active_sets.get(structure_key(qp)) if self.reuse_active_sets
+                      else None)
         if remembered is None:
             return None
         reused = reuse_active_set(qp, *remembered)
@@ -282,7 +286,7 @@ def _solve_or_reuse(seen: StepQP, spec: SolverSpec, eps: float, path: SolvePath,
     if reused is not None:
         return Answer(x=reused.x, eq_dual=reused.eq_dual, ineq_dual=reused.ineq_dual,
                       status=cp.OPTIMAL, reported_time=0.0, iterations=0,
-                      native_time=0.0), path.name, True
+                      native_time=0.0), REUSED, True
     try:
         warm = None if warm_starts is None else warm_starts.guess(spec.name, seen, scale)
         answer, taken = path.solve(seen, spec, spec.options(eps), warm)

@@ -48,7 +48,8 @@ step; ``primary_status`` is the run's own solver's status on it, which differs o
 that solver failed and a ``fallback`` solver took over.  ``path`` is how the step's QPs
 reached the solver: ``native``, ``compiled`` or ``declared``
 (:class:`~wuerfel_cvx.solve.paths.SolvePath`; joined by ``+`` when a step's QPs went different
-ways; ``none`` when no QP was solved, ``peer`` for a peer engine).  ``passes`` is the
+ways; ``reused`` for a QP answered on its structure's last active set, no solver called;
+``none`` when no QP was solved, ``peer`` for a peer engine).  ``passes`` is the
 number of QPs solved one after another for the step (the most of any island): 1 for a
 single-pass formulation, up to ``max_passes`` for the
 closest-approach Gauss-Newton passes of ``velocity``, 0 for a step that solved none; its

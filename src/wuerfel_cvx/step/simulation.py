@@ -108,7 +108,8 @@ class Simulation:
         self.formulation = with_friction_model(get_formulation(settings.formulation),
                                                settings.friction_model, has_friction)
         friction = self.formulation.friction
-        self.path = SolvePath(settings.solve_path, warm_start=settings.warm_start)
+        self.path = SolvePath(settings.solve_path, warm_start=settings.warm_start,
+                              reuse_active_sets=settings.reuse_active_sets)
         self._coulomb = (friction is not None and friction.friction_model == "coulomb"
                          and has_friction)
         self._coulomb_warned = False  # a run warns of its first unconverged step only

@@ -166,9 +166,11 @@ def run_scenario(scenario: FaultScenario) -> FaultOutcome:
         formulation = dataclasses.replace(formulation, built=[0])
     with scenario.inject():
         try:
+            # unpolished: a polished run may answer a resting scene's QPs on the last
+            # active set without calling the solver whose faults are injected
             trajectory = simulate(scenario.scene, dt=0.01, steps=scenario.steps,
                                   solver="CLARABEL", formulation=formulation,
-                                  fallback=scenario.fallback)
+                                  fallback=scenario.fallback, polish=False)
         except StepFailure as failure:
             trajectory = failure.trajectory
             outcome = f"StepFailure: {failure}"
