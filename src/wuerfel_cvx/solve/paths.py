@@ -36,7 +36,7 @@ from .cvxpy_forms import (
     declare,
     structure_key,
 )
-from .kkt import KEPT, POLISH_OUTCOMES, Residuals, kkt_residuals, polish
+from .kkt import KEPT, POLISH_OUTCOMES, POLISHED, ActiveSet, Residuals, kkt_residuals, polish
 
 __all__ = ["SOLVED", "SOLVE_PATHS", "VERIFY_FACTOR", "Residuals", "SolvePath", "StepSolution",
            "combine_solutions", "kkt_residuals", "solve_step_qp", "solve_with_fallback"]
@@ -99,6 +99,10 @@ class StepSolution:
     """Why the polish was rejected (:attr:`wuerfel_cvx.solve.kkt.Polish.reason`), else ``""``."""
     polish_time: float = 0.0
     """Wall time (s) after the solver returned: mapping back, polish and the KKT check."""
+    active: ActiveSet | None = None
+    """The active set of the polished point (``None`` unless :attr:`polish` is
+    ``polished``): the rows whose KKT system a gradient through the step solves
+    (:mod:`wuerfel_cvx.gradients`)."""
 
 
 class SolvePath:
@@ -210,10 +214,11 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     except Exception as exc:  # a solver library raising anything is a failed step
         raise StepFailure(step, spec.name, "exception", f"{type(exc).__name__}: {exc}") from exc
     wall = time.perf_counter() - started
-    outcome, reason = KEPT, ""
+    outcome, reason, active = KEPT, "", None
     if polishing:  # in the solver's units, so a power-of-two change of units changes no bit
         polished = polish(seen, *_answer_on_qp(answer, step, spec.name, 1.0, 1.0))
         outcome, reason = polished.outcome, polished.reason
+        active = polished.active if outcome == POLISHED else None
         answer = dataclasses.replace(answer, x=polished.x, eq_dual=polished.eq_dual,
                                      ineq_dual=polished.ineq_dual)
     x, eq_dual, ineq_dual = _answer_on_qp(answer, step, spec.name, scale, scale / weight_scale)
@@ -232,7 +237,7 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
                         solver_time=spec.timing.solver_time(answer.reported_time,
                                                             answer.native_time),
                         iterations=int(answer.iterations), ineq_dual=ineq_dual, path=taken,
-                        eq_dual=eq_dual, polish=outcome, polish_reason=reason,
+                        eq_dual=eq_dual, polish=outcome, polish_reason=reason, active=active,
                         polish_time=time.perf_counter() - started - wall)
 
 
