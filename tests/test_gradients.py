@@ -251,3 +251,19 @@ def test_step_adjoint_matches_cvxpy_derivative() -> None:
     np.testing.assert_allclose(target.gradient, adjoint.target, atol=1e-4 * scale)
     np.testing.assert_allclose(rhs.gradient, dense_rhs, atol=1e-4 * scale)
     np.testing.assert_allclose(rows.gradient, dense_rows, atol=1e-4 * scale)
+
+
+def test_gravity_gradient_matches_finite_differences() -> None:
+    scene = slide_scene()
+    trajectory = run(scene, 30, "CLARABEL", gradients=True)
+    adjoint = trajectory.gradient(final_heights(trajectory.points), "gravity")["gravity"]
+    for axis in range(2):
+        values = []
+        for sign in (1.0, -1.0):
+            gravity = list(scene.gravity)
+            gravity[axis] += sign * EPS
+            points = run(dataclasses.replace(scene, gravity=tuple(gravity)), 30,
+                         "CLARABEL").points
+            values.append(float(np.sum(final_heights(points) * points)))
+        expected = (values[0] - values[1]) / (2.0 * EPS)
+        assert adjoint[axis] == pytest.approx(expected, rel=RELATIVE, abs=ABSOLUTE)
