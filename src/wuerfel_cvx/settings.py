@@ -15,6 +15,7 @@ from typing import Any
 
 from .errors import InputError
 from .formulations import FRICTION_MODELS, Formulation, get_formulation
+from .gradients.tape import check_supported
 from .solve.cvxpy_forms import NATIVE
 from .solve.paths import SOLVE_PATHS
 from .solve.registry import get_solver, tolerance_value
@@ -71,6 +72,11 @@ class Settings:
     """With ``polish``: try each QP first on the last polished active set of its structure
     (:func:`wuerfel_cvx.solve.kkt.reuse_active_set`), so a resting pile skips the solver;
     off, every QP goes to the solver (to time or compare solvers)."""
+    gradients: bool = False
+    """Record what a gradient through the run needs (each step's QP and polished answer),
+    for :meth:`Trajectory.gradient <wuerfel_cvx.trajectory.Trajectory.gradient>`; the run
+    must be one the backward pass covers (:mod:`wuerfel_cvx.gradients`: ``rigid``,
+    frictionless or ``ccp``, no islands or sleep, polishing on), else :class:`InputError`."""
 
     def __post_init__(self) -> None:
         set_field = object.__setattr__  # normalised once, on a frozen object
@@ -89,6 +95,9 @@ class Settings:
                 str(self.friction_model).strip().lower() not in FRICTION_MODELS:
             raise InputError(f"unknown friction model '{self.friction_model}' (available: "
                              f"{', '.join(FRICTION_MODELS)})", field="friction_model")
+        if self.gradients:
+            check_supported(formulation, self.friction_model, islands=self.islands,
+                            sleep=self.sleep, polish=self.polish)
         if self.table_mass is not None and not (
                 isinstance(self.table_mass, int | float) and math.isfinite(self.table_mass)
                 and self.table_mass > 0):

@@ -15,6 +15,7 @@ from .scenes.geometry import FloatArray
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
+    from .gradients.tape import GradientTape
     from .scenes.scene import Scene
     from .step.model import Model
 
@@ -43,6 +44,9 @@ class Trajectory:
     """Run settings: scene name, formulation, solver, tolerance, dt, package versions, and
     the scene itself (``scene_data``, the TOML schema of :meth:`Scene.to_dict`) with the
     model options (``table_mass``, ``extra_rod``)."""
+    tape: GradientTape | None = field(default=None, repr=False, compare=False)
+    """What a gradient through the run needs (a run with ``gradients=True``); ``None``
+    otherwise, and for a loaded trajectory (:meth:`save` does not keep it)."""
 
     @property
     def scene(self) -> Scene | None:
@@ -111,6 +115,36 @@ class Trajectory:
                    velocities=arrays["velocities"], metrics=metrics,
                    table_points=arrays.get("table_points", np.zeros((0, 2))),
                    info=json.loads(str(arrays["info"])) if "info" in arrays else {})
+
+    def gradient(self, dloss_dpoints: FloatArray,
+                 wrt: str | tuple[str, ...] | list[str]) -> dict[str, FloatArray]:
+        """The gradient of a loss of the recorded corners with respect to the run's inputs.
+
+        ``dloss_dpoints`` is shaped like :attr:`points` ``(steps + 1, 4 n, 2)``: the loss's
+        derivative with respect to every recorded corner position (zeros where the loss does
+        not look).  ``wrt`` is a name or names of ``center`` ``(n, 2)`` (m), ``angle``
+        ``(n,)`` (rad), ``velocity`` ``(n, 2)`` (m/s), ``angular_velocity`` ``(n,)``
+        (rad/s), ``friction`` ``(n,)`` (1), ``mass`` ``(n,)`` (kg), per moving body (squares
+        first, then boxes, as in the scene), and ``gravity`` ``(2,)`` (m/s^2); the initial
+        state's and the scene's values.  A body's ``friction`` is its own coefficient: a
+        contact's is ``sqrt(mu_a mu_b)``, so on a table of the same coefficient the
+        contact's derivative is twice the body's.
+
+        Returns a dict with an array per requested name and, on where the derivative is
+        one-sided: ``flagged_steps`` (1-based steps with a weakly active row, where the
+        active set may change nearby, or whose polish was rejected), ``weak_rows`` (their
+        counts) and ``crossings`` (how many steps were flagged).  Each step's active set is
+        that of its polished answer: the derivative from the side the run took.  The method
+        is :mod:`wuerfel_cvx.gradients` (backpropagation through each step's reduced KKT
+        system), which says what it covers.
+
+        Raises :class:`~wuerfel_cvx.gradients.GradientError` (an ``InputError``) for a run
+        recorded without ``gradients=True``, a step that was not verified, a bad shape or
+        an unknown name.
+        """
+        from .gradients import gradient
+
+        return gradient(self, self.tape, dloss_dpoints, wrt)
 
     def plot(self, t: float, ax: Axes | None = None) -> Axes:
         """Draw the stored state nearest to time ``t`` (s) (:func:`wuerfel_cvx.animation.plot`).

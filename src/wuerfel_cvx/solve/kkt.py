@@ -36,7 +36,7 @@ from ..scenes.geometry import FloatArray
 from . import residual_kernel
 
 __all__ = ["POLISH_OUTCOMES", "ActiveSet", "Polish", "Residuals", "guess_active_set",
-           "kkt_residuals", "polish"]
+           "kkt_residuals", "polish", "reduced_kkt", "solve_reduced"]
 
 POLISHED, KEPT, REJECTED, REUSED = "polished", "kept", "rejected", "reused"
 POLISH_OUTCOMES = (KEPT, REUSED, POLISHED, REJECTED)
@@ -342,6 +342,33 @@ def reduced_kkt(qp: StepQP, active: ActiveSet) -> tuple[sp.csc_matrix, FloatArra
         assert qp.ineq_upper is not None
         bounds.append(qp.ineq_upper[active.upper])
     return matrix, np.concatenate([-gradient_at_zero, *bounds])
+
+
+def solve_reduced(matrix: sp.csc_matrix, n: int, rhs: FloatArray) -> FloatArray | None:
+    """A solution of ``matrix @ point = rhs`` for a reduced KKT matrix (:func:`reduced_kkt`).
+
+    ``n`` unknowns lead its rows.  Factored with :func:`polish`'s quasi-definite
+    regularisation and refined against the unregularised system from zero (at most
+    :data:`REFINEMENTS` sweeps, the best kept), so a consistent right side of a
+    rank-deficient matrix (dependent tight rows) gets a solution to round-off.  ``None`` if
+    the matrix does not factor or the result is not finite.  A gradient through a step
+    solves this system with the loss's gradient (:mod:`wuerfel_cvx.gradients`).
+    """
+    solve = _regularised_solver(matrix, n)
+    if solve is None:
+        return None
+    point = np.zeros(matrix.shape[0])
+    best, best_norm = point, math.inf
+    for _ in range(REFINEMENTS):
+        residual = rhs - matrix @ point
+        norm = _inf(residual)
+        if not norm < best_norm:
+            break
+        best, best_norm = point, norm
+        if norm == 0.0:
+            break
+        point = point + solve(residual)
+    return best if np.isfinite(best).all() else None
 
 
 def _solve_on(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,

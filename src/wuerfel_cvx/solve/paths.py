@@ -110,6 +110,10 @@ class StepSolution:
     """Why the polish was rejected (:attr:`wuerfel_cvx.solve.kkt.Polish.reason`), else ``""``."""
     polish_time: float = 0.0
     """Wall time (s) after the solver returned: mapping back, polish and the KKT check."""
+    active: ActiveSet | None = None
+    """The active set of the polished point (``None`` unless :attr:`polish` is
+    ``polished``): the rows whose KKT system a gradient through the step solves
+    (:mod:`wuerfel_cvx.gradients`)."""
 
 
 class SolvePath:
@@ -244,12 +248,15 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     started = time.perf_counter()
     seen = scaled_qp(qp, scale, weight_scale)
     answer, taken, reused = _solve_or_reuse(seen, spec, eps, path, warm_starts, scale, step,
-                                            polishing)
+                                            polishing)  # reused: the active set's point
     wall = time.perf_counter() - started
-    outcome, reason = (REUSED, "") if reused else (KEPT, "")
-    if polishing and not reused:  # in the solver's units: a power-of-two change of units
+    outcome, reason, active = KEPT, "", None
+    if reused is not None:
+        outcome, active = REUSED, reused.active
+    elif polishing:  # in the solver's units: a power-of-two change of units changes no bit
         polished = polish(seen, *_answer_on_qp(answer, step, spec.name, 1.0, 1.0))
         outcome, reason = polished.outcome, polished.reason
+        active = polished.active if outcome == POLISHED else None
         answer = dataclasses.replace(answer, x=polished.x, eq_dual=polished.eq_dual,
                                      ineq_dual=polished.ineq_dual)
         if outcome == POLISHED:
@@ -270,13 +277,13 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
                         solver_time=spec.timing.solver_time(answer.reported_time,
                                                             answer.native_time),
                         iterations=int(answer.iterations), ineq_dual=ineq_dual, path=taken,
-                        eq_dual=eq_dual, polish=outcome, polish_reason=reason,
+                        eq_dual=eq_dual, polish=outcome, polish_reason=reason, active=active,
                         polish_time=time.perf_counter() - started - wall)
 
 
 def _solve_or_reuse(seen: StepQP, spec: SolverSpec, eps: float, path: SolvePath,
                     warm_starts: WarmStarts | None, scale: float, step: int,
-                    polishing: bool) -> tuple[Answer, str, bool]:
+                    polishing: bool) -> tuple[Answer, str, Polish | None]:
     """The answer to ``seen`` (in the solver's units), the path taken, and whether reused.
 
     Reused: with ``polishing``, the last polished answer's active set gave ``seen``'s exact
@@ -286,7 +293,7 @@ def _solve_or_reuse(seen: StepQP, spec: SolverSpec, eps: float, path: SolvePath,
     if reused is not None:
         return Answer(x=reused.x, eq_dual=reused.eq_dual, ineq_dual=reused.ineq_dual,
                       status=cp.OPTIMAL, reported_time=0.0, iterations=0,
-                      native_time=0.0), REUSED, True
+                      native_time=0.0), REUSED, reused
     try:
         warm = None if warm_starts is None else warm_starts.guess(spec.name, seen, scale)
         answer, taken = path.solve(seen, spec, spec.options(eps), warm)
@@ -294,7 +301,7 @@ def _solve_or_reuse(seen: StepQP, spec: SolverSpec, eps: float, path: SolvePath,
         raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
     except Exception as exc:  # a solver library raising anything is a failed step
         raise StepFailure(step, spec.name, "exception", f"{type(exc).__name__}: {exc}") from exc
-    return answer, taken, False
+    return answer, taken, None
 
 
 def _answer_on_qp(answer: Answer, step: int, solver: str, scale: float,

@@ -37,6 +37,7 @@ from ..friction.coulomb import (
     fixed_point,
 )
 from ..friction.forces import ContactForces
+from ..gradients.tape import GradientTape
 from ..scenes.scene import Scene
 from ..settings import Settings
 from ..solve.kkt import POLISH_OUTCOMES
@@ -118,6 +119,8 @@ class Simulation:
         self.state = State.initial(scene)
         self.step_index = 0
         self.contacts, self._search_time = self._search(self.state)
+        self.tape = (GradientTape(self.model, self.formulation, self.dt)
+                     if settings.gradients else None)
         self.recorder = TrajectoryRecorder.start(self.model, run_info(
             scene, settings, formulation=self.formulation,
             packages=_packages(self.solvers[0])), self.state)
@@ -167,6 +170,8 @@ class Simulation:
         coulomb_row = coulomb_columns(step, coulombs, self._coulomb,
                                       warn=not self._coulomb_warned)
         self._coulomb_warned |= coulomb_row["coulomb_converged"] is False
+        if self.tape is not None:
+            self.tape.record(step, tuple(qps), tuple(solutions))
         self._advance_to(step, state, _solved_row(qps, combined, primary_status, build_time,
                                                   step_time, most_passes)
                          | coulomb_row
@@ -179,7 +184,11 @@ class Simulation:
         info = self.recorder.info
         info["steps"] = self.step_index
         info.update(self.path.counts())
-        return self.recorder.trajectory()
+        trajectory = self.recorder.trajectory()
+        if self.tape is not None:
+            trajectory.tape = GradientTape(self.tape.model, self.tape.formulation, self.dt,
+                                           list(self.tape.steps[:trajectory.n_steps]))
+        return trajectory
 
     # ------------------------------------------------------------------ parts of a step
     def _solve_passes(self, step: int, model: Model, state: State, qp: StepQP,

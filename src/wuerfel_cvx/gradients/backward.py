@@ -1,0 +1,181 @@
+"""Backpropagation through a recorded run: a loss's gradient with respect to its inputs.
+
+For a loss ``L`` of the recorded corner positions (its gradient ``dL/dpoints`` shaped like
+:attr:`Trajectory.points <wuerfel_cvx.trajectory.Trajectory.points>`), the backward pass
+carries the adjoint of each state, per body ``(a_c, a_theta, a_u, a_omega)`` (the rigid
+coordinates of :mod:`wuerfel_cvx.gradients.rigid`), from the last state to the first:
+
+1. the loss's own part at state ``k``: ``a_c += sum_corners dL/dp``, ``a_theta += sum dL/dp .
+   rot90(r)``;
+2. through the advance of step ``k`` (``c' = c + dt u*``, ``theta' = theta + dt omega*``, ``u' =
+   u*``, ``omega' = omega*``): ``a_c`` and ``a_theta`` pass on, and ``dL/dx* = (dt a_c + a_u,
+   dt a_theta + a_omega)``;
+3. through the QP's solution (:func:`~wuerfel_cvx.gradients.adjoint.qp_adjoint`, one solve
+   with the reduced KKT matrix of the polished active set) to its numbers, and from them to
+   the state at ``k`` and the parameters: the target ``(u + dt g, omega)`` to ``a_u``,
+   ``a_omega`` and gravity, the weights to the masses, the tight rows
+   (:func:`~wuerfel_cvx.gradients.rigid.contact_rows`) to ``a_c``, ``a_theta`` and the
+   friction coefficients.
+
+At the first state ``a_c``, ``a_theta``, ``a_u``, ``a_omega`` are the gradients with respect to
+the scene's ``center``, ``angle``, ``velocity`` and ``angular_velocity``.  The cost is one
+sparse LDL-like factorisation of each step's reduced KKT matrix, about what the polish of
+the forward run paid.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..scenes.geometry import FloatArray, rot90
+from ..solve.kkt import POLISHED, REUSED, guess_active_set
+from .adjoint import gap_switch_rows, qp_adjoint, weak_rows
+from .rigid import LOCAL, contact_rows, row_contacts
+from .tape import WRT_NAMES, GradientError, GradientTape, StepTape
+
+if TYPE_CHECKING:
+    from ..trajectory import Trajectory
+
+
+def checked_names(wrt: str | tuple[str, ...] | list[str]) -> tuple[str, ...]:
+    """``wrt`` as a tuple of :data:`~wuerfel_cvx.gradients.tape.WRT_NAMES`, or an error."""
+    names = (wrt,) if isinstance(wrt, str) else tuple(wrt)
+    unknown = [name for name in names if name not in WRT_NAMES]
+    if unknown or not names:
+        raise GradientError(f"unknown gradient name(s) {unknown or '(none)'} (one or more of "
+                            f"{', '.join(WRT_NAMES)})", field="wrt")
+    return names
+
+
+class _Adjoints:
+    """The adjoint of the current state and of the parameters, per body."""
+
+    def __init__(self, n: int):
+        self.center = np.zeros((n, 2))
+        self.angle = np.zeros(n)
+        self.velocity = np.zeros((n, 2))
+        self.angular_velocity = np.zeros(n)
+        self.friction = np.zeros(n)
+        self.mass = np.zeros(n)
+        self.gravity = np.zeros(2)
+
+    def add_points(self, points: FloatArray, dloss: FloatArray) -> None:
+        """Step 1 of the module docstring: the loss's part at one state."""
+        corners = points.reshape(-1, 4, 2)
+        offsets = corners - corners.mean(axis=1)[:, None, :]
+        per_corner = dloss.reshape(-1, 4, 2)
+        self.center += per_corner.sum(axis=1)
+        self.angle += np.sum(per_corner * rot90(offsets), axis=(1, 2))
+
+
+def gradient(trajectory: Trajectory, tape: GradientTape | None, dloss_dpoints: FloatArray,
+             wrt: str | tuple[str, ...] | list[str]) -> dict[str, FloatArray]:
+    """``dL/d(wrt)`` for a loss whose gradient with respect to the recorded points is given.
+
+    Returns each requested name's array (shapes in
+    :data:`~wuerfel_cvx.gradients.tape.WRT_NAMES`) and three entries on where the derivative
+    is one-sided: ``flagged_steps`` (the 1-based steps with a weakly active row or an answer
+    whose polish was rejected, whose active set was then guessed), ``weak_rows`` (the number
+    of weakly active rows per flagged step), ``crossings`` (how many steps were flagged, a
+    0-d array) and ``gap_switch_steps`` (steps with a tight row at the switch between a
+    speculative and a Baumgarte rate, :data:`~wuerfel_cvx.gradients.adjoint.GAP_SWITCH`).
+    See :meth:`Trajectory.gradient <wuerfel_cvx.trajectory.Trajectory.gradient>`.
+    """
+    names = checked_names(wrt)
+    if tape is None:
+        raise GradientError("this trajectory was recorded without gradients: run "
+                            "simulate(..., gradients=True)")
+    dloss = np.asarray(dloss_dpoints, dtype=np.float64)
+    if dloss.shape != trajectory.points.shape:
+        raise GradientError(f"dloss_dpoints has shape {dloss.shape}, the points "
+                            f"{trajectory.points.shape}", field="dloss_dpoints")
+    if len(tape.steps) != trajectory.n_steps:
+        raise GradientError(f"the tape holds {len(tape.steps)} steps, the trajectory "
+                            f"{trajectory.n_steps}")
+    unverified = [record.step for record in tape.steps if not record.solution.verified]
+    if unverified:
+        raise GradientError(f"steps {unverified[:10]} were not verified: no gradient is taken "
+                            f"through an answer that failed its KKT check")
+    adjoints = _Adjoints(tape.model.n_boxes)
+    flagged, weak, switches = [], [], []
+    for record in reversed(tape.steps):
+        k = record.step
+        adjoints.add_points(trajectory.points[k], dloss[k])
+        count, at_switch = _step_back(tape, record, trajectory.points[k - 1], adjoints)
+        if count:
+            flagged.append(k)
+            weak.append(count)
+        if at_switch:
+            switches.append(k)
+    adjoints.add_points(trajectory.points[0], dloss[0])
+    result = {name: np.array(getattr(adjoints, name)) for name in names}
+    result["flagged_steps"] = np.array(flagged[::-1], dtype=np.int64)
+    result["weak_rows"] = np.array(weak[::-1], dtype=np.int64)
+    result["crossings"] = np.array(len(flagged))
+    result["gap_switch_steps"] = np.array(switches[::-1], dtype=np.int64)
+    return result
+
+
+def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
+               adjoints: _Adjoints) -> tuple[int, int]:
+    """Carry ``adjoints`` from the state after ``record``'s step to the state before it.
+
+    Returns how many of its rows are weakly active (at least 1 for an answer whose polish
+    was rejected, whose active set is then guessed from the answer), and how many of its
+    tight rows sit at the gap switch (:func:`~wuerfel_cvx.gradients.adjoint.gap_switch_rows`).
+    """
+    qp, solution, dt, model = record.qp, record.solution, tape.dt, tape.model
+    n = model.n_boxes
+    outputs = np.concatenate([dt * adjoints.center + adjoints.velocity,
+                              (dt * adjoints.angle + adjoints.angular_velocity)[:, None]],
+                             axis=1).ravel()
+    active = solution.active
+    guessed = solution.polish not in (POLISHED, REUSED) or active is None
+    if active is None:
+        active = guess_active_set(qp, solution.x, solution.ineq_dual)
+    adjoint = qp_adjoint(qp, solution.x, solution.ineq_dual, active, outputs, record.step)
+    target = adjoint.target.reshape(n, 3)
+    adjoints.velocity = target[:, :2].copy()
+    adjoints.angular_velocity = target[:, 2].copy()
+    adjoints.gravity += dt * target[:, :2].sum(axis=0)
+    weights = adjoint.weights.reshape(n, 3)
+    inertia_per_mass = qp.weights[2::3] / qp.weights[0::3]
+    adjoints.mass += weights[:, 0] + weights[:, 1] + weights[:, 2] * inertia_per_mass
+    if adjoint.rows.size:
+        _rows_back(tape, record, points, adjoint.rows, adjoint.row_multiplier,
+                   adjoint.row_adjoint, adjoint.unknowns_adjoint, adjoints)
+    return (weak_rows(qp, solution.x, solution.ineq_dual, active) + int(guessed),
+            gap_switch_rows(qp, active, row_contacts(qp)))
+
+
+def _rows_back(tape: GradientTape, record: StepTape, points: FloatArray, tight: np.ndarray,
+               multiplier: FloatArray, row_adjoint: FloatArray, unknowns_adjoint: FloatArray,
+               adjoints: _Adjoints) -> None:
+    """The tight rows' part: ``dL/dG_r = z_r a_x - a_nu,r x``, ``dL/dh_r = a_nu,r``."""
+    model, qp, x = tape.model, record.qp, record.solution.x
+    beta = float(getattr(tape.formulation, "beta", 0.2))
+    rows = contact_rows(model, points, qp.contacts, qp, tape.dt, beta)
+    contact = rows.contact[tight]
+    local = row_adjoint[:, None] * rows.rhs.grad[tight]
+    for bodies, entries in ((qp.contacts.edge_body[contact], rows.edge_entries),
+                            (qp.contacts.point_body[contact], rows.point_entries)):
+        moving = bodies < model.n_boxes
+        column = 3 * np.where(moving, bodies, 0)
+        for axis, entry in enumerate(entries):
+            coefficient = np.where(moving, multiplier * unknowns_adjoint[column + axis]
+                                   - row_adjoint * x[column + axis], 0.0)
+            local += coefficient[:, None] * entry.grad[tight]
+    for bodies, first, friction in (
+            (qp.contacts.edge_body[contact], 0, LOCAL.index("edge_friction")),
+            (qp.contacts.point_body[contact], 3, LOCAL.index("point_friction"))):
+        moving = np.flatnonzero(bodies < model.n_boxes)
+        body = bodies[moving]
+        np.add.at(adjoints.center, (body, 0), local[moving, first])
+        np.add.at(adjoints.center, (body, 1), local[moving, first + 1])
+        np.add.at(adjoints.angle, body, local[moving, first + 2])
+        np.add.at(adjoints.friction, body, local[moving, friction])
+
+
+__all__ = ["GradientError", "checked_names", "gradient"]
