@@ -129,3 +129,15 @@ def test_the_core_stays_small() -> None:
     core = [name for name in module_names() if not name.startswith("wuerfel_cvx.lab")]
     assert len(core) <= MAX_CORE_MODULES, (
         f"{len(core)} modules outside wuerfel_cvx.lab (at most {MAX_CORE_MODULES})")
+
+
+def test_every_package_is_installed() -> None:
+    """pyproject.toml lists the packages one by one: a new subpackage must be listed, or a
+    plain ``pip install .`` leaves it out (the README's first command then fails)."""
+    import tomllib
+
+    listed = set(tomllib.loads((SRC.parent / "pyproject.toml").read_text())["tool"][
+        "setuptools"]["packages"])
+    packages = {".".join(init.parent.relative_to(SRC).parts)
+                for init in PACKAGE.rglob("__init__.py")}
+    assert packages <= listed, sorted(packages - listed)
