@@ -133,7 +133,8 @@ def test_the_core_stays_small() -> None:
 
 def test_every_package_is_installed() -> None:
     """pyproject.toml lists the packages one by one: a new subpackage must be listed, or a
-    plain ``pip install .`` leaves it out (the README's first command then fails)."""
+    plain ``pip install .`` leaves it out (the README's first command then fails).
+    """
     import tomllib
 
     listed = set(tomllib.loads((SRC.parent / "pyproject.toml").read_text())["tool"][
