@@ -132,8 +132,10 @@ def test_the_core_stays_small() -> None:
 
 
 def test_every_package_is_installed() -> None:
-    """pyproject.toml lists the packages one by one: a new subpackage must be listed, or a
-    plain ``pip install .`` leaves it out (the README's first command then fails).
+    """Every package under ``src`` is listed in pyproject.toml.
+
+    The packages are listed one by one: a new subpackage left out of the list is left out
+    of a plain ``pip install .`` (the README's first command then fails).
     """
     import tomllib
 
