@@ -224,7 +224,8 @@ def test_a_resting_stack_reuses_its_active_set_without_a_solver() -> None:
     from wuerfel_cvx import Simulation
     from wuerfel_cvx.solve.paths import SolvePath, solve_step_qp
 
-    sim = Simulation(Scene.named("stack-10"), dt=0.01, solver="CLARABEL")
+    sim = Simulation(Scene.named("stack-10"), dt=0.01, solver="CLARABEL",
+                     reuse_active_sets=True)
     for _ in range(20):
         record = sim.step()
     metrics = sim.trajectory().metrics

@@ -68,10 +68,11 @@ class Settings:
     """Polish every solver's answer on its active set (:func:`wuerfel_cvx.solve.kkt.polish`):
     exact to round-off where the active set is right; the metrics column ``polish`` says
     what became of each step's answer."""
-    reuse_active_sets: bool = True
+    reuse_active_sets: bool = False
     """With ``polish``: try each QP first on the last polished active set of its structure
-    (:func:`wuerfel_cvx.solve.kkt.reuse_active_set`), so a resting pile skips the solver;
-    off, every QP goes to the solver (to time or compare solvers)."""
+    (:func:`wuerfel_cvx.solve.kkt.reuse_active_set`), so a resting pile skips the solver.
+    Off by default: a study of solvers wants every QP solved by its solver (and its faults,
+    iterations and times seen); on, a resting pile costs one factorization a step."""
     gradients: bool = False
     """Record what a gradient through the run needs (each step's QP and polished answer),
     for :meth:`Trajectory.gradient <wuerfel_cvx.trajectory.Trajectory.gradient>`; the run

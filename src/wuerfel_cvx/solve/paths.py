@@ -133,7 +133,7 @@ class SolvePath:
     """
 
     def __init__(self, name: str = NATIVE, *, warm_start: bool = True, capacity: int = 64,
-                 compile_after: int = 2, reuse_active_sets: bool = True):
+                 compile_after: int = 2, reuse_active_sets: bool = False):
         if name not in SOLVE_PATHS:
             raise InputError(f"unknown solve path '{name}' (one of {', '.join(SOLVE_PATHS)})",
                              field="solve_path")
