@@ -215,7 +215,7 @@ def test_the_report_counts_polished_steps_and_pairs_the_runs() -> None:
     text = polish_section(pd.DataFrame(rows))
     assert "| OSQP | low | 2 | 400 | 62.50 % | 150 | active set: 140, worse: 10 |" in text
     # scene a ran both ways: error 1e-6 -> 1e-12 m, step 1 -> 2 ms
-    assert "| OSQP | low | 1 | 1e-06 | 1e-12 | 1 | 2 | 2.00x |" in text
+    assert "|  | OSQP | low | 1 | 1e-06 | 1e-12 | 1 | 2 | 2.00x |" in text
     assert polish_section(pd.DataFrame([rows[2]])) == ""
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from matplotlib.axes import Axes
 
 from .figures import new_figure, plain_log_ticks, save_figure
 from .markdown import format_ms, format_number, image_link, markdown_table
@@ -20,7 +21,8 @@ from .styles import solver_style
 TOL_MARKERS = {"low": "v", "default": "o", "high": "^"}
 """Marker of each tolerance preset in the polish plot (others: a square)."""
 
-CONFIGURATION = ["scene", "formulation", "solver", "tol", "dt", "friction_model"]
+CONFIGURATION = ["reference_kind", "scene", "formulation", "solver", "tol", "dt",
+                 "friction_model"]
 """The columns that identify a point apart from its polish."""
 
 
@@ -48,10 +50,15 @@ def polish_section(results: pd.DataFrame, out_dir: Path | None = None) -> str:
 
 
 def _summary(paired: pd.DataFrame) -> pd.DataFrame:
-    """Per solver and tolerance: geometric-mean error and median step time, both ways."""
+    """Per reference kind, solver and tolerance: geometric-mean error and median step time,
+    both ways (errors against a ``rest`` and a ``dt/8`` reference are not averaged together).
+    """
     rows = []
-    for (solver, tol), group in paired.groupby(["solver", "tol"], sort=True):
-        rows.append({"solver": solver, "tol": tol, "points": len(group),
+    paired = paired.assign(reference_kind=paired.get("reference_kind", pd.Series(
+        "", index=paired.index)).fillna(""))
+    for (kind, solver, tol), group in paired.groupby(["reference_kind", "solver", "tol"],
+                                                    sort=True):
+        rows.append({"reference": kind, "solver": solver, "tol": tol, "points": len(group),
                      "error_raw": _geomean(group.get("trajectory_error_raw")),
                      "error_polished": _geomean(group.get("trajectory_error_polished")),
                      "time_raw": float(group["wall_time_per_step_median_raw"].median()),
@@ -69,8 +76,18 @@ def plot_polish_moves(paired: pd.DataFrame, out_dir: Path) -> list[Path]:
     summary = _summary(paired).dropna(subset=["error_raw", "error_polished"])
     if summary.empty:
         return []
-    figure = new_figure(7.0, 4.8)
-    axes = figure.add_subplot()
+    kinds = sorted(summary["reference"].unique())
+    figure = new_figure(4.2 * len(kinds) + 2.2, 4.8)
+    for index, kind in enumerate(kinds):
+        axes = figure.add_subplot(1, len(kinds), index + 1)
+        _draw_moves(axes, summary[summary["reference"] == kind], f"reference: {kind}")
+    axes.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=8)
+    figure.suptitle("Where polishing moves each solver and tolerance (hollow: unpolished)")
+    return save_figure(figure, out_dir, "polish-moves")
+
+
+def _draw_moves(axes: Axes, summary: pd.DataFrame, title: str) -> None:
+    """One panel of :func:`plot_polish_moves`."""
     for row in summary.to_dict("records"):
         colour, _ = solver_style(str(row["solver"]))
         marker = TOL_MARKERS.get(str(row["tol"]), "s")
@@ -86,9 +103,7 @@ def plot_polish_moves(paired: pd.DataFrame, out_dir: Path) -> list[Path]:
     plain_log_ticks(axes)
     axes.set_xlabel("median whole step (ms)")
     axes.set_ylabel("trajectory error, geometric mean over scenes (m)")
-    axes.set_title("Where polishing moves each solver and tolerance (hollow: unpolished)")
-    axes.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=8)
-    return save_figure(figure, out_dir, "polish-moves")
+    axes.set_title(title, fontsize=10)
 
 
 def _acceptance(polished: pd.DataFrame) -> str:
@@ -121,7 +136,9 @@ def _paired(ours: pd.DataFrame) -> pd.DataFrame:
     """One row per configuration run both ways: its error and step time, polished and not."""
     keys = [column for column in CONFIGURATION if column in ours.columns]
     frame = ours.assign(polish=ours["polish"].astype("boolean").fillna(False).astype(bool),
-                        friction_model=ours["friction_model"].fillna(""))
+                        friction_model=ours["friction_model"].fillna(""),
+                        **({"reference_kind": ours["reference_kind"].fillna("")}
+                           if "reference_kind" in ours.columns else {}))
     values = ["trajectory_error", "wall_time_per_step_median"]
     wide = frame.pivot_table(index=keys, columns="polish", values=values, aggfunc="first")
     wide.columns = [f"{pair[0]}_{'polished' if pair[1] else 'raw'}" for pair in wide.columns]
@@ -132,12 +149,13 @@ def _paired(ours: pd.DataFrame) -> pd.DataFrame:
 
 
 def _effect(paired: pd.DataFrame) -> str:
-    rows = [[row["solver"], row["tol"], row["points"], format_number(row["error_raw"]),
+    rows = [[row["reference"], row["solver"], row["tol"], row["points"],
+             format_number(row["error_raw"]),
              format_number(row["error_polished"]), format_ms(row["time_raw"]),
              format_ms(row["time_polished"]),
              f"{float(row['time_polished']) / float(row['time_raw']):.2f}x"]
             for row in _summary(paired).to_dict("records")]
-    table = markdown_table(["solver", "tol", "points", "error unpolished (m)",
+    table = markdown_table(["reference", "solver", "tol", "points", "error unpolished (m)",
                             "error polished (m)", "step unpolished (ms)", "step polished (ms)",
                             "step time ratio"], rows)
     return ("The same points run both ways: geometric mean of the trajectory error over the "
