@@ -50,8 +50,9 @@ def polish_section(results: pd.DataFrame, out_dir: Path | None = None) -> str:
 
 
 def _summary(paired: pd.DataFrame) -> pd.DataFrame:
-    """Per reference kind, solver and tolerance: geometric-mean error and median step time,
-    both ways (errors against a ``rest`` and a ``dt/8`` reference are not averaged together).
+    """Geometric-mean error and median step time, both ways, per kind, solver and tolerance.
+
+    Errors against a ``rest`` and a ``dt/8`` reference are not averaged together.
     """
     rows = []
     paired = paired.assign(reference_kind=paired.get("reference_kind", pd.Series(
