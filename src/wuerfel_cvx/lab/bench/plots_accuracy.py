@@ -104,9 +104,15 @@ def _pareto_panel(axis: Axes, points: pd.DataFrame, floor: float) -> set[str]:
         group = plotted[(plotted["formulation"] == formulation) & (plotted["solver"] == solver)
                         & (models.isna() if model is None else models.eq(model))]
         style = series_style(solver, formulation, model)
-        axis.scatter(group["_x"], group["_y"], marker=style.marker, s=36, zorder=3,
-                     edgecolors=style.colour, linewidths=1.2, facecolors=style.face,
-                     label=series_label(solver, formulation, friction_model=model))
+        raw = group["_variant"].astype(str).str.contains("unpolished")
+        for part, alpha in ((group[~raw], 1.0), (group[raw], UNPOLISHED_ALPHA)):
+            if len(part):
+                axis.scatter(part["_x"], part["_y"], marker=style.marker, s=36, zorder=3,
+                             edgecolors=style.colour, linewidths=1.2, facecolors=style.face,
+                             alpha=alpha,
+                             label=series_label(solver, formulation, friction_model=model))
+    if bool(plotted["_variant"].astype(str).str.contains("unpolished").any()):
+        drawn.add("unpolished")
     front = pareto_front(x, y)
     if len(front):  # a line and rings: seen also where it runs along other lines or points
         axis.plot(x[front], y[front], drawstyle="steps-post", color="black", linewidth=1.6,
@@ -169,9 +175,16 @@ _PARETO_LINES: dict[str, tuple[str, float, LineStyleType, str, str]] = {
 plots (the front's points are ringed)."""
 
 
+UNPOLISHED_ALPHA = 0.35
+"""Opacity of the points run without the active-set polish (their series' style, faded)."""
+
+
 def _pareto_legend(points: pd.DataFrame, drawn: set[str]) -> list[Line2D]:
     """Entries for the series of ``points`` and for the kinds of line ``drawn``."""
     handles = series_handles(points, lines=False)
+    if "unpolished" in drawn:
+        handles.append(Line2D([], [], color="grey", marker="o", linestyle="none",
+                              alpha=UNPOLISHED_ALPHA, label="unpolished (faded)"))
     return handles + [Line2D([], [], color=colour, linewidth=width, linestyle=style,
                              marker=marker, markersize=10, markerfacecolor="none",
                              label=label)
