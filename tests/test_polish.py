@@ -231,6 +231,7 @@ def test_a_resting_stack_reuses_its_active_set_without_a_solver() -> None:
     metrics = sim.trajectory().metrics
     reused = metrics["polish"].eq(REUSED)
     assert reused.iloc[1:].all() and metrics.loc[reused, "iterations"].eq(0).all()
+    assert metrics.loc[reused, "solver_time_s"].eq(0.0).all()  # no solver ran
     assert sim.trajectory().info["reused_active_sets"] == 19
     # the same QP through the solver and a polish: the same exact answer
     fresh = solve_step_qp(record.qps[0], "CLARABEL", "default", path=SolvePath())

@@ -274,8 +274,8 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
                              ineq_dual / dual_scale, scale)
     return StepSolution(x=x, solver=spec.name, status=answer.status, residuals=residuals,
                         verified=verified, solve_wall_time=wall,
-                        solver_time=spec.timing.solver_time(answer.reported_time,
-                                                            answer.native_time),
+                        solver_time=0.0 if reused is not None else spec.timing.solver_time(
+                            answer.reported_time, answer.native_time),  # reused: no solver
                         iterations=int(answer.iterations), ineq_dual=ineq_dual, path=taken,
                         eq_dual=eq_dual, polish=outcome, polish_reason=reason, active=active,
                         polish_time=time.perf_counter() - started - wall)
