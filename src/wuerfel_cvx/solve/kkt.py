@@ -251,23 +251,22 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     for _ in range(REPAIRS + 1):
         point = _solve_on(qp, active, x_new, y_new, z_new)
         if point is None:
-            return _rejected("singular", qp, x, eq_dual, ineq_dual, residuals, active)
+            return _rejected("singular", x, eq_dual, ineq_dual, residuals, active)
         x_new, y_new, z_new = point  # z_new is zero off the active set
         repaired = _repaired(qp, active, x_new, z_new, scales)
         if repaired is None:
             break
         active = repaired
     else:
-        return _rejected("active set", qp, x, eq_dual, ineq_dual, residuals, active)
+        return _rejected("active set", x, eq_dual, ineq_dual, residuals, active)
     polished = kkt_residuals(qp, x_new, y_new, z_new)
     if not polished.worst() <= max(residuals.worst(), ROUND_OFF):
-        return _rejected("worse", qp, x, eq_dual, ineq_dual, residuals, active)
+        return _rejected("worse", x, eq_dual, ineq_dual, residuals, active)
     return Polish(POLISHED, "", x_new, y_new, z_new, polished, active)
 
 
-def _rejected(reason: str, qp: StepQP, x: FloatArray, eq_dual: FloatArray,
-              ineq_dual: FloatArray, residuals: Residuals, active: ActiveSet) -> Polish:
-    del qp
+def _rejected(reason: str, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray,
+              residuals: Residuals, active: ActiveSet) -> Polish:
     return Polish(REJECTED, reason, x, eq_dual, ineq_dual, residuals, active)
 
 

@@ -259,11 +259,13 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
         active = polished.active if outcome == POLISHED else None
         answer = dataclasses.replace(answer, x=polished.x, eq_dual=polished.eq_dual,
                                      ineq_dual=polished.ineq_dual)
-        if outcome == POLISHED:
+        if outcome == POLISHED and path.reuse_active_sets:
             path.remember_active_set(seen, polished)
     x, eq_dual, ineq_dual = _answer_on_qp(answer, step, spec.name, scale, scale / weight_scale)
-    # checked on the original QP, whatever units the solver saw
-    residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
+    # checked on the original QP, whatever units the solver saw; a polish of the QP itself
+    # (ordinary data: the solver saw ``qp``) checked these very numbers already
+    same = seen is qp and polishing and reused is None
+    residuals = polished.residuals if same else kkt_residuals(qp, x, eq_dual, ineq_dual)
     verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
     if answer.status == cp.OPTIMAL_INACCURATE and not verified:
         raise StepFailure(step, spec.name, answer.status,
@@ -436,6 +438,7 @@ def combine_solutions(solutions: Sequence[StepSolution]) -> StepSolution:
     """
     if len(solutions) == 1:
         return solutions[0]
+    polish, reason = polish_of(solutions)
     statuses = [solution.status for solution in solutions]
 
     def joined(names: Sequence[str]) -> str:
@@ -452,9 +455,19 @@ def combine_solutions(solutions: Sequence[StepSolution]) -> StepSolution:
         solver_time=float(sum(solution.solver_time for solution in solutions)),
         iterations=max(solution.iterations for solution in solutions),
         path=joined([solution.path for solution in solutions]),
-        polish=max((solution.polish for solution in solutions), key=POLISH_OUTCOMES.index),
-        polish_reason=joined([s.polish_reason for s in solutions if s.polish_reason]),
+        polish=polish, polish_reason=reason,
         polish_time=sum(solution.polish_time for solution in solutions))
+
+
+def polish_of(solutions: Sequence[StepSolution]) -> tuple[str, str]:
+    """``polish`` and ``polish_reason`` of several answers taken as one.
+
+    The last of :data:`~wuerfel_cvx.solve.kkt.POLISH_OUTCOMES` any had (``rejected`` over
+    ``polished`` over ``reused`` over ``kept``), and their reasons joined by ``+``.
+    """
+    return (max((solution.polish for solution in solutions), key=POLISH_OUTCOMES.index),
+            "+".join(dict.fromkeys(solution.polish_reason for solution in solutions
+                                   if solution.polish_reason)))
 
 
 def first_failed_status(solutions: Sequence[StepSolution], primary_statuses: Sequence[str],

@@ -106,15 +106,13 @@ def push_bound(model: Model, state: State, dt: float, eps: float) -> float:
 
 
 def normal_impulses(qp: StepQP, solution: StepSolution, units: RowUnits) -> FloatArray:
-    """Each contact's normal impulse (N s) from its rows' multipliers.
+    """Each contact's normal impulse (N s) from the multipliers of a QP without friction.
 
-    With friction cones, as :meth:`~wuerfel_cvx.formulations.cone.ConeRows.impulses`; without,
-    the rows are the contacts' (one each, or for the closest-approach rows two: all rate
+    The rows are the contacts' (one each, or for the closest-approach rows two: all rate
     rows, then all approach rows), each multiplier standing for
-    ``units.impulse_per_multiplier`` of impulse.
+    ``units.impulse_per_multiplier`` of impulse.  (A QP with friction cones has its contacts'
+    :class:`~wuerfel_cvx.friction.forces.ContactForces`: :func:`ccp_forces`.)
     """
-    if qp.cones is not None:
-        return qp.cones.impulses(solution.ineq_dual)[0]
     count = len(qp.contacts)
     rows = np.arange(qp.n_inequalities) % max(count, 1)
     return np.asarray(units.impulse_per_multiplier * np.bincount(

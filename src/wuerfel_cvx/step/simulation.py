@@ -40,13 +40,13 @@ from ..friction.forces import ContactForces
 from ..gradients.tape import GradientTape
 from ..scenes.scene import Scene
 from ..settings import Settings
-from ..solve.kkt import POLISH_OUTCOMES
 from ..solve.paths import (
     Residuals,
     SolvePath,
     StepSolution,
     combine_solutions,
     first_failed_status,
+    polish_of,
     solve_with_fallback,
 )
 from ..solve.registry import SOLVERS, tolerance_value
@@ -232,6 +232,7 @@ class Simulation:
         primary = first_failed_status(solutions, [status for _, status in solved], last)
         if len(solved) == 1 and coulomb is None:  # one pass: its solution is the summary
             return qp, last, primary, 1, None
+        polish, polish_reason = polish_of(solutions)
         return qp, dataclasses.replace(
             last, solver="+".join(dict.fromkeys(s.solver for s in solutions)),
             path="+".join(dict.fromkeys(s.path for s in solutions)),
@@ -242,9 +243,7 @@ class Simulation:
                               + sum(a.solver_time for a in answers)),
             iterations=sum(s.iterations for s in solutions)
             + sum(a.iterations for a in answers),
-            polish=max((s.polish for s in solutions), key=POLISH_OUTCOMES.index),
-            polish_reason="+".join(dict.fromkeys(s.polish_reason for s in solutions
-                                                 if s.polish_reason))), primary, \
+            polish=polish, polish_reason=polish_reason), primary, \
             len(solved), coulomb
 
     def _physical_check(self, qp: StepQP, solution: StepSolution, coulomb: CoulombStep | None,
@@ -258,8 +257,8 @@ class Simulation:
         """
         units = self.formulation.row_units(self.dt)
         forces = ccp_forces(qp, solution) if coulomb is None else coulomb.forces
-        row = (contact_criteria(forces, normal_impulses(qp, solution, units), model,
-                                moved.points, qp.contacts)
+        normal = forces.normal if forces is not None else normal_impulses(qp, solution, units)
+        row = (contact_criteria(forces, normal, model, moved.points, qp.contacts)
                | row_pushes(qp, solution, units))
         bound = push_bound(model, state, self.dt, tolerance_value(self.tol))
         if solution.verified and not row["push_gap_product_Nsm"] <= bound:

@@ -81,6 +81,11 @@ def _numbers(metrics: pd.DataFrame, column: str) -> pd.Series:
     return pd.to_numeric(metrics[column], errors="coerce").astype("float64")
 
 
+def column_max(metrics: pd.DataFrame, column: str) -> float | None:
+    """The largest number of a metrics column; ``None`` if it has none (or no such column)."""
+    return _largest(_numbers(metrics, column))
+
+
 def _largest(values: pd.Series) -> float | None:
     known = values.dropna()
     return float(known.max()) if len(known) else None

@@ -32,7 +32,7 @@ from ...trajectory import Trajectory
 from ...versions import package_version
 from ..peers import peer_version, simulate_peer
 from . import schema
-from .friction_summary import friction_summary
+from .friction_summary import column_max, friction_summary
 from .suite import (
     DEFAULT_FRICTION_MODEL,
     REFERENCE_REFINEMENT,
@@ -264,11 +264,12 @@ def _polish_summary(trajectory: Trajectory) -> dict[str, Any]:
     metrics = trajectory.metrics
     if "polish" not in metrics.columns:
         return {}
-    outcomes = metrics["polish"].astype("string").dropna()
+    solved = metrics[metrics["status"].astype("string").ne(ASLEEP)]
+    outcomes = solved["polish"].astype("string").dropna()
     outcomes = outcomes[outcomes.ne("")]
     summary: dict[str, Any] = {
-        "max_push_at_distance": _largest(metrics.get("push_at_distance_Ns")),
-        "max_push_gap_product": _largest(metrics.get("push_gap_product_Nsm"))}
+        "max_push_at_distance": column_max(metrics, "push_at_distance_Ns"),
+        "max_push_gap_product": column_max(metrics, "push_gap_product_Nsm")}
     if not len(outcomes) or outcomes.eq("kept").all():
         return summary
     rejected = outcomes[outcomes.str.startswith("rejected")]
@@ -278,14 +279,6 @@ def _polish_summary(trajectory: Trajectory) -> dict[str, Any]:
         "polish_rejected_steps": len(rejected),
         "polish_rejections": ", ".join(f"{reason}: {count}" for reason, count in reasons.items())
         or None}
-
-
-def _largest(values: pd.Series | None) -> float | None:
-    """The largest number of a metrics column; ``None`` if it has none."""
-    if values is None:
-        return None
-    numbers = pd.to_numeric(values, errors="coerce").dropna()
-    return float(numbers.max()) if len(numbers) else None
 
 
 def _call_timing(trajectory: Trajectory, seconds: float) -> dict[str, Any]:
