@@ -43,12 +43,17 @@ def compiled_kernels() -> None:
 
     In a fresh environment the first process to use them compiles them (9 to 16 s); a
     Ctrl-C pressed in that window is answered after the compilation, which the 30 s bound
-    is not about.  Each formulation and the Coulomb fixed point compile their kernels here.
+    is not about.  Each formulation and the Coulomb fixed point compile their kernels here,
+    and one generated scene of the property sweep the contact search's other
+    specialisations (two more, about 3 s: once compiled in the robustness command's first
+    second, its Ctrl-C was answered after 30 s on a loaded CI run).
     """
     code = ("from wuerfel_cvx import simulate\n"
+            "from wuerfel_cvx.lab.robustness.properties import run_property_sweep\n"
             "for formulation in ('velocity', 'rigid', 'seed'):\n"
             "    simulate('stack-3', steps=2, formulation=formulation)\n"
-            "simulate('card-house', dt=1/60, steps=1, friction_model='coulomb')\n")
+            "simulate('card-house', dt=1/60, steps=1, friction_model='coulomb')\n"
+            "run_property_sweep(1, 0, steps=2)\n")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=600,
                    capture_output=True)
 
