@@ -422,7 +422,11 @@ def test_a_results_csv_with_a_wrong_header_still_lists_the_columns(tmp_path: Pat
                              r"'polish_rejected_steps', 'polish_rejections', "
                              r"'max_push_at_distance', 'max_push_gap_product', "
                              r"'call_wall_time_per_step', "
-                             r"'call_over_solver_mean', 'max_overlap_depth', 'energy_gain', "
+                             r"'call_over_solver_mean', 'search_time_per_step', "
+                             r"'build_time_per_step', 'solve_time_per_step', "
+                             r"'solver_time_per_step_mean', 'polish_time_per_step', "
+                             r"'update_time_per_step', 'record_time_per_step', "
+                             r"'outside_steps_time_per_step', 'max_overlap_depth', 'energy_gain', "
                              r"'friction_model', "):
         write_report(broken, tmp_path / "reports")
 

@@ -239,3 +239,27 @@ def test_a_native_run_follows_one_through_cvxpy(solver: str) -> None:
     # move the squares at most dt AGREEMENT farther apart
     bound = steps * 0.01 * AGREEMENT  # m
     assert float(np.max(np.abs(native.points - through_cvxpy.points))) <= bound
+
+
+@pytest.mark.parametrize("options", [{}, {"friction_model": "coulomb"},
+                                     {"sleep": SleepSettings()}],
+                         ids=["default", "coulomb", "sleep"])
+def test_a_steps_stages_add_up_to_its_wall_time(options: dict[str, object]) -> None:
+    """The lap timer gives every interval of a step to one stage.
+
+    The stages' sum is the step's time to round-off; the solver's own time and the polish
+    lie within the solve stage.
+    """
+    scene = "friction-slide" if options.get("friction_model") else "stack-3"
+    trajectory = simulate(scene, dt=0.01, steps=60, **options)  # type: ignore[arg-type]
+    m = trajectory.metrics
+    stages = m[[f"{stage}_time_s" for stage in simulation_module.STAGES]]
+    assert (stages.to_numpy() >= 0.0).all()
+    np.testing.assert_allclose(stages.sum(axis=1), m["step_time_s"], rtol=1e-12, atol=0.0)
+    solved = m[m["status"] != simulation_module.ASLEEP]
+    assert len(solved)
+    assert (solved["solver_time_s"] + solved["polish_time_s"] <= solved["solve_time_s"]).all()
+    if options.get("sleep"):
+        assert (m["status"] == simulation_module.ASLEEP).any()
+        asleep = m[m["status"] == simulation_module.ASLEEP]
+        assert (asleep[["build_time_s", "solve_time_s"]].to_numpy() == 0.0).all()

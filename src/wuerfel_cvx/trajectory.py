@@ -196,12 +196,28 @@ class Trajectory:
                 f"energy               {energy[0]:.6g} J -> {energy[-1]:.6g} J "
                 f"(largest one-step rise {np.max(np.diff(energy, prepend=energy[0])):.3e} J)",
                 f"verified steps       {int(solved['verified'].sum())}/{len(solved)}{slept}",
-                f"median build / solve {1e3 * solved['build_time_s'].median():.2f} ms / "
-                f"{1e3 * solved['solve_time_s'].median():.2f} ms per step "
-                f"(solver's own {1e3 * solved['solver_time_s'].median():.3f} ms)",
+                *_time_lines(solved),
             ]
             lines += _friction_lines(self.info, m) + _coulomb_lines(m)
         return "\n".join(lines)
+
+
+def _time_lines(solved: pd.DataFrame) -> list[str]:
+    """Where a step's time went: the mean of each stage per step (ms), and the solver's own.
+
+    Means, not medians, so that the stages add up to the whole step; a run recorded before
+    the stages were (no ``search_time_s``) shows its build and solve medians.
+    """
+    if "search_time_s" not in solved.columns:
+        return [f"median build / solve {1e3 * solved['build_time_s'].median():.2f} ms / "
+                f"{1e3 * solved['solve_time_s'].median():.2f} ms per step"]
+    stages = ("search", "build", "solve", "update", "record")
+    means = {stage: 1e3 * float(solved[f"{stage}_time_s"].mean()) for stage in stages}
+    return [f"mean step            {1e3 * float(solved['step_time_s'].mean()):.3f} ms = "
+            + " + ".join(f"{means[stage]:.3f} {stage}" for stage in stages),
+            f"solver's own         {1e3 * float(solved['solver_time_s'].mean()):.3f} ms "
+            f"(mean, within solve; polish and check "
+            f"{1e3 * float(solved['polish_time_s'].mean()):.3f} ms)"]
 
 
 def _bodies_text(squares: int, boxes: int) -> str:

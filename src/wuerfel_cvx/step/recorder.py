@@ -26,8 +26,8 @@ from .model import Model, State
 METRIC_COLUMNS = (
     "step", "time_s", "solver", "status", "primary_status", "verified", "n_variables",
     "n_equalities",
-    "n_inequalities", "n_contacts", "build_time_s", "solve_time_s", "solver_time_s",
-    "step_time_s",
+    "n_inequalities", "n_contacts", "search_time_s", "build_time_s", "solve_time_s",
+    "update_time_s", "record_time_s", "step_time_s", "solver_time_s", "polish_time_s",
     "iterations", "primal_residual", "dual_residual", "complementarity", "rod_drift",
     "penetration_m", "kinetic_energy_J", "potential_energy_J", "total_energy_J", "path",
     "passes", "polish", "signorini_violation_Nsm", "push_at_distance_Ns",
@@ -37,13 +37,15 @@ METRIC_COLUMNS = (
 )
 """Columns of :attr:`Trajectory.metrics`, one row per step (state after the step).
 
-``build_time_s`` is the step's contact search and QP construction, ``solve_time_s`` the
-wall time of the solve call (cvxpy's compilation included), ``solver_time_s`` the solver's
-own reported time, and ``step_time_s`` the whole step: contact search, islands and sleep if
-on, build, solve, check and advance (all in s).  A state's contacts are searched once, when
-the state is reached, and that search is counted in the step that starts from the state.
-The row's own diagnostics (rod drift, penetration, energies) are measured outside
-``step_time_s``.  ``solver`` and ``status`` are those of the solver that produced the
+The times (s) split the step's wall time into the stages it runs
+(:data:`~wuerfel_cvx.step.simulation.STAGES`), which add up to ``step_time_s``:
+``search_time_s`` the contact search of the state the step starts from (run when that state
+was reached), ``build_time_s`` building the QPs (islands, rows, the further passes'
+QPs), ``solve_time_s`` the solve calls, ``update_time_s`` advancing the bodies, the
+physical check and merging the islands, ``record_time_s`` the row's metrics and the
+recording.  Within ``solve_time_s``, ``solver_time_s`` is the solver's own reported time and
+``polish_time_s`` the time after the solver returned (mapping back, the polish and the KKT
+check).  ``solver`` and ``status`` are those of the solver that produced the
 step; ``primary_status`` is the run's own solver's status on it, which differs only when
 that solver failed and a ``fallback`` solver took over.  ``path`` is how the step's QPs
 reached the solver: ``native``, ``compiled`` or ``declared``

@@ -64,6 +64,43 @@ from .model import IntArray, Model, State
 from .recorder import TrajectoryRecorder, physical_metrics, run_info
 from .sleep import IslandPlanner, merge, restrict
 
+STAGES = ("search", "build", "solve", "update", "record")
+"""The stages a step's wall time is split into, in the order they run (metrics columns
+``<stage>_time_s``, s): the contact search of the state the step starts from (run when that
+state was reached), building the QPs (islands, rows, the closest-approach passes' and the
+Coulomb fixed point's further QPs), the solve calls (the solver's own time, its adapter,
+the KKT check and the polish), the update (advancing the bodies, the physical check,
+merging the islands) and the metrics and recording of the row."""
+
+
+class StageClock:
+    """A lap timer over :data:`STAGES`: each lap's time goes to the stage named.
+
+    Every interval between the clock's start and its last lap belongs to exactly one stage,
+    so the stages add up to the step's wall time: nothing falls between timers.
+    """
+
+    def __init__(self, search: float = 0.0) -> None:
+        self.seconds = dict.fromkeys(STAGES, 0.0)
+        self.seconds["search"] = search
+        self._last = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        """Give the time since the last lap (or the start) to ``stage``."""
+        now = time.perf_counter()
+        self.seconds[stage] += now - self._last
+        self._last = now
+
+    def skip(self) -> None:
+        """Give the time since the last lap to no stage of this clock (another step's)."""
+        self._last = time.perf_counter()
+
+    def columns(self) -> dict[str, float]:
+        """The metrics columns ``<stage>_time_s`` and ``step_time_s``, their sum (s)."""
+        return {f"{stage}_time_s": seconds for stage, seconds in self.seconds.items()} | {
+            "step_time_s": sum(self.seconds.values())}
+
+
 ASLEEP = "asleep"
 """Status of a step in which every island slept: no QP was solved, nothing moved.  Its
 ``verified`` is vacuously true and its residuals are 0; summaries count such steps apart."""
@@ -132,21 +169,19 @@ class Simulation:
         state is not finite; the object then still holds the state before the step.
         """
         step = self.step_index + 1
-        started = time.perf_counter()
+        clock = StageClock(self._search_time)
         plan = self.planner.plan(self.contacts)
         if plan.all_asleep:
-            return self._sleep(step, started)
+            return self._sleep(step, clock)
         qps, solutions, primary_statuses, parts = [], [], [], []
-        build_time, mark = self._search_time, started
         most_passes, criteria = 0, []
         coulombs: list[CoulombStep | None] = []
         remembered: list[tuple[CoulombStep, IntArray | None]] = []
         for boxes in plan.groups:
             model, state, contacts = restrict(self.model, self.state, self.contacts, boxes)
             qp = self.formulation.build(model, state, contacts, self.dt)
-            build_time += time.perf_counter() - mark
             qp, solution, primary, passes, coulomb = self._solve_passes(step, model, state, qp,
-                                                                        boxes)
+                                                                        boxes, clock)
             most_passes = max(most_passes, passes)
             coulombs.append(coulomb)
             if coulomb is not None:
@@ -158,24 +193,22 @@ class Simulation:
             qps.append(qp)
             solutions.append(solution)
             primary_statuses.append(primary)
-            mark = time.perf_counter()
+            clock.lap("update")
         state = merge(self.state, parts)
         if not (np.isfinite(state.points).all() and np.isfinite(state.velocities).all()):
             raise StepFailure(step, self.solvers[0], solutions[-1].status, "non-finite state")
         self.planner.record(state.velocities, self.dt)
         self._friction_memory.remember(remembered)
-        step_time = self._search_time + time.perf_counter() - started
         combined = combine_solutions(solutions)
         primary_status = first_failed_status(solutions, primary_statuses, combined)
         coulomb_row = coulomb_columns(step, coulombs, self._coulomb,
                                       warn=not self._coulomb_warned)
         self._coulomb_warned |= coulomb_row["coulomb_converged"] is False
+        clock.lap("update")
         if self.tape is not None:
             self.tape.record(step, tuple(qps), tuple(solutions))
-        self._advance_to(step, state, _solved_row(qps, combined, primary_status, build_time,
-                                                  step_time, most_passes)
-                         | coulomb_row
-                         | combine_criteria(criteria))
+        self._advance_to(step, state, _solved_row(qps, combined, primary_status, most_passes)
+                         | coulomb_row | combine_criteria(criteria), clock)
         return StepRecord(step, tuple(qps), tuple(solutions),
                           tuple(None if c is None else c.forces for c in coulombs))
 
@@ -192,7 +225,7 @@ class Simulation:
 
     # ------------------------------------------------------------------ parts of a step
     def _solve_passes(self, step: int, model: Model, state: State, qp: StepQP,
-                      boxes: IntArray | None,
+                      boxes: IntArray | None, clock: StageClock,
                       ) -> tuple[StepQP, StepSolution, str, int, CoulombStep | None]:
         """Solve ``qp`` and the formulation's further passes.
 
@@ -205,11 +238,16 @@ class Simulation:
         started from the last step's impulses (``boxes``: the island's boxes, ``None`` for
         all; :class:`~wuerfel_cvx.friction.coulomb.FrictionMemory`); its
         friction problems' times and iterations are in the sums, and a friction problem that
-        fails its own check makes the step unverified.
+        fails its own check makes the step unverified.  What ran since ``clock``'s last lap
+        and between the solve calls (building the passes' QPs) is its ``build`` stage, the
+        solve calls its ``solve`` stage.
         """
         def solve(pass_qp: StepQP) -> tuple[StepSolution, str]:
-            return solve_with_fallback(pass_qp, self.solvers, self.tol, step, self.path,
-                                       polishing=self.settings.polish)
+            clock.lap("build")
+            solved = solve_with_fallback(pass_qp, self.solvers, self.tol, step, self.path,
+                                         polishing=self.settings.polish)
+            clock.lap("solve")
+            return solved
 
         coulomb = None
         if qp.cones is not None and self._coulomb:
@@ -226,6 +264,7 @@ class Simulation:
                                                       self.dt, len(solved))) is not None:
                 qp = refined
                 solved.append(solve(qp))
+        clock.lap("build")  # the last refine found no further pass
         solutions = [solution for solution, _ in solved]
         last = solutions[-1]
         answers = coulomb.answers if coulomb is not None else []
@@ -243,6 +282,7 @@ class Simulation:
                               + sum(a.solver_time for a in answers)),
             iterations=sum(s.iterations for s in solutions)
             + sum(a.iterations for a in answers),
+            polish_time=sum(s.polish_time for s in solutions),
             polish=polish, polish_reason=polish_reason), primary, \
             len(solved), coulomb
 
@@ -272,40 +312,48 @@ class Simulation:
                                  self.formulation.body_reach(self.model, state, self.dt))
         return contacts, time.perf_counter() - started
 
-    def _advance_to(self, step: int, state: State, timing_row: dict[str, Any]) -> None:
-        """Take ``state`` as the state after ``step``: search its contacts, record the row."""
+    def _advance_to(self, step: int, state: State, row: dict[str, Any],
+                    clock: StageClock) -> None:
+        """Take ``state`` as the state after ``step``: search its contacts, record the row.
+
+        The search is the next step's ``search`` stage; the metrics and the recording are
+        this step's ``record`` stage (``clock``'s last lap).
+        """
         self.state = state
         self.step_index = step
         self.contacts, self._search_time = self._search(state)
-        row = {"step": step, "time_s": step * self.dt, **timing_row,
+        clock.skip()  # the search is the next step's
+        row = {"step": step, "time_s": step * self.dt, **row,
                **physical_metrics(self.model, state, self.contacts.deepest_penetration())}
-        self.recorder.record(step * self.dt, state, row)
+        clock.lap("record")
+        self.recorder.record(step * self.dt, state, row | clock.columns())
 
-    def _sleep(self, step: int, started: float) -> StepRecord:
+    def _sleep(self, step: int, clock: StageClock) -> StepRecord:
         """A step in which every island sleeps: nothing moves, no QP, no contact search."""
         state = State(self.state.points, np.zeros_like(self.state.velocities))
         self.planner.record(state.velocities, self.dt)
-        step_time = time.perf_counter() - started
         self.state, self.step_index = state, step
         self._search_time = 0.0  # the points did not move: the contacts are still valid
-        row = {"step": step, "time_s": step * self.dt, **_asleep_row(step_time),
+        clock.lap("update")
+        row = {"step": step, "time_s": step * self.dt, **_asleep_row(),
                **physical_metrics(self.model, state, self.contacts.deepest_penetration())}
-        self.recorder.record(step * self.dt, state, row)
+        clock.lap("record")
+        self.recorder.record(step * self.dt, state, row | clock.columns())
         return StepRecord(step, (), ())
 
 
 def _solved_row(qps: list[StepQP], solution: StepSolution, primary_status: str,
-                build_time: float, step_time: float, passes: int) -> dict[str, Any]:
-    """The solver and timing columns of a step's metrics row (its QPs summed)."""
+                passes: int) -> dict[str, Any]:
+    """The solver columns of a step's metrics row (its QPs summed; times but the stages')."""
     return {
         "solver": solution.solver, "status": solution.status,
         "primary_status": primary_status, "verified": solution.verified,
         "n_variables": sum(qp.n_variables for qp in qps),
         "n_equalities": sum(qp.n_equalities for qp in qps),
         "n_inequalities": sum(qp.n_inequalities for qp in qps),
-        "n_contacts": sum(len(qp.contacts) for qp in qps), "build_time_s": build_time,
-        "solve_time_s": solution.solve_wall_time, "solver_time_s": solution.solver_time,
-        "step_time_s": step_time, "iterations": solution.iterations,
+        "n_contacts": sum(len(qp.contacts) for qp in qps),
+        "solver_time_s": solution.solver_time, "polish_time_s": solution.polish_time,
+        "iterations": solution.iterations,
         "primal_residual": solution.residuals.primal, "dual_residual": solution.residuals.dual,
         "complementarity": solution.residuals.complementarity, "path": solution.path,
         "passes": passes, "polish": (f"{solution.polish} ({solution.polish_reason})"
@@ -313,12 +361,12 @@ def _solved_row(qps: list[StepQP], solution: StepSolution, primary_status: str,
     }
 
 
-def _asleep_row(step_time: float) -> dict[str, Any]:
-    """The solver and timing columns of a step in which every island slept."""
+def _asleep_row() -> dict[str, Any]:
+    """The solver columns of a step in which every island slept."""
     nothing_solved = StepSolution(
         x=np.zeros(0), solver="", status=ASLEEP, residuals=Residuals(0.0, 0.0, 0.0),
         verified=True, solve_wall_time=0.0, solver_time=np.nan, iterations=0, path="none")
-    return (_solved_row([], nothing_solved, ASLEEP, step_time, step_time, 0)
+    return (_solved_row([], nothing_solved, ASLEEP, 0)
             | combine_criteria([]))
 
 

@@ -21,6 +21,7 @@ import pandas as pd
 from .plots_accuracy import plot_drift_penetration, plot_pareto, plot_pareto_headline
 from .plots_cost import (
     plot_scaling,
+    plot_stage_breakdown,
     plot_success_heatmap,
     plot_success_rates,
     plot_timing_breakdown,
@@ -79,6 +80,7 @@ __all__ = [
     "plot_scaling",
     "plot_success_heatmap",
     "plot_success_rates",
+    "plot_stage_breakdown",
     "plot_timing_breakdown",
     "preferred_tolerance",
     "scaling_table",
@@ -92,7 +94,7 @@ __all__ = [
 
 PLOT_STEMS: tuple[str, ...] = ("pareto-headline", "pareto", "drift-penetration", "scaling",
                                "success", "success-by-scene", "timing-breakdown",
-                               "friction-criteria")
+                               "stage-breakdown", "friction-criteria")
 """File stems written by :func:`plot_all`."""
 
 
@@ -110,6 +112,7 @@ def plot_all(results: pd.DataFrame, series_dir: str | Path, out_dir: str | Path,
         "success": plot_success_rates(results, out_dir),
         "success-by-scene": plot_success_heatmap(results, out_dir),
         "timing-breakdown": plot_timing_breakdown(results, out_dir),
+        "stage-breakdown": plot_stage_breakdown(results, out_dir),
         "friction-criteria": plot_friction_criteria(results, out_dir),
     }
     return {stem: paths for stem, paths in made.items() if paths}

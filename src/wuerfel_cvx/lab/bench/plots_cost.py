@@ -13,7 +13,9 @@ from matplotlib.ticker import FuncFormatter
 
 from .figures import new_figure, plain_log_ticks, save_figure
 from .selection import (
+    STAGE_CELLS,
     as_float,
+    default_rows,
     fitted_exponent,
     outcome_counts,
     scaling_table,
@@ -234,3 +236,53 @@ def _stacked_bar(axis: Axes, x: float, colour: str, solver_ms: float, modelling_
     axis.annotate(f"{wall_ms:.3g}", (x, top), ha="center", va="bottom", fontsize=7,
                   xytext=(0, 2), textcoords="offset points")
     return kind
+
+
+_STAGE_COLOURS = {"search": "#8c564b", "build": "#1f77b4", "solver's own": "#d62728",
+                  "polish + check": "#ff7f0e", "rest of solve": "#ffbb78",
+                  "update": "#2ca02c", "record": "#9467bd", "outside steps": "#c7c7c7"}
+"""Colours of the stacked stages (the solve stage drawn as its three parts)."""
+
+
+def plot_stage_breakdown(results: pd.DataFrame, out_dir: str | Path,
+                         stem: str = "stage-breakdown") -> list[Path]:
+    """The default run's call time per step by stage (ms): per scene, a bar per solver.
+
+    The stages of :data:`~wuerfel_cvx.lab.bench.selection.STAGE_CELLS`, stacked.
+    """
+    rows = default_rows(results)
+    if rows.empty:
+        return []
+    scenes = list(rows.groupby("scene")["call_wall_time_per_step"].median()
+                  .sort_values().index)  # the cheapest scene first
+    figure = new_figure(2.2 + 2.4 * len(scenes), 4.2)
+    axes = np.atleast_1d(figure.subplots(1, len(scenes)))
+    for axis, scene in zip(axes, scenes, strict=True):
+        chosen = rows[rows["scene"] == scene]
+        for position, (_, row) in enumerate(chosen.iterrows()):
+            bottom = 0.0
+            for name, ms in _stage_parts(row).items():
+                axis.bar(position, ms, 0.7, bottom=bottom, color=_STAGE_COLOURS[name])
+                bottom += ms
+            axis.annotate(f"{bottom:.3g}", (position, bottom), ha="center", va="bottom",
+                          fontsize=7, xytext=(0, 2), textcoords="offset points")
+        axis.set_xticks(range(len(chosen)), list(chosen["solver"]), fontsize=7, rotation=45,
+                        ha="right", rotation_mode="anchor")
+        axis.set_title(scene, fontsize=10)
+        axis.margins(y=0.12)
+    axes[0].set_ylabel("wall time per step of simulate() (ms)")
+    axes[-1].legend(handles=[Patch(facecolor=colour, label=name)
+                             for name, colour in reversed(_STAGE_COLOURS.items())],
+                    fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    figure.suptitle("The default run's time per step, by stage (means)", fontsize=11)
+    return save_figure(figure, Path(out_dir), stem)
+
+
+def _stage_parts(row: pd.Series) -> dict[str, float]:
+    """A default row's stages (ms), its solve stage split into its three parts."""
+    ms = {name: 1e3 * max(as_float(row[column]), 0.0) if math.isfinite(as_float(row[column]))
+          else 0.0 for name, column in STAGE_CELLS}
+    rest = max(ms["solve"] - ms["solver's own"] - ms["polish + check"], 0.0)
+    return {"search": ms["search"], "build": ms["build"], "solver's own": ms["solver's own"],
+            "polish + check": ms["polish + check"], "rest of solve": rest,
+            "update": ms["update"], "record": ms["record"], "outside steps": ms["outside steps"]}

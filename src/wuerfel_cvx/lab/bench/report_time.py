@@ -23,6 +23,7 @@ from .markdown import (
     markdown_table,
     solver_rows,
 )
+from .report_stages import stage_section
 from .shgeom import DEFAULT_TIME_SHIFT, shifted_geometric_mean
 
 _POINT_KEY = ["scene", "tol", "dt", "duration", "table_mass", "extra_rod", "sleep", "islands",
@@ -123,6 +124,9 @@ def speed_section(results: pd.DataFrame, images: dict[str, list[Path]],
     per_point = point_time_table(results)
     if per_point:
         parts.append(per_point)
+    stages = stage_section(results, images, out_dir)
+    if stages:
+        parts.append(stages)
     image = image_link(images, "timing-breakdown", out_dir, "modelling and solver time per step")
     if image:
         parts += ["### Where the time goes", image,

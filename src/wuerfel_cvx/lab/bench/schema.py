@@ -24,7 +24,7 @@ import pandas as pd
 from ...errors import InputError
 from ...formulations import FORMULATIONS
 
-SCHEMA_VERSION = 8
+SCHEMA_VERSION = 9
 """Version of :data:`COLUMNS`; stored in every row's ``schema_version``."""
 
 FRICTION_FORMULATIONS: frozenset[str] = frozenset(
@@ -44,6 +44,15 @@ def _old_friction_model(frame: pd.DataFrame) -> pd.Series:
                      index=frame.index, dtype="string")
 
 
+STAGE_TIME_COLUMNS = (
+    "search_time_per_step", "build_time_per_step", "solve_time_per_step",
+    "solver_time_per_step_mean", "polish_time_per_step", "update_time_per_step",
+    "record_time_per_step", "outside_steps_time_per_step")
+"""The mean time per step (s) of each stage of a run's steps (the metrics' ``<stage>_time_s``,
+:data:`wuerfel_cvx.step.simulation.STAGES`), the solver's own and the polish's within the
+solve stage, and the rest of the ``simulate()`` call (set-up, the loop): they add up to
+``call_wall_time_per_step``."""
+
 ADDED_COLUMNS: dict[int, dict[str, Any]] = {
     4: {"islands": False},
     5: {"max_overlap_depth": None},
@@ -55,6 +64,7 @@ ADDED_COLUMNS: dict[int, dict[str, Any]] = {
     7: {"solve_path": None, "call_wall_time_per_step": None, "call_over_solver_mean": None},
     8: {"polish": None, "polished_fraction": None, "polish_rejected_steps": None,
         "polish_rejections": None, "max_push_at_distance": None, "max_push_gap_product": None},
+    9: dict.fromkeys(STAGE_TIME_COLUMNS),
 }
 """Per schema version, the columns it added and their value in the rows of older files:
 a constant, ``None`` (not measured then: missing), or a function of the older frame giving
@@ -65,7 +75,7 @@ criteria and fixed-point columns are missing and its ``friction_model`` is that 
 structures on a direct path that no longer exists: left empty) and did not time the whole
 ``simulate`` call; version 7 did not polish (``polish`` false) nor measure pushes at a
 distance row by row (``polish`` left empty: the plots take such rows as plain, not as the
-unpolished variant of a newer run)."""
+unpolished variant of a newer run); version 8 did not split a step's time into stages."""
 
 ColumnType = Literal["str", "int", "float", "bool"]
 
@@ -139,6 +149,21 @@ COLUMNS: tuple[Column, ...] = (
        "over the steps completed: what a user waits for"),
     _c("call_over_solver_mean", "float", "1",
        "call_wall_time_per_step over the solver's own mean time per step"),
+    _c("search_time_per_step", "float", "s", "mean time per step of the contact search"),
+    _c("build_time_per_step", "float", "s",
+       "mean time per step building the QPs (islands, rows, further passes' QPs)"),
+    _c("solve_time_per_step", "float", "s",
+       "mean time per step of the solve calls (solver, adapter, polish, KKT check)"),
+    _c("solver_time_per_step_mean", "float", "s",
+       "mean of the solver's own time per step (within the solve calls)"),
+    _c("polish_time_per_step", "float", "s",
+       "mean time per step after the solver returned: polish and KKT check (within the "
+       "solve calls)"),
+    _c("update_time_per_step", "float", "s",
+       "mean time per step advancing the bodies, the physical check, merging islands"),
+    _c("record_time_per_step", "float", "s", "mean time per step of the metrics and recording"),
+    _c("outside_steps_time_per_step", "float", "s",
+       "call_wall_time_per_step minus the mean step: set-up and the loop around the steps"),
     _c("wall_time_per_step_p90", "float", "s", "90th percentile wall time of a step"),
     _c("solver_time_per_step_median", "float", "s", "median of the solver's own time"),
     _c("modelling_time_per_step_median", "float", "s",
@@ -388,7 +413,8 @@ CLOCK_COLUMNS: frozenset[str] = frozenset({
     "finished_at", "wall_time_per_step_median", "wall_time_per_step_p90",
     "solver_time_per_step_median", "modelling_time_per_step_median",
     "step_over_solver_median", "wall_time_per_simulated_second", "total_wall_time",
-    "call_wall_time_per_step", "call_over_solver_mean", "step_time_s", "solver_time_s"})
+    "call_wall_time_per_step", "call_over_solver_mean", "step_time_s", "solver_time_s",
+    *STAGE_TIME_COLUMNS})
 """The results and series columns read off a clock.  They differ from run to run; the
 others are physics, the same bits on every run of a deterministic solver."""
 

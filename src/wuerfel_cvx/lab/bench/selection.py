@@ -16,6 +16,8 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
+from ...settings import Settings
+
 TOL_ORDER: dict[str, int] = {"low": 0, "default": 1, "native": 1, "high": 2}
 """Order of the tolerance presets along a tolerance sweep (loosest first)."""
 
@@ -261,3 +263,28 @@ def timing_breakdown(results: pd.DataFrame) -> pd.DataFrame:
     return frame.groupby(["formulation", "solver"]).agg(
         points=("wall", "size"), wall=("wall", "median"),
         solver_time=("solver_time", "median"), modelling=("modelling", "median")).reset_index()
+
+
+STAGE_CELLS = (("search", "search_time_per_step"), ("build", "build_time_per_step"),
+               ("solve", "solve_time_per_step"), ("solver's own", "solver_time_per_step_mean"),
+               ("polish + check", "polish_time_per_step"),
+               ("update", "update_time_per_step"), ("record", "record_time_per_step"),
+               ("outside steps", "outside_steps_time_per_step"))
+"""The results' stage columns (:data:`~wuerfel_cvx.lab.bench.schema.STAGE_TIME_COLUMNS`) by
+their names in tables and plots; *solver's own* and *polish + check* lie within *solve*."""
+
+
+def default_rows(results: pd.DataFrame) -> pd.DataFrame:
+    """The completed grid points run with the default settings that have the stage columns."""
+    if "search_time_per_step" not in results.columns:
+        return results.iloc[:0]
+    defaults = Settings()
+    rows = results[is_value(results["status"], "ok")
+                   & is_value(results["engine"], "wuerfel_cvx")
+                   & is_value(results["formulation"], str(defaults.formulation))
+                   & is_value(results["tol"].astype(str), str(defaults.tol))
+                   & plain_variant(results)
+                   & results["search_time_per_step"].notna()]
+    return rows.sort_values(["scene", "solver"], kind="stable")
+
+

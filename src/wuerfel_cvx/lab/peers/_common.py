@@ -156,8 +156,10 @@ def _engine_row(model: Model, engine: str, n_contacts: int | None, solver_time: 
         "solver": engine, "status": "peer", "primary_status": "peer", "verified": pd.NA,
         "n_variables": 3 * model.n_boxes, "n_equalities": 0, "n_inequalities": pd.NA,
         "n_contacts": pd.NA if n_contacts is None else n_contacts,
-        "build_time_s": step_time - solver_time, "solve_time_s": solver_time,
-        "solver_time_s": solver_time, "step_time_s": step_time, "iterations": pd.NA,
+        "search_time_s": np.nan, "build_time_s": step_time - solver_time,
+        "solve_time_s": solver_time, "update_time_s": np.nan, "record_time_s": np.nan,
+        "step_time_s": step_time, "solver_time_s": solver_time, "polish_time_s": np.nan,
+        "iterations": pd.NA,
         "primal_residual": pd.NA, "dual_residual": pd.NA, "complementarity": pd.NA,
         "path": "peer",
     }
