@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import signal
@@ -18,10 +19,13 @@ import pytest
 from wuerfel_cvx import simulate
 from wuerfel_cvx.errors import InputError, StepFailure
 from wuerfel_cvx.lab.bench import runner, schema
+from wuerfel_cvx.lab.bench.report import report_fingerprint, write_report
 from wuerfel_cvx.lab.bench.suite import REFERENCE_REFINEMENT, Suite, suite_names
 from wuerfel_cvx.lab.bench.sweep import RESULTS_FILE, run_sweep
 from wuerfel_cvx.lab.peers import PEER_ENGINES
+from wuerfel_cvx.lab.robustness.determinism import physics_fingerprint
 from wuerfel_cvx.solve.registry import available_solvers
+from wuerfel_cvx.versions import code_version
 
 pytestmark = pytest.mark.integration
 
@@ -350,3 +354,28 @@ def test_progress_bar_stays_quiet_when_stderr_is_not_a_terminal(
               progress=True)
     shown = capfd.readouterr().err
     assert "tiny:" in shown and "100%|" in shown  # the bar, with its rate and ETA fields
+
+
+def test_a_sweep_records_its_physics_and_refuses_to_mix_in_other_physics(
+        tmp_path: Path) -> None:
+    """provenance.json beside the results names the physics the rows were measured on.
+
+    The report states it; a resumed sweep whose physics differ is refused before it runs.
+    """
+    suite = Suite.from_dict({"name": "tiny", "defaults": {"duration": 0.02, "reference": "none",
+                                                          "compare_every": 0}, "grid": [
+        {"scenes": ["tilted-drop"], "solvers": ["CLARABEL"]}]})
+    out = tmp_path / "out"
+    run_sweep(suite, out, progress=False, echo=lambda _: None)
+    provenance = json.loads((out / schema.PROVENANCE_FILE).read_text())
+    assert provenance["physics_fingerprint"] == physics_fingerprint()
+    assert provenance["code_versions"] == [code_version()]
+    readme = write_report(out / RESULTS_FILE, root=tmp_path / "reports")
+    assert report_fingerprint(readme.read_text()) == physics_fingerprint()
+    assert (readme.parent / schema.PROVENANCE_FILE).is_file()
+    (out / schema.PROVENANCE_FILE).write_text(json.dumps(
+        {"physics_fingerprint": "0" * 12, "code_versions": ["old"]}))
+    (out / RESULTS_FILE).unlink()  # a point to run again: the check comes first
+    with pytest.raises(InputError, match="physics fingerprint 000000000000"):
+        run_sweep(suite, out, progress=False, echo=lambda _: None)
+    assert not (out / RESULTS_FILE).exists()

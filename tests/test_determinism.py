@@ -27,7 +27,10 @@ from wuerfel_cvx.lab.robustness.determinism import (
     GOLDEN_RUN,
     GOLDEN_SOLVERS,
     exact_digest,
+    fingerprint_of,
+    golden_fingerprint,
     largest_difference,
+    physics_fingerprint,
     pinned_versions,
     rounded_digest,
 )
@@ -115,3 +118,20 @@ def test_round_off_differences_stay_far_below_the_golden_rounding(solver: str) -
                          steps=GOLDEN_RUN.steps, solver=solver, tol=GOLDEN_RUN.tol)
     difference = largest_difference(perturbed, reference_run(solver))
     assert 0.0 < difference < 1e-11  # > 0: the perturbation did reach the run
+
+
+def test_the_physics_fingerprint_is_the_golden_files() -> None:
+    """A report's physics fingerprint names the golden file's digest set.
+
+    Computed from the golden runs run now, it equals the golden file's when the pinned
+    versions are installed; one changed digest changes it.
+    """
+    golden = tomllib.loads(GOLDEN_FILE.read_text())
+    for solver in GOLDEN_SOLVERS:
+        if pinned_versions(solver) != golden["solvers"][solver]["versions"]:
+            pytest.skip(f"golden digests recorded with other versions of {solver}'s packages")
+    expected = golden_fingerprint(GOLDEN_FILE.read_text())
+    assert physics_fingerprint() == expected
+    digests = {solver: entry["sha256"] for solver, entry in golden["solvers"].items()}
+    assert fingerprint_of(digests) == expected
+    assert fingerprint_of({**digests, "OSQP": "0" * 64}) != expected

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import subprocess
+from functools import cache
 from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
 
 NOT_INSTALLED = "not installed"
 """The version reported for a distribution that is not installed."""
@@ -23,3 +26,22 @@ def package_version(distribution: str) -> str:
     except (OSError, ValueError):  # unreadable or malformed metadata
         return UNKNOWN
     return found or UNKNOWN
+
+
+@cache
+def code_version() -> str:
+    """The code this process runs: the git commit of its source tree if it is a checkout.
+
+    ``<10-digit commit>`` (``+changes`` when the tree differs from it), else the installed
+    package's version (a wheel carries no commit).
+    """
+    source = Path(__file__).resolve().parent
+    try:
+        commit = subprocess.run(["git", "-C", str(source), "rev-parse", "--short=10", "HEAD"],
+                                capture_output=True, text=True, timeout=10, check=True)
+        changed = subprocess.run(["git", "-C", str(source), "status", "--porcelain",
+                                  "--untracked-files=no", "--", "."],
+                                 capture_output=True, text=True, timeout=10, check=True)
+    except (OSError, subprocess.SubprocessError):
+        return package_version("wuerfel_cvx")
+    return commit.stdout.strip() + ("+changes" if changed.stdout.strip() else "")

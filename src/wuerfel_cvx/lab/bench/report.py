@@ -15,8 +15,11 @@ point.  The sections are written by :mod:`~wuerfel_cvx.lab.bench.report_time`,
 from __future__ import annotations
 
 import datetime as dt_module
+import json
+import re
 import shutil
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -87,14 +90,46 @@ def write_report(results_csv: str | Path, root: str | Path = "reports",
     _remove_old_plots(out_dir)
     images = plots.plot_all(results, results_csv.parent / "series", out_dir,
                             headline=headline)
+    provenance = _read_provenance(results_csv.parent / schema.PROVENANCE_FILE)
     text = render_report(results, suite, images, out_dir,
-                         _results_dir_hint(results_csv, suite), headline=headline)
+                         _results_dir_hint(results_csv, suite), headline=headline,
+                         provenance=provenance)
     readme = out_dir / README
     readme.write_text(text, encoding="utf-8")
-    copy = out_dir / "results.csv"  # the report carries its data
-    if not copy.exists() or not copy.samefile(results_csv):
-        shutil.copyfile(results_csv, copy)
+    for source in (results_csv, results_csv.parent / schema.PROVENANCE_FILE):
+        copy = out_dir / source.name  # the report carries its data
+        if source.exists() and (not copy.exists() or not copy.samefile(source)):
+            shutil.copyfile(source, copy)
     return readme
+
+
+FINGERPRINT_LINE = "- **Physics fingerprint:**"
+"""How a report's header states its physics fingerprint (:func:`report_fingerprint`)."""
+
+
+def _read_provenance(path: Path) -> dict[str, Any] | None:
+    """A results directory's provenance (:func:`~wuerfel_cvx.lab.bench.sweep.record_provenance`)."""
+    if not path.exists():
+        return None
+    return dict(json.loads(path.read_text(encoding="utf-8")))
+
+
+def report_fingerprint(readme: str) -> str | None:
+    """The physics fingerprint a report's README states; ``None`` if it states none."""
+    for line in readme.splitlines():
+        if line.startswith(FINGERPRINT_LINE):
+            found = re.search(r"`([0-9a-f]{12})`", line)
+            return found[1] if found else None
+    return None
+
+
+def _provenance_line(provenance: dict[str, Any] | None) -> str:
+    if provenance is None:
+        return (f"{FINGERPRINT_LINE} not recorded (these rows were measured before sweeps "
+                "recorded the physics they ran)")
+    codes = ", ".join(f"`{code}`" for code in provenance.get("code_versions", []))
+    return (f"{FINGERPRINT_LINE} `{provenance['physics_fingerprint']}` (the golden runs' "
+            f"digests, `tests/golden/trajectory_hashes.toml`); code {codes}")
 
 
 def suite_name(results: pd.DataFrame, source: str = "results") -> str:
@@ -112,11 +147,12 @@ def suite_name(results: pd.DataFrame, source: str = "results") -> str:
 
 
 def render_report(results: pd.DataFrame, suite: str, images: dict[str, list[Path]],
-                  out_dir: Path, results_dir: str, headline: str | None = None) -> str:
+                  out_dir: Path, results_dir: str, headline: str | None = None,
+                  provenance: dict[str, Any] | None = None) -> str:
     """The README text (Markdown); image links are relative to ``out_dir``."""
     sections = [
         f"# Benchmark report: `{suite}`",
-        header_section(results, suite, results_dir),
+        header_section(results, suite, results_dir, provenance),
         speed_section(results, images, out_dir),
         success_section(results, images, out_dir),
         accuracy_section(results, images, out_dir, headline=headline),
@@ -129,8 +165,9 @@ def render_report(results: pd.DataFrame, suite: str, images: dict[str, list[Path
     return "\n\n".join(section for section in sections if section) + "\n"
 
 
-def header_section(results: pd.DataFrame, suite: str, results_dir: str) -> str:
-    """Generation date, run dates, machine, versions and the regenerating commands."""
+def header_section(results: pd.DataFrame, suite: str, results_dir: str,
+                   provenance: dict[str, Any] | None = None) -> str:
+    """Generation date, run dates, machine, versions, physics and the regenerating commands."""
     now = dt_module.datetime.now(dt_module.UTC).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
         f"- **Report generated:** {now}",
@@ -140,6 +177,7 @@ def header_section(results: pd.DataFrame, suite: str, results_dir: str) -> str:
         f"- **wuerfel_cvx:** {_distinct(results['package_version'])}",
         f"- **cvxpy:** {_distinct(results['cvxpy_version'])}",
         f"- **Solvers:** {solver_versions(results)}",
+        _provenance_line(provenance),
     ]
     several = [name for name in ("cpu", "python_version", "package_version", "cvxpy_version")
                if results[name].dropna().nunique() > 1]

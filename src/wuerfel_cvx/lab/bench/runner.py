@@ -31,6 +31,7 @@ from ...solve.paths import StepSolution, solve_step_qp
 from ...solve.registry import SOLVERS
 from ...step.metrics import deepest_overlap, largest_corner_distance, total_energy
 from ...step.model import State
+from ...step.simulation import Simulation
 from ...trajectory import Trajectory
 from ...versions import package_version
 from ..peers import peer_version, simulate_peer
@@ -244,7 +245,9 @@ def _warm_up(point: GridPoint) -> None:
         return
     _warmed.add(settings)
     with contextlib.suppress(StepFailure):  # a failure shows in the timed run itself
-        simulate(WARM_UP_SCENE, steps=WARM_UP_STEPS, settings=settings)
+        simulation = Simulation(resolve_scene(WARM_UP_SCENE), settings=settings)
+        for _ in range(WARM_UP_STEPS):
+            simulation.step()
 
 
 def _configuration(point: GridPoint) -> dict[str, Any]:

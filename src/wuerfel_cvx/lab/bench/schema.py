@@ -25,6 +25,10 @@ from ...errors import InputError
 from ...formulations import FORMULATIONS
 
 SCHEMA_VERSION = 9
+
+PROVENANCE_FILE = "provenance.json"
+"""Beside a results CSV: the physics fingerprint its rows were measured on and the code
+versions that wrote them (:func:`wuerfel_cvx.lab.bench.sweep.record_provenance`)."""
 """Version of :data:`COLUMNS`; stored in every row's ``schema_version``."""
 
 FRICTION_FORMULATIONS: frozenset[str] = frozenset(

@@ -10,6 +10,7 @@ either way only the main process writes the results file, and the rows are the s
 
 from __future__ import annotations
 
+import json
 import sys
 from collections.abc import Callable, Generator, Iterable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -24,7 +25,9 @@ from tqdm.auto import tqdm
 from ...errors import InputError
 from ...scenes.scene import Scene
 from ...solve.registry import SOLVERS, available_solvers
+from ...versions import code_version
 from ..peers import PEER_ENGINES, available_peers
+from ..robustness.determinism import physics_fingerprint
 from . import schema
 from .ctrl_c import held_ctrl_c, ignore_ctrl_c
 from .runner import (
@@ -96,6 +99,8 @@ def run_sweep(suite: Suite, out: str | Path, *, jobs: int = 1, progress: bool | 
     todo = [p for p in runnable if p.point_id not in done]
     if done:
         note(f"resuming {results}: {len(runnable) - len(todo)} of {len(runnable)} rows done")
+    if todo:
+        record_provenance(out / schema.PROVENANCE_FILE)
     references = _references_needed(todo, out)
     show = sys.stderr.isatty() if progress is None else progress
     work = sum(key_steps(key) for key in references) + sum(p.steps for p in todo)
@@ -151,6 +156,28 @@ def _executor(jobs: int, dask: DaskCluster | None,
     from .dask_sweep import dask_executor
 
     return dask_executor(dask, note)
+
+
+def record_provenance(path: Path) -> dict[str, Any]:
+    """Record (or check) what physics and code a results directory's rows come from.
+
+    The physics fingerprint (:func:`~wuerfel_cvx.lab.robustness.determinism.physics_fingerprint`,
+    the golden runs run now) must equal the one recorded when the directory's first rows
+    were measured: rows of two physics in one results file would compare apples with
+    pears, so a resumed sweep on changed physics is an :class:`InputError`.  Each code
+    version (:func:`~wuerfel_cvx.versions.code_version`) that added rows is listed.
+    """
+    fingerprint, code = physics_fingerprint(), code_version()
+    recorded: dict[str, Any] = ({"physics_fingerprint": fingerprint, "code_versions": []}
+                                if not path.exists() else json.loads(path.read_text()))
+    if recorded.get("physics_fingerprint") != fingerprint:
+        raise InputError(f"its rows were measured on physics fingerprint "
+                         f"{recorded.get('physics_fingerprint')}, this code's is {fingerprint}: "
+                         "use a new --out (or delete the directory)", source=str(path.parent))
+    if code not in recorded["code_versions"]:
+        recorded["code_versions"].append(code)
+    path.write_text(json.dumps(recorded, indent=1) + "\n", encoding="utf-8")
+    return recorded
 
 
 def key_steps(key: ReferenceKey) -> int:

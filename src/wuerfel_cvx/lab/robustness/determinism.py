@@ -31,7 +31,10 @@ from __future__ import annotations
 
 import hashlib
 import sys
+import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 
@@ -94,6 +97,30 @@ def pinned_versions(solver: str) -> dict[str, str]:
     """Installed versions of the packages a golden digest depends on."""
     packages = (*PINNED_PACKAGES, SOLVERS[solver].package)
     return {package: package_version(package) for package in packages}
+
+
+def fingerprint_of(digests: Mapping[str, str]) -> str:
+    """The physics fingerprint of a set of golden digests (solver -> digest): 12 hex digits.
+
+    Equal for two sets exactly when every digest is; a report states the fingerprint of the
+    physics it was measured on (:func:`physics_fingerprint`), and a test compares it with
+    the golden file's (:func:`golden_fingerprint`).
+    """
+    text = "\n".join(f"{solver} {digest}" for solver, digest in sorted(digests.items()))
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:12]
+
+
+@cache
+def physics_fingerprint() -> str:
+    """The fingerprint of this installation's physics: the golden runs, run now (about 1 s)."""
+    return fingerprint_of({solver: rounded_digest(GOLDEN_RUN.run(solver).points)
+                           for solver in GOLDEN_SOLVERS})
+
+
+def golden_fingerprint(text: str) -> str:
+    """The fingerprint of a golden file's digests (its TOML ``text``)."""
+    solvers = tomllib.loads(text)["solvers"]
+    return fingerprint_of({solver: str(entry["sha256"]) for solver, entry in solvers.items()})
 
 
 def golden_file_text() -> str:
