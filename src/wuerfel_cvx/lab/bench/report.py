@@ -96,8 +96,9 @@ def write_report(results_csv: str | Path, root: str | Path = "reports",
                          provenance=provenance)
     readme = out_dir / README
     readme.write_text(text, encoding="utf-8")
-    for source in (results_csv, results_csv.parent / schema.PROVENANCE_FILE):
-        copy = out_dir / source.name  # the report carries its data
+    for source, name in ((results_csv, "results.csv"),
+                         (results_csv.parent / schema.PROVENANCE_FILE, schema.PROVENANCE_FILE)):
+        copy = out_dir / name  # the report carries its data
         if source.exists() and (not copy.exists() or not copy.samefile(source)):
             shutil.copyfile(source, copy)
     return readme
