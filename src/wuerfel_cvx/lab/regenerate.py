@@ -1,0 +1,117 @@
+"""Regenerate the study's reports on today's physics: ``python -m wuerfel_cvx.lab.regenerate``.
+
+One job per folder of ``reports/``, run in order, each a list of commands with a time
+budget.  A benchmark suite's sweep writes its rows to ``bench-results/<suite>`` (resumable:
+a second run carries on where the first stopped) and records the physics it ran
+(``provenance.json``); once every point has a row, ``wuerfel-cvx report`` writes
+``reports/<suite>`` with the physics fingerprint in its header.  A sweep still running when
+its budget is spent gets a Ctrl-C, which keeps every finished row and stops without writing
+the report: run the command again to resume.  ``--only`` picks jobs, ``--budget-scale``
+stretches every budget, ``--list`` shows the jobs and their commands.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+INTERRUPTED = 130
+"""Exit status of a command stopped by Ctrl-C (the budget's end)."""
+
+
+@dataclass(frozen=True)
+class Job:
+    """One report folder: the commands that regenerate it, run in order, and their budget."""
+
+    name: str
+    commands: tuple[tuple[str, ...], ...]
+    budget_minutes: float
+    """Wall-time budget (min) on the 2-core machine of the README, for all its commands."""
+    needs: str = ""
+    """A console command the job needs (an extra's), or '' for the core install."""
+
+
+def suite_job(suite: str, budget_minutes: float, jobs: int = 1) -> Job:
+    """A benchmark suite's job: its sweep (resumable) then its report."""
+    out = f"bench-results/{suite}"
+    return Job(suite, (("wuerfel-cvx", "bench", "--suite", suite, "--out", out,
+                        "--jobs", str(jobs), "--no-progress"),
+                       ("wuerfel-cvx", "report", f"{out}/results.csv", "--root", "reports")),
+               budget_minutes)
+
+
+JOBS = (
+    suite_job("perf", 15),  # one process: its times are the report's point
+    suite_job("scaling", 20),
+    suite_job("standard", 30, jobs=2),
+    suite_job("hard", 20, jobs=2),
+    suite_job("polish", 20, jobs=2),
+    suite_job("islands", 10),
+    suite_job("friction", 600, jobs=2),
+    Job("robustness", (("wuerfel-cvx", "robustness", "--scenes", "200", "--fuzz", "2000",
+                        "--report"),), 30),
+)
+"""Every regenerated report, cheapest first (the Coulomb card house makes ``friction`` the
+longest by far)."""
+
+
+def run_job(job: Job, scale: float = 1.0) -> bool:
+    """Run ``job``'s commands within its budget; whether they all finished."""
+    if job.needs and shutil.which(job.needs) is None:
+        print(f"{job.name}: skipped ({job.needs} is not installed)", file=sys.stderr)
+        return False
+    deadline = time.monotonic() + 60.0 * job.budget_minutes * scale
+    for command in job.commands:
+        print(f"{job.name}: {' '.join(command)}", file=sys.stderr, flush=True)
+        status = _run_until(command, deadline)
+        if status == INTERRUPTED:
+            print(f"{job.name}: budget spent; finished rows are kept, run again to resume",
+                  file=sys.stderr)
+            return False
+        if status != 0:
+            print(f"{job.name}: '{' '.join(command)}' exited with {status}", file=sys.stderr)
+            return False
+    return True
+
+
+def _run_until(command: Sequence[str], deadline: float) -> int:
+    """Run ``command``; at ``deadline`` (monotonic s) send it Ctrl-C and wait for it."""
+    process = subprocess.Popen(command)
+    try:
+        return process.wait(timeout=max(0.0, deadline - time.monotonic()))
+    except subprocess.TimeoutExpired:
+        process.send_signal(signal.SIGINT)
+        return process.wait()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the jobs asked for; 0 when every one finished, 1 otherwise (see stderr)."""
+    parser = argparse.ArgumentParser(prog="python -m wuerfel_cvx.lab.regenerate",
+                                     description=__doc__.split("\n\n")[0])
+    parser.add_argument("--only", nargs="+", choices=[job.name for job in JOBS],
+                        help="these jobs only (default: all, in order)")
+    parser.add_argument("--budget-scale", type=float, default=1.0,
+                        help="multiply every job's budget (default 1)")
+    parser.add_argument("--list", action="store_true", help="list the jobs and exit")
+    args = parser.parse_args(argv)
+    chosen = [job for job in JOBS if args.only is None or job.name in args.only]
+    if args.list:
+        for job in chosen:
+            print(f"{job.name} ({job.budget_minutes:g} min):")
+            for command in job.commands:
+                print("    " + " ".join(command))
+        return 0
+    if args.budget_scale <= 0:
+        parser.error("--budget-scale must be positive")
+    finished = [run_job(job, args.budget_scale) for job in chosen]
+    return 0 if all(finished) else 1
+
+
+if __name__ == "__main__":  # pragma: no cover - the command itself
+    raise SystemExit(main())

@@ -1,0 +1,50 @@
+"""The report regeneration driver: budgets end a command with Ctrl-C, jobs run in order."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from wuerfel_cvx.lab import regenerate
+from wuerfel_cvx.lab.bench.suite import suite_names
+from wuerfel_cvx.lab.regenerate import JOBS, Job, run_job
+
+pytestmark = pytest.mark.subprocess
+
+
+def test_a_finished_job_runs_its_commands_in_order(tmp_path: Path) -> None:
+    log = tmp_path / "log"
+    write = "import sys; open(sys.argv[1], 'a').write(sys.argv[2])"
+    job = Job("two", ((sys.executable, "-c", write, str(log), "a"),
+                      (sys.executable, "-c", write, str(log), "b")), budget_minutes=1.0)
+    assert run_job(job)
+    assert log.read_text() == "ab"
+
+
+def test_a_spent_budget_interrupts_the_command_and_skips_the_rest(tmp_path: Path) -> None:
+    """The command gets Ctrl-C at the deadline, and the report step after it does not run.
+
+    (A Python child exits 130 on Ctrl-C here, as our commands do.)
+    """
+    log = tmp_path / "log"
+    sleeper = ("import signal, sys, time\n"
+               "signal.signal(signal.SIGINT, lambda *_: sys.exit(130))\n"
+               "time.sleep(60)\n")
+    job = Job("slow", ((sys.executable, "-c", sleeper),
+                       (sys.executable, "-c", f"open({str(log)!r}, 'w')")),
+              budget_minutes=0.02)
+    started = time.monotonic()
+    assert not run_job(job)
+    assert time.monotonic() - started < 30.0  # stopped at the budget, not after 60 s
+    assert not log.exists()
+
+
+def test_the_jobs_name_existing_suites() -> None:
+    names = set(suite_names())
+    for job in JOBS:
+        if job.commands[0][:2] == ("wuerfel-cvx", "bench"):
+            assert job.name in names
+    assert regenerate.main(["--list"]) == 0
