@@ -21,8 +21,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import Literal
 
 import numpy as np
+import scipy.sparse as sp
 
 from .._sparse import empty_rows
 from ..errors import InputError
@@ -30,28 +32,34 @@ from ..scenes.geometry import FloatArray, corner_mean, cross
 from ..step.contacts import Contacts
 from ..step.model import Model, State
 from . import motion
-from .cone import contact_cones
+from .cone import ConeRows, contact_cones
 from .motion import rigid_step
-from .qp import FrictionSettings, RowUnits, SinglePass, StepQP, declare_qp, velocity_rows
+from .qp import FrictionSettings, RowUnits, StepQP, declare_qp, velocity_rows
 from .rows import body_rows
-from .velocity import VelocityFormulation
+from .velocity import VelocityFormulation, closest_approach, rows_along
 
 
 @dataclass(frozen=True)
-class RigidFormulation(SinglePass, FrictionSettings):
+class RigidFormulation(FrictionSettings):
     """Velocity-level QP in (u_x, u_y, omega) per square; contacts as in ``velocity``."""
 
     beta: float = 0.2
     """Fraction of a penetration removed per step (1)."""
     contact_margin: float = 0.01
     """Distance (m) within which a point-edge pair is always constrained."""
+    linearisation: Literal["closest-approach", "start"] = "start"
+    """Where contact gaps are linearised, as in ``velocity``
+    (:attr:`~wuerfel_cvx.formulations.velocity.VelocityFormulation.linearisation`): at the
+    step's start, or at each contact's closest approach along the step's rigid motion,
+    re-linearised in Gauss-Newton passes."""
     name: str = "rigid"
 
     @cached_property
     def _velocity(self) -> VelocityFormulation:
-        """The velocity formulation whose reach and contact rows this one takes."""
+        """The velocity formulation whose reach, contact rows and passes this one takes."""
         return VelocityFormulation(beta=self.beta, contact_margin=self.contact_margin,
-                                   linearisation="start")
+                                   linearisation=self.linearisation,
+                                   friction_model=self.friction_model)
 
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
         """Contact reach (m) per body, as in the velocity formulation."""
@@ -70,16 +78,63 @@ class RigidFormulation(SinglePass, FrictionSettings):
         if model.table_mass is not None:
             raise InputError("the rigid formulation has fixed tables only", field="table_mass")
         points = state.points
+        weights, target = rigid_objective(model, state, dt)
+        if self.linearisation == "closest-approach":
+            return self._along(model, state, contacts, weights, target, target, dt)
         all_points = model.all_points(points)
         corner_rows, rhs = self._velocity.contact_rows(model, all_points, contacts, dt)
         corner_rows, rhs, cones = contact_cones(model, all_points, contacts, corner_rows, rhs,
                                                 np.arange(len(contacts)),
                                                 edges=self.friction_model == "ccp")
+        return self._declared(weights, target, points, corner_rows, rhs, contacts, cones)
+
+    def refine(self, model: Model, state: State, previous: StepQP, solution: FloatArray,
+               dt: float, passes: int) -> StepQP | None:
+        """The next Gauss-Newton pass's QP, or ``None`` to accept ``solution``.
+
+        ``velocity``'s passes (:meth:`VelocityFormulation.refine`) on the corner velocities
+        of the bodies' new velocities ``solution``; none with ``linearisation="start"``.
+        """
+        if self.linearisation == "start" or passes >= self._velocity.max_passes:
+            return None
+        corners = self.new_velocities(state, solution, dt).ravel()
+        contacts = self._velocity._reached_contacts(model, state, previous.contacts, corners,
+                                                    dt)
+        approach = closest_approach(model, state.points, contacts, corners, dt,
+                                    self._velocity.push_speed)
+        if contacts is previous.contacts and approach.violation <= self._velocity.gap_tolerance:
+            return None
+        last = previous.linearised_about
+        about = 0.5 * (solution + last) if passes >= 2 and last is not None else solution
+        return self._along(model, state, contacts, previous.weights, previous.target, about,
+                           dt)
+
+    def _along(self, model: Model, state: State, contacts: Contacts, weights: FloatArray,
+               target: FloatArray, about: FloatArray, dt: float) -> StepQP:
+        """The QP with each contact's rows at its closest approach along ``about``'s motion.
+
+        ``about``: body velocities ``(u_x, u_y, omega)`` per body, flat (m/s, rad/s).
+        """
+        corners = self.new_velocities(state, about, dt).ravel()
+        approach = closest_approach(model, state.points, contacts, corners, dt,
+                                    self._velocity.push_speed)
+        rows = rows_along(model, contacts, approach)
+        matrix, rhs, cones = self._velocity._cones(model, state.points, contacts, rows.matrix,
+                                                  rows.rhs)
+        return self._declared(weights, target, state.points, matrix, rhs, contacts, cones,
+                              linearised_about=about)
+
+    @staticmethod
+    def _declared(weights: FloatArray, target: FloatArray, points: FloatArray,
+                  corner_rows: sp.csr_array, rhs: FloatArray, contacts: Contacts,
+                  cones: ConeRows | None, linearised_about: FloatArray | None = None,
+                  ) -> StepQP:
+        """The step QP of contact rows in the corner velocities, mapped to the bodies'."""
         if cones is not None:
             cones = replace(cones, slip=body_rows(cones.slip, points))
-        weights, target = rigid_objective(model, state, dt)
         return declare_qp(weights, target, empty_rows(weights.shape[0]), np.zeros(0),
-                          body_rows(corner_rows, points), rhs, contacts, cones=cones)
+                          body_rows(corner_rows, points), rhs, contacts, cones=cones,
+                          linearised_about=linearised_about)
 
     def row_units(self, dt: float) -> RowUnits:
         """A contact row's multiplier and slack in impulse (N s) and gap (m)."""
