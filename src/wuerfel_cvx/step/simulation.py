@@ -171,7 +171,8 @@ class Simulation:
                                       warn=not self._coulomb_warned)
         self._coulomb_warned |= coulomb_row["coulomb_converged"] is False
         if self.tape is not None:
-            self.tape.record(step, tuple(qps), tuple(solutions))
+            self.tape.record(step, tuple(qps), tuple(solutions),
+                             tuple(None if c is None else c.forces for c in coulombs))
         self._advance_to(step, state, _solved_row(qps, combined, primary_status, build_time,
                                                   step_time, most_passes)
                          | coulomb_row
