@@ -1,6 +1,6 @@
 """Gradients through ``coulomb`` friction's fixed point (issue 26): differences and physics.
 
-:mod:`wuerfel_cvx.gradients.coulomb` differentiates the fixed point's conditions (the
+:mod:`wuerfel_cvx.gradients.adjoint` differentiates the fixed point's conditions (the
 implicit function theorem on the fixed point, friction a function of the normal impulses),
 not the last contact QP with its friction held.  Checked here against central differences
 of whole runs, as the ``ccp`` gradients are in ``test_gradients``, on a slide (with the

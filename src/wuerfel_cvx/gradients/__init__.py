@@ -12,7 +12,7 @@ with respect to the state and the parameters exactly (:mod:`wuerfel_cvx.gradient
 
 What is covered: the ``rigid`` formulation, frictionless contacts, ``ccp`` friction and
 ``coulomb`` friction (through its converged fixed point:
-:mod:`wuerfel_cvx.gradients.coulomb`), with respect to the initial centres, angles,
+:mod:`wuerfel_cvx.gradients.adjoint`), with respect to the initial centres, angles,
 velocities and angular velocities, the bodies' friction coefficients and masses, and
 gravity.  What is not, and why:
 

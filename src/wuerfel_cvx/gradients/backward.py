@@ -32,8 +32,14 @@ import numpy as np
 from ..scenes.geometry import FloatArray, rot90
 from ..solve.kkt import POLISHED, REUSED, guess_active_set
 from ..step.model import IntArray, Model
-from .adjoint import gap_switch_rows, qp_adjoint, weak_rows
-from .coulomb import FrictionAdjoint, coulomb_adjoint, unshifted_target
+from .adjoint import (
+    FrictionAdjoint,
+    coulomb_adjoint,
+    gap_switch_rows,
+    qp_adjoint,
+    unshifted_target,
+    weak_rows,
+)
 from .rigid import LOCAL, contact_rows, row_contacts, slip_rows
 from .tape import WRT_NAMES, GradientError, GradientTape, StepTape
 
@@ -184,7 +190,7 @@ def _rows_back(tape: GradientTape, record: StepTape, points: FloatArray, tight: 
 def _slips_back(tape: GradientTape, record: StepTape, points: FloatArray,
                 friction: FrictionAdjoint, unknowns_adjoint: FloatArray,
                 adjoints: _Adjoints) -> None:
-    """A ``coulomb`` step's slip rows and coefficients (:mod:`~wuerfel_cvx.gradients.coulomb`).
+    """A ``coulomb`` step's slip rows and coefficients (:mod:`~wuerfel_cvx.gradients.adjoint`).
 
     ``dL/dS_c = slip_unknowns_c a_x - slip_solution_c x`` and ``dL/dmu_c``, carried to the
     contacts' local inputs by the slip rows' derivatives.
