@@ -59,8 +59,9 @@ difference of runs agrees with this derivative to about the same relative size (
 tighter ``coulomb_tolerance``).  A contact at the stick-slip boundary (on its cone's edge and
 hardly slipping) makes the derivative one-sided: the step is flagged as for a weakly active row.
 The system is small (three unknowns per body, a row per contact) and, with dependent rows (a
-resting box's two sticking corners), rank deficient but consistent; it is solved densely by
-least squares.
+resting box's two sticking corners), rank deficient but consistent; it is solved with the
+polish's regularised, refined sparse LU (dense least squares where that does not reach
+round-off).
 """
 
 from __future__ import annotations
@@ -68,6 +69,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..formulations.qp import StepQP
 from ..friction.forces import ContactForces
@@ -256,7 +258,7 @@ def coulomb_adjoint(qp: StepQP, target: FloatArray, x: FloatArray, ineq_dual: Fl
     jacobian[:n, n + n_eq + m:] = -2.0 * slip[stick].T
     jacobian[n:, :n] = np.vstack([eq, rows_g, slip[stick]])
     rhs = np.concatenate([gradient, np.zeros(size - n)])
-    solution, *_ = np.linalg.lstsq(jacobian.T, rhs, rcond=None)
+    solution = _transposed_solve(jacobian, n, rhs)
     scale = 1.0 + float(np.max(np.abs(rhs)))
     if not np.isfinite(solution).all() or \
             np.max(np.abs(jacobian.T @ solution - rhs)) > 1e-6 * scale:
@@ -272,6 +274,29 @@ def coulomb_adjoint(qp: StepQP, target: FloatArray, x: FloatArray, ineq_dual: Fl
                         rows=tight, row_multiplier=np.asarray(ineq_dual[tight], dtype=np.float64),
                         row_adjoint=a_z, unknowns_adjoint=a_x)
     return qp_part, FrictionAdjoint(2.0 * friction, stick_adjoint, mu_gradient), state.weak
+
+
+def _transposed_solve(jacobian: FloatArray, n: int, rhs: FloatArray) -> FloatArray:
+    """A solution of ``jacobian' a = rhs``.
+
+    The KKT solve's regularised, refined sparse LU
+    (:func:`~wuerfel_cvx.solve.kkt.solve_reduced`), or dense least squares where that does
+    not reach round-off.
+    """
+    transposed = jacobian.T
+    size = transposed.shape[0]
+    row, col = np.nonzero(transposed)
+    diagonal = np.arange(size)
+    matrix = sp.csc_matrix((np.concatenate([transposed[row, col], np.zeros(size)]),
+                            (np.concatenate([row, diagonal]), np.concatenate([col, diagonal]))),
+                           shape=(size, size))
+    matrix.sum_duplicates()
+    matrix.sort_indices()
+    solution = solve_reduced(matrix, n, rhs)
+    if solution is None or np.max(np.abs(transposed @ solution - rhs)) > 1e-9 * (
+            1.0 + float(np.max(np.abs(rhs)))):
+        return np.asarray(np.linalg.lstsq(transposed, rhs, rcond=None)[0], dtype=np.float64)
+    return solution
 
 
 def unshifted_target(qp: StepQP, forces: ContactForces) -> FloatArray:
