@@ -320,7 +320,9 @@ not the adjoint's.""",
 
 One step QP of the slide, declared as a DPP problem in cvxpy and differentiated by
 `Problem.backward` (diffcp on SCS's conic form), against the hand-derived adjoint of
-`wuerfel_cvx.gradients.adjoint.qp_adjoint`; relative to the largest entry of dL/dt.""",
+`wuerfel_cvx.gradients.adjoint.qp_adjoint`; relative to the largest entry of dL/dt.
+diffcp is not among the package's dependencies or extras: for this report it was installed
+beside them (`pip install diffcp`); without it the row says it was not run.""",
     "cost": """## Cost
 
 Time of `Trajectory.gradient` (centre, velocity, friction, mass) over the time of the run
@@ -329,13 +331,16 @@ repeats alternated over the scenes; times are medians, the ratio's min and media
 repeats.  The target is a gradient at most 2x the run.""",
     "velocity": """## Why the `velocity` formulation is not covered
 
-The `velocity` formulation (the package default) solves up to several QPs per step: each
-Gauss-Newton pass re-linearises its closest-approach rows about the last pass's answer, so a
-step's answer depends on the earlier passes' answers through the rows.  A backward pass
-would chain every pass's adjoint and the rows' derivatives with respect to the previous
-answer (not written).  `simulate(..., formulation="velocity", gradients=True)` raises a
-`GradientError` naming `rigid` as the formulation covered.  How often the passes happen on
-the cases above (dt 1/240):""",
+`simulate(..., formulation="velocity", gradients=True)` raises a `GradientError` naming
+`rigid` as the formulation covered.  What a backward pass through `velocity` (the package
+default) needs and is not written: (1) its own row derivatives: its unknowns are corner
+velocities held together by rod equalities, its contact rows are built in corner space and
+include closest-approach rows, so `gradients/rigid.py`'s derivatives of the rigid rows do not
+apply and would need a counterpart, with the rods' rows and the advance of the corners;
+(2) the chain through its Gauss-Newton passes, where a step takes several: each pass
+re-linearises the closest-approach rows about the last pass's answer, so the answer depends
+on the earlier answers through the rows.  On the cases above the passes do not occur (one
+pass a step, dt 1/240), so (1) is the work that would open them:""",
 }
 
 
