@@ -10,15 +10,15 @@ recorded with ``gradients=True`` keeps each step's QP and answer
 the steps (:mod:`wuerfel_cvx.gradients.backward`), each step's QP numbers differentiated
 with respect to the state and the parameters exactly (:mod:`wuerfel_cvx.gradients.rigid`).
 
-What is covered: the ``rigid`` formulation, frictionless contacts and ``ccp`` friction, with
-respect to the initial centres, angles, velocities and angular velocities, the bodies'
-friction coefficients and masses, and gravity.  What is not, and why:
+What is covered: the ``rigid`` formulation, frictionless contacts, ``ccp`` friction and
+``coulomb`` friction (through its converged fixed point:
+:mod:`wuerfel_cvx.gradients.adjoint`), with respect to the initial centres, angles,
+velocities and angular velocities, the bodies' friction coefficients and masses, and
+gravity.  What is not, and why:
 
 * ``velocity`` (the default) and ``velocity-baumgarte``: their rows come from Gauss-Newton
   passes linearised about the previous pass's answer (closest approach), and their rods are
   equalities in corner velocities; the chain through the passes is not written yet.
-* ``coulomb`` friction: its answer is the fixed point of two QPs; differentiating the fixed
-  point needs the two problems' KKT systems together (not written yet).
 * ``seed`` formulations: acceleration-level, no friction; not covered.
 
 Where the active set changes, the derivative is one-sided: the backward pass holds the

@@ -1,4 +1,4 @@
-"""The adjoint of one step QP's solution: implicit differentiation on its active set.
+"""The adjoint of one step's solution: implicit differentiation on its active set.
 
 On its active set ``A = [E; G_tight]`` (:class:`~wuerfel_cvx.solve.kkt.ActiveSet`) the
 polished solution of the step QP (no coupling cost, no linear cost, as the ``rigid``
@@ -25,6 +25,43 @@ the right side ``[g; 0]`` is consistent, and the regularised, refined solve
 (:func:`~wuerfel_cvx.solve.kkt.solve_reduced`) returns one solution.  The derivatives with
 respect to the rows then depend on the split, their effect on the state (what the backward
 pass propagates) does not where the active set is locally constant.
+
+*Coulomb friction: implicit differentiation at the converged fixed point.*  The Coulomb
+fixed point (:mod:`wuerfel_cvx.friction.coulomb`)
+alternates a contact QP, the friction impulse ``lambda_t`` held as an external impulse, and a
+friction problem, the normal impulses held.  At its fixed point both hold at once; on the
+step's active set (the contact QP's tight normal rows ``A``, each loaded contact with friction
+either *sliding* with ``sigma = sign(s_c)`` or *sticking*) those conditions are the equations::
+
+    F1:  2 W (x - t) - G_A' z_A + E' y - 2 S_St' lambda_St + 2 S_Sl' diag(sigma mu) N z_A = 0
+    F2:  G_A x = h_A          F3:  E x = e          F4:  S_St x = 0
+
+in ``(x, y, z_A, lambda_St)``: a sliding contact's friction is ``lambda_t = -sigma mu lambda_n``
+with ``lambda_n = N z`` (half the sum of its rows' multipliers), a sticking contact's is the
+multiplier of its no-slip row, inside its cone.  ``t`` is the step's own target (without the
+friction impulse the last contact QP held).  This is the implicit function theorem on the
+fixed point itself, not on the last contact QP with its friction held: the friction's
+dependence on the normal impulses (and through them on the state, the masses and ``mu``) is
+kept, the fixed-point map's own Jacobian included.  Holding the last pass's friction impulse
+fixed instead would give ``dL/dmu = 0`` through every sliding step.
+
+The Jacobian ``J`` of ``F`` is not symmetric (the sliding columns); one solve with ``J'``,
+``J' a = [dL/dx; 0]``, gives every derivative (``dL/dp = -a' dF/dp``)::
+
+    dL/dt = 2 W a_x                     dL/dw = 2 a_x (t - x)
+    dL/dh_r = a_z,r                     dL/dG_r = z_r a_x - a_z,r x
+    dL/dS_c = 2 lambda_t,c a_x - [c sticks] a_s,c x
+    dL/dmu_c = -2 sigma_c lambda_n,c S_c a_x           (sliding contacts)
+
+The run's fixed point stops within its tolerance (``coulomb_tolerance``, relative on the
+normal impulses), so its state is that of the equations above to that tolerance; a finite
+difference of runs agrees with this derivative to about the same relative size (tighter with a
+tighter ``coulomb_tolerance``).  A contact at the stick-slip boundary (on its cone's edge and
+hardly slipping) makes the derivative one-sided: the step is flagged as for a weakly active row.
+The system is small (three unknowns per body, a row per contact) and, with dependent rows (a
+resting box's two sticking corners), rank deficient but consistent; it is solved with the
+polish's regularised, refined sparse LU (dense least squares where that does not reach
+round-off).
 """
 
 from __future__ import annotations
@@ -32,8 +69,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..formulations.qp import StepQP
+from ..friction.forces import ContactForces
 from ..scenes.geometry import FloatArray
 from ..solve.kkt import ActiveSet, reduced_kkt, solve_reduced
 from .tape import GradientError
@@ -122,3 +161,146 @@ def gap_switch_rows(qp: StepQP, active: ActiveSet, row_contact: np.ndarray) -> i
         return 0
     distance = qp.contacts.distance[row_contact[tight]]
     return int(np.count_nonzero(np.abs(distance) <= GAP_SWITCH))
+
+
+# ------------------------------------------------- coulomb friction: the fixed point
+CONE_EDGE = 1e-3
+"""A loaded contact whose friction impulse is within this fraction of its cone's radius
+``mu lambda_n`` slides (its friction problem put it on the edge; the fixed point's tolerance
+moves the radius by about ``coulomb_tolerance``, 1e-4 by default); inside it sticks."""
+
+SLIP_WEAK = 1e-7
+"""A sliding contact whose slip is below this fraction of the step's largest velocity (plus
+1 m/s) is at the stick-slip boundary: the derivative is one-sided there (flagged)."""
+
+
+@dataclass(frozen=True)
+class FrictionAdjoint:
+    """What a loss's gradient makes of the contacts' slip rows and coefficients."""
+
+    slip_unknowns: FloatArray
+    """Per contact: ``dL/dS_c = slip_unknowns_c a_x - slip_solution_c x`` ..."""
+    slip_solution: FloatArray
+    """... (``2 lambda_t,c`` and ``a_s,c``; 0 for a contact without friction)."""
+    mu: FloatArray
+    """``dL/dmu_c`` per contact."""
+
+
+@dataclass(frozen=True)
+class FrictionState:
+    """Each contact's part in the fixed point: loaded, sliding (and ``sigma``), sticking."""
+
+    normal: FloatArray
+    """``lambda_n`` (N s) from the polished multipliers of the tight rows."""
+    sliding: np.ndarray
+    sticking: np.ndarray
+    sigma: FloatArray
+    """``sign(s_c)`` of the sliding contacts (0 elsewhere)."""
+    weak: int
+    """Contacts at the stick-slip boundary."""
+
+
+def friction_state(qp: StepQP, x: FloatArray, ineq_dual: FloatArray, active: ActiveSet,
+                   forces: ContactForces) -> FrictionState:
+    """Classify the contacts of a ``coulomb`` contact QP's answer (the module docstring)."""
+    assert qp.cones is not None
+    count = len(qp.contacts)
+    rows = qp.cones.row_contact
+    tight = np.zeros(qp.n_inequalities, dtype=bool)
+    tight[active.lower] = True
+    normal_rows = np.where(tight[:len(rows)], ineq_dual[:len(rows)], 0.0)
+    normal = np.asarray(0.5 * np.bincount(rows, weights=normal_rows, minlength=count),
+                        dtype=np.float64)
+    loaded = np.bincount(rows, weights=tight[:len(rows)].astype(float), minlength=count) > 0
+    radius = qp.cones.coefficient * normal
+    rough = loaded & (radius > 0.0)
+    slip = np.asarray(qp.cones.slip @ x, dtype=np.float64)
+    friction = np.asarray(forces.friction, dtype=np.float64)
+    on_edge = rough & (np.abs(friction) >= (1.0 - CONE_EDGE) * radius)
+    slow = np.abs(slip) <= SLIP_WEAK * (1.0 + float(np.max(np.abs(x), initial=0.0)))
+    sliding = on_edge & ~slow
+    sigma = np.where(sliding, -np.sign(friction), 0.0)
+    return FrictionState(normal, sliding, rough & ~sliding, sigma,
+                         int(np.count_nonzero(on_edge & slow)))
+
+
+def coulomb_adjoint(qp: StepQP, target: FloatArray, x: FloatArray, ineq_dual: FloatArray,
+                    active: ActiveSet, forces: ContactForces, gradient: FloatArray,
+                    step: int) -> tuple[QPAdjoint, FrictionAdjoint, int]:
+    """The adjoint of a ``coulomb`` step's fixed point (the module docstring).
+
+    ``qp`` is the last contact QP, ``target`` the step's own target ``t`` (without the held
+    friction impulse), ``(x, z)`` its polished answer on ``active``, ``forces`` the fixed
+    point's impulses, ``gradient`` ``dL/dx``.  Returns the QP part (as
+    :func:`~wuerfel_cvx.gradients.adjoint.qp_adjoint`'s), the friction part, and the number
+    of contacts at the stick-slip boundary.
+    """
+    assert qp.cones is not None
+    if active.upper.size or qp.cost_factor is not None or qp.linear is not None:
+        raise GradientError(f"step {step}: the Coulomb backward pass covers the rigid "
+                            f"formulation's contact QPs (lower-bounded rows, diagonal cost)")
+    state = friction_state(qp, x, ineq_dual, active, forces)
+    tight = np.asarray(active.lower, dtype=np.int64)
+    slip = qp.cones.slip.toarray()
+    rows_g = qp.ineq_matrix.toarray()[tight]
+    eq = qp.eq_matrix.toarray()
+    n, n_eq, m = qp.n_variables, qp.n_equalities, tight.size
+    stick = np.flatnonzero(state.sticking)
+    half_sum = np.zeros((len(qp.contacts), m))  # N: lambda_n = N z_A
+    normal_row = tight < len(qp.cones.row_contact)
+    half_sum[qp.cones.row_contact[tight[normal_row]], np.flatnonzero(normal_row)] = 0.5
+    sliding_part = slip.T @ ((2.0 * state.sigma * qp.cones.coefficient)[:, None] * half_sum)
+    size = n + n_eq + m + stick.size
+    jacobian = np.zeros((size, size))
+    jacobian[:n, :n] = np.diag(2.0 * qp.weights)
+    jacobian[:n, n:n + n_eq] = eq.T
+    jacobian[:n, n + n_eq:n + n_eq + m] = -rows_g.T + sliding_part
+    jacobian[:n, n + n_eq + m:] = -2.0 * slip[stick].T
+    jacobian[n:, :n] = np.vstack([eq, rows_g, slip[stick]])
+    rhs = np.concatenate([gradient, np.zeros(size - n)])
+    solution = _transposed_solve(jacobian, n, rhs)
+    scale = 1.0 + float(np.max(np.abs(rhs)))
+    if not np.isfinite(solution).all() or \
+            np.max(np.abs(jacobian.T @ solution - rhs)) > 1e-6 * scale:
+        raise GradientError(f"step {step}: the Coulomb fixed point's linearised conditions "
+                            f"have no adjoint (inconsistent dependent rows)")
+    a_x, a_z = solution[:n], solution[n + n_eq:n + n_eq + m]
+    friction = np.where(state.sliding, -state.sigma * qp.cones.coefficient * state.normal,
+                        np.where(state.sticking, forces.friction, 0.0))
+    stick_adjoint = np.zeros(len(qp.contacts))
+    stick_adjoint[stick] = solution[n + n_eq + m:]
+    mu_gradient = np.where(state.sliding, -2.0 * state.sigma * state.normal * (slip @ a_x), 0.0)
+    qp_part = QPAdjoint(target=2.0 * qp.weights * a_x, weights=2.0 * a_x * (target - x),
+                        rows=tight, row_multiplier=np.asarray(ineq_dual[tight], dtype=np.float64),
+                        row_adjoint=a_z, unknowns_adjoint=a_x)
+    return qp_part, FrictionAdjoint(2.0 * friction, stick_adjoint, mu_gradient), state.weak
+
+
+def _transposed_solve(jacobian: FloatArray, n: int, rhs: FloatArray) -> FloatArray:
+    """A solution of ``jacobian' a = rhs``.
+
+    The KKT solve's regularised, refined sparse LU
+    (:func:`~wuerfel_cvx.solve.kkt.solve_reduced`), or dense least squares where that does
+    not reach round-off.
+    """
+    transposed = jacobian.T
+    size = transposed.shape[0]
+    row, col = np.nonzero(transposed)
+    diagonal = np.arange(size)
+    matrix = sp.csc_matrix((np.concatenate([transposed[row, col], np.zeros(size)]),
+                            (np.concatenate([row, diagonal]), np.concatenate([col, diagonal]))),
+                           shape=(size, size))
+    matrix.sum_duplicates()
+    matrix.sort_indices()
+    solution = solve_reduced(matrix, n, rhs)
+    if solution is None or np.max(np.abs(transposed @ solution - rhs)) > 1e-9 * (
+            1.0 + float(np.max(np.abs(rhs)))):
+        return np.asarray(np.linalg.lstsq(transposed, rhs, rcond=None)[0], dtype=np.float64)
+    return solution
+
+
+def unshifted_target(qp: StepQP, forces: ContactForces) -> FloatArray:
+    """The step's own target ``t``: the contact QP's less the friction impulse it held."""
+    assert qp.cones is not None
+    return np.asarray(qp.target - (qp.cones.slip.T @ forces.friction) / qp.weights,
+                      dtype=np.float64)

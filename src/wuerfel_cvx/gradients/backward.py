@@ -31,8 +31,16 @@ import numpy as np
 
 from ..scenes.geometry import FloatArray, rot90
 from ..solve.kkt import POLISHED, REUSED, guess_active_set
-from .adjoint import gap_switch_rows, qp_adjoint, weak_rows
-from .rigid import LOCAL, contact_rows, row_contacts
+from ..step.model import IntArray, Model
+from .adjoint import (
+    FrictionAdjoint,
+    coulomb_adjoint,
+    gap_switch_rows,
+    qp_adjoint,
+    unshifted_target,
+    weak_rows,
+)
+from .rigid import LOCAL, contact_rows, row_contacts, slip_rows
 from .tape import WRT_NAMES, GradientError, GradientTape, StepTape
 
 if TYPE_CHECKING:
@@ -135,7 +143,13 @@ def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
     guessed = solution.polish not in (POLISHED, REUSED) or active is None
     if active is None:
         active = guess_active_set(qp, solution.x, solution.ineq_dual)
-    adjoint = qp_adjoint(qp, solution.x, solution.ineq_dual, active, outputs, record.step)
+    friction, weak = None, 0
+    if record.forces is not None and qp.cones is not None:  # a coulomb step's fixed point
+        adjoint, friction, weak = coulomb_adjoint(
+            qp, unshifted_target(qp, record.forces), solution.x, solution.ineq_dual, active,
+            record.forces, outputs, record.step)
+    else:
+        adjoint = qp_adjoint(qp, solution.x, solution.ineq_dual, active, outputs, record.step)
     target = adjoint.target.reshape(n, 3)
     adjoints.velocity = target[:, :2].copy()
     adjoints.angular_velocity = target[:, 2].copy()
@@ -146,7 +160,9 @@ def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
     if adjoint.rows.size:
         _rows_back(tape, record, points, adjoint.rows, adjoint.row_multiplier,
                    adjoint.row_adjoint, adjoint.unknowns_adjoint, adjoints)
-    return (weak_rows(qp, solution.x, solution.ineq_dual, active) + int(guessed),
+    if friction is not None:
+        _slips_back(tape, record, points, friction, adjoint.unknowns_adjoint, adjoints)
+    return (weak_rows(qp, solution.x, solution.ineq_dual, active) + int(guessed) + weak,
             gap_switch_rows(qp, active, row_contacts(qp)))
 
 
@@ -167,13 +183,47 @@ def _rows_back(tape: GradientTape, record: StepTape, points: FloatArray, tight: 
             coefficient = np.where(moving, multiplier * unknowns_adjoint[column + axis]
                                    - row_adjoint * x[column + axis], 0.0)
             local += coefficient[:, None] * entry.grad[tight]
-    for bodies, first, friction in (
-            (qp.contacts.edge_body[contact], 0, LOCAL.index("edge_friction")),
-            (qp.contacts.point_body[contact], 3, LOCAL.index("point_friction"))):
+    _scatter(model, qp.contacts.edge_body[contact], qp.contacts.point_body[contact], local,
+             adjoints)
+
+
+def _slips_back(tape: GradientTape, record: StepTape, points: FloatArray,
+                friction: FrictionAdjoint, unknowns_adjoint: FloatArray,
+                adjoints: _Adjoints) -> None:
+    """A ``coulomb`` step's slip rows and coefficients (:mod:`~wuerfel_cvx.gradients.adjoint`).
+
+    ``dL/dS_c = slip_unknowns_c a_x - slip_solution_c x`` and ``dL/dmu_c``, carried to the
+    contacts' local inputs by the slip rows' derivatives.
+    """
+    model, qp, x = tape.model, record.qp, record.solution.x
+    involved = np.flatnonzero((friction.slip_unknowns != 0.0) | (friction.slip_solution != 0.0)
+                              | (friction.mu != 0.0))
+    if not involved.size:
+        return
+    rows = slip_rows(model, points, qp.contacts)
+    local = friction.mu[involved, None] * rows.mu.grad[involved]
+    for bodies, entries in ((qp.contacts.edge_body[involved], rows.edge_entries),
+                            (qp.contacts.point_body[involved], rows.point_entries)):
+        moving = bodies < model.n_boxes
+        column = 3 * np.where(moving, bodies, 0)
+        for axis, entry in enumerate(entries):
+            coefficient = np.where(moving, friction.slip_unknowns[involved]
+                                   * unknowns_adjoint[column + axis]
+                                   - friction.slip_solution[involved] * x[column + axis], 0.0)
+            local += coefficient[:, None] * entry.grad[involved]
+    _scatter(model, qp.contacts.edge_body[involved], qp.contacts.point_body[involved], local,
+             adjoints)
+
+
+def _scatter(model: Model, edge_bodies: IntArray, point_bodies: IntArray,
+             local: FloatArray, adjoints: _Adjoints) -> None:
+    """Add per-contact derivatives ``(m, len(LOCAL))`` to the moving bodies' adjoints."""
+    for bodies, first, friction in ((edge_bodies, 0, LOCAL.index("edge_friction")),
+                                    (point_bodies, 3, LOCAL.index("point_friction"))):
         moving = np.flatnonzero(bodies < model.n_boxes)
         body = bodies[moving]
-        np.add.at(adjoints.center, (body, 0), local[moving, first])
-        np.add.at(adjoints.center, (body, 1), local[moving, first + 1])
+        np.add.at(adjoints.center[:, 0], body, local[moving, first])  # views: in place
+        np.add.at(adjoints.center[:, 1], body, local[moving, first + 1])
         np.add.at(adjoints.angle, body, local[moving, first + 2])
         np.add.at(adjoints.friction, body, local[moving, friction])
 

@@ -153,14 +153,22 @@ class ContactRows:
     """Each row's contact."""
 
 
-def contact_rows(model: Model, points: FloatArray, contacts: Contacts, qp: StepQP,
-                 dt: float, beta: float) -> ContactRows:
-    """The rows of ``qp`` (a ``rigid`` step QP from corners ``points``) with derivatives.
+@dataclass(frozen=True)
+class _Geometry:
+    """Every contact's corners, side and slip blocks, coefficient and gap, as tangents."""
 
-    Row order as the formulation builds them: one row per contact (the ``+`` cone edge where
-    it has friction), then the ``-`` edges of the rough contacts
-    (:func:`~wuerfel_cvx.formulations.cone.with_cones`).
-    """
+    corners: tuple[_Corners, _Corners, _Corners]
+    """The edge's start ``i``, its end ``j`` and the point ``k``."""
+    side: tuple[Vector, Vector, Vector]
+    """The side row's blocks ``g`` for ``v_i``, ``v_j``, ``v_k``."""
+    slip: tuple[Vector, Vector, Vector]
+    """The slip row's blocks ``s`` for ``v_i``, ``v_j``, ``v_k``."""
+    mu: Tangent
+    gap: Tangent
+
+
+def _geometry(model: Model, points: FloatArray, contacts: Contacts) -> _Geometry:
+    """The contacts' row geometry from corners ``points`` (the module docstring)."""
     centers = points.reshape(-1, 4, 2).mean(axis=1)
     corner_i = _corners(model, points, centers, contacts.edge_i, contacts.edge_body, 0)
     corner_j = _corners(model, points, centers, contacts.edge_j, contacts.edge_body, 0)
@@ -175,36 +183,79 @@ def contact_rows(model: Model, points: FloatArray, contacts: Contacts, qp: StepQ
     alpha = _dot(_minus(p_k, p_i), edge) / (length * length)
     one = _constant(np.ones(len(contacts)))
     slip = (_scaled(tangent, -(one - alpha)), _scaled(tangent, -alpha), tangent)
-    mu = _friction(model, contacts)
     distance = _dot(side[2], _minus(p_k, p_i))
-    gap = _gap(contacts, distance, p_i, p_j, p_k)
-    rate = np.where(contacts.distance > 0.0, 1.0 / dt, beta / dt)
+    return _Geometry((corner_i, corner_j, corner_k), side, slip, _friction(model, contacts),
+                     _gap(contacts, distance, p_i, p_j, p_k))
 
+
+def _body_entries(geometry: _Geometry, rows: IntArray, blocks: list[Vector],
+                  ) -> tuple[Tangent, ...]:
+    """Corner blocks ``(v_i, v_j, v_k)`` of contacts ``rows`` in body columns.
+
+    ``(edge u_x, edge u_y, edge omega, point u_x, point u_y, point omega)``: the corner map
+    of the module docstring.
+    """
+    r_i, r_j, r_k = ((_take(c.offset[0], rows), _take(c.offset[1], rows))
+                     for c in geometry.corners)
+    return (blocks[0][0] + blocks[1][0], blocks[0][1] + blocks[1][1],
+            _dot(blocks[0], _rot90(r_i)) + _dot(blocks[1], _rot90(r_j)),
+            blocks[2][0], blocks[2][1], _dot(blocks[2], _rot90(r_k)))
+
+
+def contact_rows(model: Model, points: FloatArray, contacts: Contacts, qp: StepQP,
+                 dt: float, beta: float) -> ContactRows:
+    """The rows of ``qp`` (a ``rigid`` step QP from corners ``points``) with derivatives.
+
+    Row order as the formulation builds them: one row per contact (the ``+`` cone edge where
+    it has friction), then the ``-`` edges of the rough contacts
+    (:func:`~wuerfel_cvx.formulations.cone.with_cones`).  A ``coulomb`` contact QP has the
+    normal rows only (its cones have no ``-`` edges).
+    """
+    geometry = _geometry(model, points, contacts)
+    rate = np.where(contacts.distance > 0.0, 1.0 / dt, beta / dt)
     contact, sign = _row_signs(qp, len(contacts))
-    edge_x, edge_y, edge_w, point_x, point_y, point_w = [], [], [], [], [], []
+    parts: list[tuple[Tangent, ...]] = []
     for rows, sigma in ((contact[sign == 0], 0.0), (contact[sign > 0], 1.0),
                         (contact[sign < 0], -1.0)):
-        factor = _take(mu, rows) * sigma
+        factor = _take(geometry.mu, rows) * sigma
         blocks = [(_take(g[0], rows) + _take(s[0], rows) * factor,
-                   _take(g[1], rows) + _take(s[1], rows) * factor) for g, s in zip(side, slip,
-                                                                                   strict=True)]
-        r_i = (_take(corner_i.offset[0], rows), _take(corner_i.offset[1], rows))
-        r_j = (_take(corner_j.offset[0], rows), _take(corner_j.offset[1], rows))
-        r_k = (_take(corner_k.offset[0], rows), _take(corner_k.offset[1], rows))
-        edge_x.append(blocks[0][0] + blocks[1][0])
-        edge_y.append(blocks[0][1] + blocks[1][1])
-        edge_w.append(_dot(blocks[0], _rot90(r_i)) + _dot(blocks[1], _rot90(r_j)))
-        point_x.append(blocks[2][0])
-        point_y.append(blocks[2][1])
-        point_w.append(_dot(blocks[2], _rot90(r_k)))
+                   _take(g[1], rows) + _take(s[1], rows) * factor)
+                  for g, s in zip(geometry.side, geometry.slip, strict=True)]
+        parts.append(_body_entries(geometry, rows, blocks))
     order = np.argsort(np.concatenate([np.flatnonzero(sign == 0), np.flatnonzero(sign > 0),
                                        np.flatnonzero(sign < 0)]), kind="stable")
-    rhs = gap * (-rate)
-    rows = ContactRows(tuple(_joined(parts, order) for parts in (edge_x, edge_y, edge_w)),  # type: ignore[arg-type]
-                       tuple(_joined(parts, order) for parts in (point_x, point_y, point_w)),  # type: ignore[arg-type]
-                       _take(rhs, contact), contact)
+    entries = [_joined([part[column] for part in parts], order) for column in range(6)]
+    rhs = geometry.gap * (-rate)
+    rows = ContactRows((entries[0], entries[1], entries[2]),
+                       (entries[3], entries[4], entries[5]), _take(rhs, contact), contact)
     _check(model, rows, qp, contacts)
     return rows
+
+
+@dataclass(frozen=True)
+class SlipRows:
+    """Every contact's slip row ``S_c`` and coefficient ``mu_c``, with derivatives."""
+
+    edge_entries: tuple[Tangent, Tangent, Tangent]
+    """The slip row's entries in the edge body's columns ``(u_x, u_y, omega)``."""
+    point_entries: tuple[Tangent, Tangent, Tangent]
+    """The slip row's entries in the point body's columns."""
+    mu: Tangent
+    """The contact's coefficient ``sqrt(mu_P mu_E)``."""
+
+
+def slip_rows(model: Model, points: FloatArray, contacts: Contacts) -> SlipRows:
+    """The slip rows and coefficients of ``contacts``, with derivatives (:data:`LOCAL`).
+
+    The rows are ``qp.cones.slip`` of a ``rigid`` step QP (the slip in m/s of each contact
+    in the bodies' velocities): what a ``coulomb`` step's friction depends on.
+    """
+    geometry = _geometry(model, points, contacts)
+    every = np.arange(len(contacts), dtype=np.int64)
+    entries = _body_entries(geometry, every, [(_take(s[0], every), _take(s[1], every))
+                                              for s in geometry.slip])
+    return SlipRows((entries[0], entries[1], entries[2]), (entries[3], entries[4], entries[5]),
+                    geometry.mu)
 
 
 def row_contacts(qp: StepQP) -> IntArray:

@@ -15,6 +15,7 @@ from typing import Any
 
 from ..errors import InputError
 from ..formulations.qp import Formulation, StepQP
+from ..friction.forces import ContactForces
 from ..solve.paths import StepSolution
 from ..step.model import Model
 
@@ -29,7 +30,7 @@ SUPPORTED_FORMULATIONS = ("rigid",)
 """Formulations a gradient can be taken through (the module docstring of
 :mod:`wuerfel_cvx.gradients` says why the others are not yet)."""
 
-SUPPORTED_FRICTION_MODELS = ("ccp",)
+SUPPORTED_FRICTION_MODELS = ("ccp", "coulomb")
 """Friction models a gradient can be taken through (frictionless contacts always)."""
 
 
@@ -48,7 +49,13 @@ class StepTape:
     step: int
     """The 1-based step index (from state ``step - 1`` to state ``step``)."""
     qp: StepQP
+    """The step's QP; with ``coulomb`` friction the fixed point's last contact QP, its target
+    shifted by the friction impulse it held."""
     solution: StepSolution
+    forces: ContactForces | None = None
+    """With ``coulomb`` friction: the fixed point's impulses and slips per contact of
+    :attr:`qp` (:attr:`CoulombStep.forces <wuerfel_cvx.friction.coulomb.CoulombStep.forces>`);
+    ``None`` for a step without the fixed point."""
 
 
 @dataclass
@@ -61,13 +68,13 @@ class GradientTape:
     """Time step (s)."""
     steps: list[StepTape] = field(default_factory=list)
 
-    def record(self, step: int, qps: tuple[StepQP, ...],
-               solutions: tuple[StepSolution, ...]) -> None:
-        """Keep step ``step``'s QP and answer (one QP: islands are refused up front)."""
+    def record(self, step: int, qps: tuple[StepQP, ...], solutions: tuple[StepSolution, ...],
+               forces: tuple[ContactForces | None, ...] = (None,)) -> None:
+        """Keep step ``step``'s QP, answer and Coulomb forces (one QP: no islands)."""
         if len(qps) != 1:
             raise GradientError(f"step {step} solved {len(qps)} QPs; a gradient needs one "
                                 f"QP per step (islands off, sleep off)")
-        self.steps.append(StepTape(step, qps[0], solutions[0]))
+        self.steps.append(StepTape(step, qps[0], solutions[0], forces[0]))
 
 
 def check_supported(formulation: Formulation, friction_model: str | None, *,

@@ -758,6 +758,25 @@ def launched_box_scene(speed: float = 3.0, friction: float = 0.5) -> Scene:
     return Scene(name="friction-slide", squares=(square,), tables=(table,))
 
 
+def ramp_slide_scene(friction: float = 0.2, angle: float = 0.3, speed: float = 0.0,
+                     clearance: float = 1e-3, ramp_friction: float | None = None) -> Scene:
+    """A unit square on a ramp tilted by ``angle`` (rad, down towards +x), sliding down it.
+
+    The square sits ``clearance`` (m) above the ramp's face, turned with it, moving at
+    ``speed`` (m/s) down the slope; its friction is ``friction``, the ramp's
+    ``ramp_friction`` (``friction`` when ``None``), the contacts' ``sqrt`` of the two.  With
+    ``mu < tan(angle)`` it accelerates at ``g (sin(angle) - mu cos(angle))`` along the slope.
+    """
+    normal = (math.sin(angle), math.cos(angle))
+    down = (math.cos(angle), -math.sin(angle))
+    reach = 1.0 + clearance  # the ramp's half thickness and the square's half side
+    square = Square(center=(reach * normal[0], reach * normal[1]), angle=-angle,
+                    velocity=(speed * down[0], speed * down[1]), friction=friction)
+    ramp = Table(center=(0.0, 0.0), size=(40.0, 1.0), angle=-angle,
+                 friction=friction if ramp_friction is None else ramp_friction)
+    return Scene(name="ramp-slide", squares=(square,), tables=(ramp,))
+
+
 def _ladder_pose(angle: float) -> tuple[tuple[float, float], FloatArray]:
     """The ladder's centre (m) with its foot at the origin, and its corners ``(4, 2)``."""
     length, thickness = LADDER_SIZE

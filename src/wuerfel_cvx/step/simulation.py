@@ -206,7 +206,8 @@ class Simulation:
         self._coulomb_warned |= coulomb_row["coulomb_converged"] is False
         clock.lap("update")
         if self.tape is not None:
-            self.tape.record(step, tuple(qps), tuple(solutions))
+            self.tape.record(step, tuple(qps), tuple(solutions),
+                             tuple(None if c is None else c.forces for c in coulombs))
         self._advance_to(step, state, _solved_row(qps, combined, primary_status, most_passes)
                          | coulomb_row | combine_criteria(criteria), clock)
         return StepRecord(step, tuple(qps), tuple(solutions),

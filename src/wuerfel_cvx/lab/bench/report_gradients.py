@@ -1,0 +1,357 @@
+"""The gradients report (issue 26): ``reports/gradients/README.md`` from fresh measurements.
+
+``python -m wuerfel_cvx.lab.bench.report_gradients --out reports/gradients`` runs every
+measurement and writes the Markdown (a few minutes on two cores):
+
+* the analytic slide: ``dd/dv0`` and ``dd/dmu`` of a launched box against ``v0/(mu g)`` and
+  ``-v0^2/(2 mu^2 g)`` for ``ccp`` and ``coulomb`` at dt 1/240;
+* central finite differences against the adjoint on a tilted drop, a slide and a resting
+  stack, for CLARABEL, OSQP and PIQP and both friction models (the inputs and losses of
+  ``tests/test_gradients.py``);
+* one step's adjoint against cvxpy's own derivative (``Problem.backward``, which needs the
+  optional package diffcp; the row says so when it is missing);
+* the cost of a gradient: the backward pass's time over the recorded run's, on stack-10 and
+  20-body piles, alternated repeats (min and median);
+* why the ``velocity`` formulations are not covered: how many of their steps take more than
+  one Gauss-Newton pass.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime
+import platform
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ... import Scene, Square, simulate
+from ...formulations import Formulation, get_formulation
+from ...scenes.library import FLOOR, launched_box_scene
+from ...trajectory import Trajectory
+from ...versions import package_version
+from .markdown import markdown_table
+
+G = 9.81
+DT = 1 / 240
+"""Time step (s) of the analytic and finite-difference runs."""
+EPS = 1e-6
+"""Step of the central differences (in each input's unit)."""
+FLOOR_SCALE = 1e-3
+"""Relative errors are ``|adjoint - fd| / max(|fd|, FLOOR_SCALE)``: a derivative that vanishes
+is judged absolutely, at ``1e-5 * FLOOR_SCALE`` for the issue's 1e-5."""
+SOLVERS = ("CLARABEL", "OSQP", "PIQP")
+MODELS = ("ccp", "coulomb")
+FD_COULOMB_TOLERANCE = 1e-10
+"""``coulomb_tolerance`` of the finite-difference runs (the tests' reason)."""
+
+Input = tuple[int, str, int]
+Loss = Callable[[np.ndarray], np.ndarray]
+
+
+def formulation(model: str, coulomb_tolerance: float | None = None) -> Formulation:
+    """``rigid`` with friction model ``model`` (and a fixed point tolerance, if given)."""
+    extra = {} if coulomb_tolerance is None else {"coulomb_tolerance": coulomb_tolerance}
+    return dataclasses.replace(get_formulation("rigid"),  # type: ignore[type-var]
+                               friction_model=model, **extra)
+
+
+def _perturbed(scene: Scene, body: int, name: str, component: int, step: float) -> Scene:
+    square = scene.squares[body]
+    value = getattr(square, name)
+    if isinstance(value, tuple):
+        changed = list(value)
+        changed[component] += step
+        value = tuple(changed)
+    else:
+        value = value + step
+    squares = list(scene.squares)
+    squares[body] = dataclasses.replace(square, **{name: value})
+    return dataclasses.replace(scene, squares=tuple(squares))
+
+
+def _last_state(weights: Callable[[np.ndarray], np.ndarray]) -> Loss:
+    def loss(points: np.ndarray) -> np.ndarray:
+        gradient = np.zeros_like(points)
+        gradient[-1] = weights(points[-1])
+        return gradient
+    return loss
+
+
+def _first_x(points: np.ndarray) -> np.ndarray:
+    weights = np.zeros_like(points)
+    weights[:4, 0] = 0.25
+    return weights
+
+
+def _heights(points: np.ndarray) -> np.ndarray:
+    weights = np.zeros_like(points)
+    weights[:, 1] = 1.0
+    return weights
+
+
+def _top_x(points: np.ndarray) -> np.ndarray:
+    weights = np.zeros_like(points)
+    weights[-4:, 0] = 0.25
+    return weights
+
+
+ALL_INPUTS: list[Input] = [(0, "center", 0), (0, "center", 1), (0, "angle", 0),
+                           (0, "velocity", 0), (0, "velocity", 1),
+                           (0, "angular_velocity", 0), (0, "friction", 0), (0, "mass", 0)]
+
+
+def fd_cases() -> list[tuple[str, Scene, Loss, list[Input], int]]:
+    """The finite-difference cases: name, scene, loss gradient, inputs, steps."""
+    slide = _perturbed(launched_box_scene(3.0, 0.5), 0, "center", 1, 1e-3)
+    square = Square(center=(0.0, 0.9), angle=0.3, velocity=(0.4, -1.0), angular_velocity=1.0,
+                    friction=0.4)
+    drop = Scene(name="tilted-drop", squares=(square,),
+                 tables=(dataclasses.replace(FLOOR, friction=0.4),))
+    stack = Scene(name="stack-3-rough",
+                  squares=tuple(Square(center=(0.0, 0.5 + k), friction=0.6) for k in range(3)),
+                  tables=(dataclasses.replace(FLOOR, friction=0.6),))
+    stack_inputs = [(2, "center", 0), (1, "center", 0), (2, "velocity", 0), (1, "velocity", 0),
+                    (2, "friction", 0), (1, "mass", 0), (2, "angular_velocity", 0)]
+    return [("tilted drop (60 steps)", drop, _last_state(_heights), ALL_INPUTS, 60),
+            ("slide (40 steps)", slide, _last_state(_first_x), ALL_INPUTS, 40),
+            ("resting 3-stack (30 steps)", stack, _last_state(_top_x), stack_inputs, 30)]
+
+
+def fd_agreement(scene: Scene, loss: Loss, inputs: list[Input], steps: int, solver: str,
+                 model: str) -> tuple[float, str, int]:
+    """The worst relative disagreement over ``inputs``, its input, and the one-sided steps."""
+    form = formulation(model, FD_COULOMB_TOLERANCE if model == "coulomb" else None)
+
+    def run(changed: Scene, gradients: bool = False) -> Trajectory:
+        return simulate(changed, dt=DT, steps=steps, solver=solver, formulation=form,
+                        gradients=gradients)
+
+    trajectory = run(scene, True)
+    names = tuple(dict.fromkeys(name for _, name, _ in inputs))
+    gradient = trajectory.gradient(loss(trajectory.points), names)
+    worst, where = 0.0, ""
+    for body, name, component in inputs:
+        value = gradient[name][body]
+        adjoint = float(value[component] if np.ndim(value) else value)
+        values = []
+        for sign in (1.0, -1.0):
+            points = run(_perturbed(scene, body, name, component, sign * EPS)).points
+            values.append(float(np.sum(loss(points) * points)))
+        expected = (values[0] - values[1]) / (2.0 * EPS)
+        error = abs(adjoint - expected) / max(abs(expected), FLOOR_SCALE)
+        if error >= worst:
+            worst, where = error, f"{name}[{body}]"
+    return worst, where, int(gradient["crossings"])
+
+
+def analytic_rows() -> list[list[str]]:
+    """The launched box (v0 3 m/s, mu 0.5, 200 steps at dt 1/240) for both models."""
+    speed, mu = 3.0, 0.5
+    rows = []
+    for model, target in (("ccp", 0.03), ("coulomb", 0.01)):
+        trajectory = simulate(launched_box_scene(speed, mu), dt=DT, steps=200,
+                              formulation=formulation(model), gradients=True)
+        loss = _last_state(_first_x)(trajectory.points)
+        gradient = trajectory.gradient(loss, ("velocity", "friction"))
+        for name, computed, exact in (
+                ("dd/dv0 (s)", gradient["velocity"][0, 0], speed / (mu * G)),
+                ("dd/dmu (m)", 2.0 * gradient["friction"][0], -speed**2 / (2 * mu**2 * G))):
+            error = computed / exact - 1.0
+            rows.append([model, name, f"{computed:.5f}", f"{exact:.5f}", f"{100 * error:+.2f} %",
+                         f"{100 * target:.0f} %", "yes" if abs(error) <= target else "no"])
+    return rows
+
+
+def cvxpy_row() -> list[str]:
+    """One slide step's adjoint against ``Problem.backward`` (largest relative difference)."""
+    try:
+        import diffcp  # type: ignore[import-not-found]  # noqa: F401
+    except ImportError:
+        return ["not run: diffcp (cvxpy's derivative backend) is not installed", "", ""]
+    import cvxpy as cp
+
+    from ...gradients.adjoint import qp_adjoint
+    scene = _perturbed(launched_box_scene(3.0, 0.5), 0, "center", 1, 1e-3)
+    trajectory = simulate(scene, dt=DT, steps=12, formulation="rigid", gradients=True)
+    assert trajectory.tape is not None
+    record = next(r for r in reversed(trajectory.tape.steps)
+                  if r.solution.active is not None and r.solution.active.size)
+    qp, solution = record.qp, record.solution
+    assert solution.active is not None
+    loss = np.array([1.0, 0.5, 2.0])
+    adjoint = qp_adjoint(qp, solution.x, solution.ineq_dual, solution.active, loss, 1)
+    x = cp.Variable(qp.n_variables)
+    target = cp.Parameter(qp.n_variables, value=qp.target)
+    rows = cp.Parameter(qp.ineq_matrix.shape, value=qp.ineq_matrix.toarray())
+    rhs = cp.Parameter(qp.n_inequalities, value=qp.ineq_rhs)
+    root = np.sqrt(qp.weights)
+    problem = cp.Problem(cp.Minimize(cp.sum_squares(cp.multiply(root, x - target))),
+                         [rows @ x >= rhs])
+    problem.solve(solver=cp.SCS, requires_grad=True, eps=1e-12, max_iters=100_000)
+    x.gradient = loss
+    problem.backward()
+    dense_rhs = np.zeros(qp.n_inequalities)
+    dense_rhs[adjoint.rows] = adjoint.row_adjoint
+    scale = float(np.max(np.abs(adjoint.target)))
+    differences = [np.max(np.abs(target.gradient - adjoint.target)),
+                   np.max(np.abs(rhs.gradient - dense_rhs))]
+    return [f"slide step {record.step} ({qp.n_variables} unknowns, {qp.n_inequalities} rows), "
+            f"diffcp {package_version('diffcp')}, SCS eps 1e-12",
+            f"{max(differences) / scale:.1e}", "dL/dt, dL/dh"]
+
+
+def cost_rows(repeats: int) -> list[list[str]]:
+    """Backward time over the recorded run's time (dt 1/60, 200 steps), alternated repeats."""
+    cases = [("stack-10", "ccp"), ("rain-20", "ccp"), ("spinning-pile-20", "ccp"),
+             ("field-pyramid-5", "ccp"), ("field-pyramid-5", "coulomb")]
+    timings: dict[tuple[str, str], list[tuple[float, float]]] = {case: [] for case in cases}
+    for _ in range(repeats):
+        for scene, model in cases:
+            started = time.perf_counter()
+            trajectory = simulate(scene, dt=1 / 60, steps=200, formulation=formulation(model),
+                                  gradients=True)
+            ran = time.perf_counter() - started
+            loss = np.zeros_like(trajectory.points)
+            loss[-1, :, 1] = 1.0
+            started = time.perf_counter()
+            trajectory.gradient(loss, ("center", "velocity", "friction", "mass"))
+            timings[(scene, model)].append((ran, time.perf_counter() - started))
+    rows = []
+    for (scene, model), pairs in timings.items():
+        ratios = [back / run for run, back in pairs]
+        rows.append([scene, model, f"{statistics.median(run for run, _ in pairs):.2f}",
+                     f"{statistics.median(back for _, back in pairs):.2f}",
+                     f"{min(ratios):.2f}", f"{statistics.median(ratios):.2f}",
+                     "yes" if statistics.median(ratios) <= 2.0 else "no"])
+    return rows
+
+
+def velocity_rows() -> list[list[str]]:
+    """Steps of the ``velocity`` formulation that take more than one pass (dt 1/240)."""
+    rows = []
+    for name, scene, _, _, steps in fd_cases():
+        metrics = simulate(scene, dt=DT, steps=steps, formulation="velocity").metrics
+        passes = metrics["passes"].to_numpy()
+        rows.append([name, f"{int(np.sum(passes > 1))} of {len(passes)}",
+                     f"{int(np.max(passes))}"])
+    return rows
+
+
+def fd_rows() -> list[list[str]]:
+    """:func:`fd_agreement` for every case, solver and friction model."""
+    rows = []
+    for name, scene, loss, inputs, steps in fd_cases():
+        for model in MODELS:
+            for solver in SOLVERS:
+                worst, where, crossings = fd_agreement(scene, loss, inputs, steps, solver, model)
+                rows.append([name, model, solver, f"{worst:.1e}", where, str(crossings),
+                             "yes" if worst <= 1e-5 else "no"])
+    return rows
+
+
+def _header(command: str) -> str:
+    stamp = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    solvers = ", ".join(f"{name} {package_version(package)}" for name, package in
+                        (("CLARABEL", "clarabel"), ("OSQP", "osqp"), ("PIQP", "piqp")))
+    return "\n".join([
+        "# Gradients through a run (issue 26)", "",
+        f"- **Report generated:** {stamp}",
+        f"- **CPU:** {platform.processor() or platform.machine()}",
+        f"- **Python:** {platform.python_version()}",
+        f"- **wuerfel_cvx:** {package_version('wuerfel_cvx')}, "
+        f"**cvxpy:** {package_version('cvxpy')}",
+        f"- **Solvers:** {solvers}", "",
+        "Every number below is measured by one script; to regenerate:", "",
+        "```sh", command, "```", ""])
+
+
+def write_report(out: Path, repeats: int) -> Path:
+    """Measure everything and write ``out/README.md`` (the module docstring)."""
+    command = (f"python -m wuerfel_cvx.lab.bench.report_gradients --out {out} "
+               f"--repeats {repeats}")
+    parts = [_header(command), _TEXT["analytic"],
+             markdown_table(["model", "derivative", "computed", "analytic", "error", "target",
+                             "met"], analytic_rows(), "llrrrrl"),
+             _TEXT["fd"],
+             markdown_table(["case", "model", "solver", "worst relative", "at", "one-sided steps",
+                             "<= 1e-5"], fd_rows(), "llllrrl"),
+             _TEXT["cvxpy"],
+             markdown_table(["step", "largest relative difference", "compared"], [cvxpy_row()],
+                            "lrl"),
+             _TEXT["cost"],
+             markdown_table(["scene", "model", "run (s)", "backward (s)", "ratio min",
+                             "ratio median", "<= 2x"], cost_rows(repeats), "llrrrrl"),
+             _TEXT["velocity"],
+             markdown_table(["case", "steps with more than one pass", "most passes"],
+                            velocity_rows(), "lrr")]
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "README.md"
+    path.write_text("\n\n".join(part.strip("\n") for part in parts) + "\n")
+    return path
+
+
+_TEXT = {
+    "analytic": """## Analytic slide
+
+A unit box launched at v0 = 3 m/s on a flat table, box and table mu = 0.5 (the contact's
+coefficient sqrt(mu mu) = 0.5; its derivative is twice the box's), dt 1/240, 200 steps,
+CLARABEL, the default `coulomb_tolerance` (1e-4).  d = v0^2 / (2 mu g); the discrete slide
+stops after floor(v0 / (mu g dt)) steps, which puts the discrete derivatives up to
+mu g dt / v0 = 0.7 % from the continuous ones.""",
+    "fd": f"""## Finite differences
+
+Central differences (step {EPS:g}) of whole runs against the adjoint, dt 1/240, the `rigid`
+formulation; the worst over the inputs (centre, angle, velocity, angular velocity, friction,
+mass of a body; the stack: horizontal positions and velocities, friction, mass, spin), as
+|adjoint - fd| / max(|fd|, {FLOOR_SCALE:g}).  `coulomb` runs with `coulomb_tolerance`
+{FD_COULOMB_TOLERANCE:g}, so that the runs are the fixed point to round-off.  One-sided steps:
+steps with a weakly active row or a contact at the stick-slip boundary (none here).  On the
+resting stack a velocity pushed into the sticking contacts is stopped in the first step
+(the derivative is 0), but the perturbed `coulomb` runs' first fixed point stops at its 50
+iterations without converging (staggered projections converge slowly through a stack of
+sticking contacts): the difference then carries the fixed point's own error (about 3e-7),
+not the adjoint's.""",
+    "cvxpy": """## cvxpy's derivative
+
+One step QP of the slide, declared as a DPP problem in cvxpy and differentiated by
+`Problem.backward` (diffcp on SCS's conic form), against the hand-derived adjoint of
+`wuerfel_cvx.gradients.adjoint.qp_adjoint`; relative to the largest entry of dL/dt.
+diffcp is not among the package's dependencies or extras: for this report it was installed
+beside them (`pip install diffcp`); without it the row says it was not run.""",
+    "cost": """## Cost
+
+Time of `Trajectory.gradient` (centre, velocity, friction, mass) over the time of the run
+that recorded it (`simulate(..., gradients=True)`, dt 1/60, 200 steps, CLARABEL, `rigid`),
+repeats alternated over the scenes; times are medians, the ratio's min and median over the
+repeats.  The target is a gradient at most 2x the run.""",
+    "velocity": """## Why the `velocity` formulation is not covered
+
+`simulate(..., formulation="velocity", gradients=True)` raises a `GradientError` naming
+`rigid` as the formulation covered.  What a backward pass through `velocity` (the package
+default) needs and is not written: (1) its own row derivatives: its unknowns are corner
+velocities held together by rod equalities, its contact rows are built in corner space and
+include closest-approach rows, so `gradients/rigid.py`'s derivatives of the rigid rows do not
+apply and would need a counterpart, with the rods' rows and the advance of the corners;
+(2) the chain through its Gauss-Newton passes, where a step takes several: each pass
+re-linearises the closest-approach rows about the last pass's answer, so the answer depends
+on the earlier answers through the rows.  On the cases above the passes do not occur (one
+pass a step, dt 1/240), so (1) is the work that would open them:""",
+}
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Command line: ``--out DIR`` (default ``reports/gradients``), ``--repeats N``."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=Path("reports/gradients"))
+    parser.add_argument("--repeats", type=int, default=3)
+    arguments = parser.parse_args(argv)
+    print(write_report(arguments.out, arguments.repeats))
+
+
+if __name__ == "__main__":
+    main()
