@@ -15,6 +15,7 @@ from typing import Any
 
 from ..errors import InputError
 from ..formulations.qp import Formulation, StepQP
+from ..formulations.rigid import RigidFormulation
 from ..friction.forces import ContactForces
 from ..solve.paths import StepSolution
 from ..step.model import Model
@@ -90,6 +91,9 @@ def check_supported(formulation: Formulation, friction_model: str | None, *,
         refuse(f"gradients are implemented for the {', '.join(SUPPORTED_FORMULATIONS)} "
                f"formulation only, not '{formulation.name}' (its closest-approach passes "
                f"and rods are not differentiated yet)")
+    if isinstance(formulation, RigidFormulation) and formulation.linearisation != "start":
+        refuse("gradients through rigid's closest-approach rows (linearisation "
+               "'closest-approach') are not differentiated yet: use linearisation 'start'")
     model = (friction_model or (formulation.friction.friction_model
                                 if formulation.friction is not None else "ccp"))
     if str(model).strip().lower() not in SUPPORTED_FRICTION_MODELS:
