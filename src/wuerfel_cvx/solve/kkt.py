@@ -64,6 +64,15 @@ REPAIRS = 5
 """Most corrections of the guessed active set (rows dropped for a wrong-signed multiplier,
 rows added for a violated bound) before a polish gives up."""
 
+CLEAR_MARGIN = 1e4
+"""Factor (1) by which a row's scaled multiplier must exceed its scaled slack to be guessed
+tight in :func:`polish`'s second guess, tried when the first (OSQP's rule, factor 1) is
+rejected.  Rows on which an interior-point answer is ambiguous, slack and multiplier both
+small (on the card house's degenerate contacts 1e-6 and 1e-5 of the scales), then start
+free, and a repair tightens those the exact point violates; rows that carry load exceed
+their slack by far more (1e8 there).  Guessed tight with the first rule they make the
+reduced system inconsistent (more independent tight rows than the unknowns allow)."""
+
 @dataclass(frozen=True)
 class Residuals:
     """Relative KKT residuals of a candidate solution (dimensionless)."""
@@ -187,17 +196,18 @@ def _scales(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArra
 
 
 def guess_active_set(qp: StepQP, x: FloatArray, ineq_dual: FloatArray,
-                     scales: _Scales | None = None) -> ActiveSet:
+                     scales: _Scales | None = None, margin: float = 1.0) -> ActiveSet:
     """The rows an answer ``(x, z)`` rests on: OSQP's rule "slack below multiplier".
 
-    A row is taken as tight on its lower bound when ``z_r / dual scale`` exceeds
-    ``(G x - h)_r / primal scale``, and on its upper bound when ``-z_r / dual scale``
-    exceeds ``(u - G x)_r / primal scale``: the comparison OSQP makes in its scaled units,
-    made unit-free by the scales of the KKT check.  A violated row counts as tight.
+    A row is taken as tight on its lower bound when ``z_r / dual scale`` exceeds ``margin``
+    times ``(G x - h)_r / primal scale``, and on its upper bound when ``-z_r / dual scale``
+    exceeds ``margin`` times ``(u - G x)_r / primal scale``: with ``margin`` 1 the comparison
+    OSQP makes in its scaled units, made unit-free by the scales of the KKT check.  A
+    violated row counts as tight.
     """
     scales = _scales(qp, x, np.zeros(qp.n_equalities), ineq_dual) if scales is None else scales
     lhs = qp.ineq_matrix @ x
-    weight = ineq_dual / scales.dual
+    weight = ineq_dual / (margin * scales.dual)
     lower_tight = weight > (lhs - qp.ineq_rhs) / scales.primal
     upper_tight = np.zeros_like(lower_tight)
     rows = qp.upper_rows
@@ -239,13 +249,30 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     each time from the last point, so a row made tight starts with no multiplier.
     The polished point is returned as :data:`POLISHED` only if it is feasible and
     sign-consistent to :data:`ROUND_OFF` and its residuals are no worse than ``residuals``;
-    else :data:`REJECTED` with the reason.
+    else the same is tried once more from a stricter guess (:data:`CLEAR_MARGIN`: only rows
+    whose multiplier clearly exceeds their slack), and if that too fails, :data:`REJECTED`
+    with the first attempt's reason.
     """
     if residuals is None:
         residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
     scales = _scales(qp, x, eq_dual, ineq_dual)
     active = guess_active_set(qp, x, ineq_dual, scales)
-    x_new, y_new, z_new = x, eq_dual, ineq_dual  # each solve starts from the last point
+    first = _polished_on(qp, active, (x, eq_dual, ineq_dual), scales, residuals)
+    if first.outcome == POLISHED or first.reason == "singular":
+        return first
+    strict = guess_active_set(qp, x, ineq_dual, scales, CLEAR_MARGIN)
+    if np.array_equal(strict.lower, active.lower) and np.array_equal(strict.upper, active.upper):
+        return first
+    second = _polished_on(qp, strict, (x, eq_dual, ineq_dual), scales, residuals)
+    return second if second.outcome == POLISHED else first
+
+
+def _polished_on(qp: StepQP, active: ActiveSet,
+                 answer: tuple[FloatArray, FloatArray, FloatArray], scales: _Scales,
+                 residuals: Residuals) -> Polish:
+    """:func:`polish` from the guess ``active``: solves, repairs, and the acceptance check."""
+    x, eq_dual, ineq_dual = answer
+    x_new, y_new, z_new = answer  # each solve starts from the last point
     for _ in range(REPAIRS + 1):
         point = _solve_on(qp, active, x_new, y_new, z_new)
         if point is None:
