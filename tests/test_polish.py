@@ -113,10 +113,21 @@ def test_a_wrong_guess_is_repaired() -> None:
 def test_a_wrong_guess_without_repairs_is_rejected(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(kkt, "REPAIRS", 0)
     qp = _qp([1, 1], [0, 0], [[1, 1], [1, 0]], [2, 1 - 1e-6])
-    answer = (np.array([1.0, 1.0]), np.zeros(0), np.array([2.0, 1e-3]))
+    # a claimed multiplier 1e6 times the slack: both guesses take the second row as tight
+    answer = (np.array([1.0, 1.0]), np.zeros(0), np.array([2.0, 1.0]))
     result = polish(qp, *answer, kkt_residuals(qp, *answer))
     assert (result.outcome, result.reason) == (REJECTED, "active set")
     np.testing.assert_array_equal(result.x, answer[0])  # the answer is kept
+
+
+def test_the_second_guess_leaves_an_ambiguous_row_free(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(kkt, "REPAIRS", 0)
+    qp = _qp([1, 1], [0, 0], [[1, 1], [1, 0]], [2, 1 - 1e-6])
+    # multiplier 1e3 times the slack: tight by OSQP's rule, not by CLEAR_MARGIN's
+    answer = (np.array([1.0, 1.0]), np.zeros(0), np.array([2.0, 1e-3]))
+    assert 1e-3 / 1e-6 < kkt.CLEAR_MARGIN
+    result = _check_exact(qp, np.array([1.0, 1.0]), answer)
+    assert list(result.active.lower) == [0]
 
 
 def test_a_polish_that_makes_things_worse_is_rejected(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -104,3 +104,53 @@ def test_stacked_blocks_are_scipys_stack() -> None:
     assert np.array_equal(ours.toarray(), reference.toarray())
     assert np.array_equal(ours.indptr, reference.indptr)
     assert np.array_equal(ours.indices, reference.indices)
+
+
+def _kkt_blocks(seed: int) -> tuple[np.ndarray, sp.csr_array, sp.csr_array, np.ndarray]:
+    """A diagonal Hessian, equality rows, inequality rows and some tight rows, at random."""
+    rng = np.random.default_rng(seed)
+    n = 12
+    hessian = rng.uniform(0.5, 2.0, n)
+    equalities = sp.csr_array(sp.random(3, n, density=0.4, random_state=rng))
+    inequalities = sp.csr_array(sp.random(9, n, density=0.3, random_state=rng))
+    equalities.sort_indices()
+    inequalities.sort_indices()
+    return hessian, equalities, inequalities, np.array([7, 1, 4], dtype=np.int64)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_kkt_matrix_is_scipys_block_matrix(seed: int) -> None:
+    hessian, equalities, inequalities, tight = _kkt_blocks(seed)
+    n = hessian.size
+    rows = sp.vstack([equalities, inequalities[tight]])
+    expected = sp.block_array([[sp.diags_array(hessian), rows.T], [rows, None]]).toarray()
+    indptr, indices, data = _sparse.kkt_matrix(
+        np.arange(n + 1), np.arange(n), hessian, equalities.data, equalities.indices,
+        equalities.indptr, inequalities.data, inequalities.indices, inequalities.indptr, tight)
+    size = indptr.size - 1
+    ours = sp.csc_matrix((data, indices, indptr), shape=(size, size))
+    assert ours.has_sorted_indices
+    assert np.array_equal(ours.toarray(), expected)
+    assert np.array_equal(ours.diagonal(), np.concatenate([hessian, np.zeros(size - n)]))
+    assert ours.nnz == np.count_nonzero(expected) + size - n  # the rows' zero diagonal
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_ldl_solves_a_quasi_definite_system_to_round_off(seed: int) -> None:
+    hessian, equalities, inequalities, tight = _kkt_blocks(seed)
+    n, m = hessian.size, equalities.shape[0] + tight.size
+    indptr, indices, data = _sparse.kkt_matrix(
+        np.arange(n + 1), np.arange(n), hessian, equalities.data, equalities.indices,
+        equalities.indptr, inequalities.data, inequalities.indices, inequalities.indptr, tight)
+    shift = np.concatenate([np.full(m, -0.1), np.zeros(n)])  # rows first: quasi-definite
+    new_of_old = np.concatenate([np.arange(m, n + m), np.arange(m)])
+    *factor, factored = _sparse.ldl_factor(
+        *_sparse.permuted_upper(data, indices, indptr, new_of_old, shift))
+    assert factored
+    rhs = np.random.default_rng(seed).normal(size=n + m)
+    regularised = (sp.csc_matrix((data, indices, indptr), shape=(n + m, n + m)).toarray()
+                   + np.diag(shift[new_of_old]))
+    solution = _sparse.ldl_solve(*factor, new_of_old, rhs)
+    # backward stable: a residual of the order of the unit round-off times |M| |x|
+    scale = np.abs(regularised).max() * np.abs(solution).max()
+    assert np.abs(regularised @ solution - rhs).max() <= 1e3 * np.finfo(float).eps * scale

@@ -2,8 +2,9 @@
 
 The kernels (the compiled loops of :mod:`~wuerfel_cvx.step.contacts`, the contact search and
 the contact matcher, of :mod:`~wuerfel_cvx.formulations.rows` and
-:mod:`~wuerfel_cvx.formulations.motion`, :mod:`~wuerfel_cvx.solve.residual_kernel` and
-:func:`~wuerfel_cvx._sparse.add_rows`) are plain Python functions over arrays;
+:mod:`~wuerfel_cvx.formulations.motion`, :mod:`~wuerfel_cvx.solve.residual_kernel`,
+:func:`~wuerfel_cvx._sparse.add_rows` and the polish's sparse ``L D L'``) are plain Python
+functions over arrays;
 :func:`compiled` hands them to ``numba.njit`` with its default strict IEEE semantics (no
 fast-math: no reassociation, no fused multiply-add), so each operation rounds as NumPy's
 does.  The machine code is cached on disk (next to the sources, or in ``NUMBA_CACHE_DIR``),

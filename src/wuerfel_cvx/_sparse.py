@@ -12,9 +12,15 @@ This relies on how a scipy ``csr_array`` keeps its state (the instance attribute
 ``_shape``, ``maxprint``, ``data``, ``indices`` and ``indptr``).  That layout is checked
 once, on a matrix the constructor made; if another scipy keeps its state otherwise, every
 call goes through the constructor, with the same results.
+
+The polish's reduced KKT systems (:mod:`wuerfel_cvx.solve.kkt`) are assembled, factored
+``L D L'`` and refined by compiled loops here (:func:`kkt_matrix`, :func:`ldl_factor`,
+:func:`refined`): SuperLU through scipy cost a step's polish more than the rest of it.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import scipy.sparse as sp
@@ -159,3 +165,217 @@ def selected_rows(matrix: sp.csr_array, rows: np.ndarray) -> sp.csr_array:
     positions = np.repeat(matrix.indptr[rows] - indptr[:-1], counts) + np.arange(indptr[-1])
     return canonical_csr(matrix.data[positions], matrix.indices[positions], indptr,
                          (rows.size, matrix.shape[1]))
+
+
+@compiled
+def permuted_upper(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+                   new_of_old: np.ndarray, shift: FloatArray) -> tuple[np.ndarray, np.ndarray,
+                                                                      FloatArray]:
+    """The upper triangle of ``Q M Q' + diag(shift)`` of a symmetric CSC ``M``, as CSC arrays.
+
+    ``Q`` maps index ``i`` to ``new_of_old[i]``; ``shift`` is in the new order.  Every
+    diagonal entry of ``M`` must be stored; each column's rows come in no particular order
+    (:func:`ldl_factor` needs none).
+    """
+    size = indptr.shape[0] - 1
+    counts = np.zeros(size + 1, dtype=np.int64)
+    for column in range(size):
+        new_column = new_of_old[column]
+        for k in range(indptr[column], indptr[column + 1]):
+            if new_of_old[indices[k]] <= new_column:
+                counts[new_column + 1] += 1
+    upper_ptr = np.cumsum(counts)
+    upper_rows = np.empty(upper_ptr[size], dtype=np.int64)
+    upper_data = np.empty(upper_ptr[size])
+    next_free = upper_ptr[:size].copy()
+    for column in range(size):
+        new_column = new_of_old[column]
+        for k in range(indptr[column], indptr[column + 1]):
+            new_row = new_of_old[indices[k]]
+            if new_row <= new_column:
+                slot = next_free[new_column]
+                upper_rows[slot] = new_row
+                upper_data[slot] = data[k] + (shift[new_row] if new_row == new_column else 0.0)
+                next_free[new_column] += 1
+    return upper_ptr, upper_rows, upper_data
+
+
+@compiled
+def ldl_factor(upper_ptr: np.ndarray, upper_rows: np.ndarray, upper_data: FloatArray
+               ) -> tuple[np.ndarray, np.ndarray, FloatArray, FloatArray, bool]:
+    """``L D L'`` of a symmetric matrix given by its upper triangle (CSC), without pivoting.
+
+    QDLDL's up-looking algorithm (Goulart and Stellato; OSQP's factorization): the
+    elimination tree and column counts of ``L`` first, then one column of ``L`` per row.
+    Exists for every symmetric ordering of a quasi-definite matrix (Vanderbei 1995).
+    Returns ``L``'s strict lower triangle (CSC: pointers, rows, values), ``1 / D`` and
+    whether every pivot is nonzero and finite.
+    """
+    size = upper_ptr.shape[0] - 1
+    parent = np.full(size, -1, dtype=np.int64)
+    column_count = np.zeros(size, dtype=np.int64)
+    visited = np.full(size, -1, dtype=np.int64)
+    for j in range(size):  # the elimination tree and the entries of each column of L
+        visited[j] = j
+        for k in range(upper_ptr[j], upper_ptr[j + 1]):
+            i = upper_rows[k]
+            while visited[i] != j:
+                if parent[i] == -1:
+                    parent[i] = j
+                column_count[i] += 1
+                visited[i] = j
+                i = parent[i]
+    l_ptr = np.zeros(size + 1, dtype=np.int64)
+    for i in range(size):
+        l_ptr[i + 1] = l_ptr[i] + column_count[i]
+    l_rows = np.empty(l_ptr[size], dtype=np.int64)
+    l_data = np.empty(l_ptr[size])
+    inverse_pivot = np.zeros(size)
+    next_free = l_ptr[:size].copy()
+    values = np.zeros(size)
+    used = np.zeros(size, dtype=np.bool_)
+    pattern = np.empty(size, dtype=np.int64)
+    path = np.empty(size, dtype=np.int64)
+    for k in range(size):  # row k of L: a sparse triangular solve along the tree
+        pivot = 0.0
+        n_pattern = 0
+        for p in range(upper_ptr[k], upper_ptr[k + 1]):
+            i = upper_rows[p]
+            if i == k:
+                pivot += upper_data[p]
+                continue
+            values[i] += upper_data[p]
+            n_path = 0
+            while i != -1 and i < k and not used[i]:
+                used[i] = True
+                path[n_path] = i
+                n_path += 1
+                i = parent[i]
+            while n_path:  # reversed: each node after its descendants
+                n_path -= 1
+                pattern[n_pattern] = path[n_path]
+                n_pattern += 1
+        for q in range(n_pattern - 1, -1, -1):
+            column = pattern[q]
+            value = values[column]
+            for p in range(l_ptr[column], next_free[column]):
+                values[l_rows[p]] -= l_data[p] * value
+            slot = next_free[column]
+            l_rows[slot] = k
+            l_data[slot] = value * inverse_pivot[column]
+            pivot -= value * l_data[slot]
+            next_free[column] += 1
+            values[column] = 0.0
+            used[column] = False
+        if pivot == 0.0 or not math.isfinite(pivot):
+            return l_ptr, l_rows, l_data, inverse_pivot, False
+        inverse_pivot[k] = 1.0 / pivot
+    return l_ptr, l_rows, l_data, inverse_pivot, True
+
+
+@compiled
+def ldl_solve(l_ptr: np.ndarray, l_rows: np.ndarray, l_data: FloatArray,
+              inverse_pivot: FloatArray, new_of_old: np.ndarray, rhs: FloatArray) -> FloatArray:
+    """The solution of ``M x = rhs`` from the ``L D L'`` of ``Q M Q'`` (:func:`ldl_factor`)."""
+    size = rhs.shape[0]
+    work = np.empty(size)
+    for i in range(size):
+        work[new_of_old[i]] = rhs[i]
+    for i in range(size):
+        value = work[i]
+        for p in range(l_ptr[i], l_ptr[i + 1]):
+            work[l_rows[p]] -= l_data[p] * value
+    for i in range(size):
+        work[i] *= inverse_pivot[i]
+    for i in range(size - 1, -1, -1):
+        total = work[i]
+        for p in range(l_ptr[i], l_ptr[i + 1]):
+            total -= l_data[p] * work[l_rows[p]]
+        work[i] = total
+    out = np.empty(size)
+    for i in range(size):
+        out[i] = work[new_of_old[i]]
+    return out
+
+
+@compiled
+def kkt_matrix(h_ptr: np.ndarray, h_rows: np.ndarray, h_data: FloatArray,
+               e_data: FloatArray, e_indices: np.ndarray, e_indptr: np.ndarray,
+               g_data: FloatArray, g_indices: np.ndarray, g_indptr: np.ndarray,
+               tight: np.ndarray) -> tuple[np.ndarray, np.ndarray, FloatArray]:
+    """CSC arrays of ``[[H, A'], [A, 0]]``, ``A`` the rows of CSR ``E`` and then ``tight`` of ``G``.
+
+    ``H`` is a canonical CSC matrix (``n x n``); the result is canonical (each column's rows
+    ascending), its rows' diagonal zeros stored.
+    """
+    n = h_ptr.shape[0] - 1
+    n_eq = e_indptr.shape[0] - 1
+    m = n_eq + tight.shape[0]
+    starts = np.empty(m, dtype=np.int64)
+    stops = np.empty(m, dtype=np.int64)
+    for r in range(n_eq):
+        starts[r], stops[r] = e_indptr[r], e_indptr[r + 1]
+    for r in range(tight.shape[0]):
+        starts[n_eq + r], stops[n_eq + r] = g_indptr[tight[r]], g_indptr[tight[r] + 1]
+    counts = np.zeros(n + m + 1, dtype=np.int64)
+    for j in range(n):
+        counts[j + 1] = h_ptr[j + 1] - h_ptr[j]
+    for r in range(m):
+        counts[n + r + 1] = stops[r] - starts[r] + 1
+        for k in range(starts[r], stops[r]):
+            counts[(e_indices[k] if r < n_eq else g_indices[k]) + 1] += 1
+    indptr = np.cumsum(counts)
+    indices = np.empty(indptr[n + m], dtype=np.int64)
+    data = np.empty(indptr[n + m])
+    next_free = indptr[:n + m].copy()
+    for j in range(n):
+        for k in range(h_ptr[j], h_ptr[j + 1]):
+            indices[next_free[j]], data[next_free[j]] = h_rows[k], h_data[k]
+            next_free[j] += 1
+    for r in range(m):
+        row_slot = next_free[n + r]
+        for k in range(starts[r], stops[r]):
+            column = e_indices[k] if r < n_eq else g_indices[k]
+            value = e_data[k] if r < n_eq else g_data[k]
+            indices[next_free[column]], data[next_free[column]] = n + r, value
+            next_free[column] += 1
+            indices[row_slot], data[row_slot] = column, value
+            row_slot += 1
+        indices[row_slot], data[row_slot] = n + r, 0.0
+    return indptr, indices, data
+
+
+@compiled
+def refined(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, l_ptr: np.ndarray,
+            l_rows: np.ndarray, l_data: FloatArray, inverse_pivot: FloatArray,
+            new_of_old: np.ndarray, rhs: FloatArray, point: FloatArray,
+            sweeps: int) -> FloatArray:
+    """``point`` refined towards ``M x = rhs`` by at most ``sweeps`` corrections.
+
+    ``M`` is the CSC matrix ``(data, indices, indptr)``, each correction solved with the
+    ``L D L'`` of a nearby matrix (:func:`ldl_factor`).  Stops when the largest residual
+    entry stops falling (or is zero, or NaN) and returns the point with the smallest.
+    """
+    size = rhs.shape[0]
+    best = point
+    best_norm = math.inf
+    for _ in range(sweeps):
+        residual = rhs.copy()
+        for column in range(size):
+            value = point[column]
+            for k in range(indptr[column], indptr[column + 1]):
+                residual[indices[k]] -= data[k] * value
+        norm = 0.0
+        for i in range(size):
+            magnitude = abs(residual[i])
+            if magnitude != magnitude:
+                norm = math.nan
+                break
+            norm = max(norm, magnitude)
+        if not norm < best_norm:
+            break
+        best, best_norm = point, norm
+        if norm == 0.0:
+            break
+        point = point + ldl_solve(l_ptr, l_rows, l_data, inverse_pivot, new_of_old, residual)
+    return best

@@ -23,14 +23,12 @@ with friction cones).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
-from .._sparse import canonical_csc, selected_rows
+from .._sparse import canonical_csc, kkt_matrix, ldl_factor, permuted_upper, refined
 from ..formulations.qp import StepQP
 from ..scenes.geometry import FloatArray
 from . import residual_kernel
@@ -65,6 +63,15 @@ REFINEMENTS = 10
 REPAIRS = 5
 """Most corrections of the guessed active set (rows dropped for a wrong-signed multiplier,
 rows added for a violated bound) before a polish gives up."""
+
+CLEAR_MARGIN = 1e4
+"""Factor (1) by which a row's scaled multiplier must exceed its scaled slack to be guessed
+tight in :func:`polish`'s second guess, tried when the first (OSQP's rule, factor 1) is
+rejected.  Rows on which an interior-point answer is ambiguous, slack and multiplier both
+small (on the card house's degenerate contacts 1e-6 and 1e-5 of the scales), then start
+free, and a repair tightens those the exact point violates; rows that carry load exceed
+their slack by far more (1e8 there).  Guessed tight with the first rule they make the
+reduced system inconsistent (more independent tight rows than the unknowns allow)."""
 
 @dataclass(frozen=True)
 class Residuals:
@@ -189,17 +196,18 @@ def _scales(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArra
 
 
 def guess_active_set(qp: StepQP, x: FloatArray, ineq_dual: FloatArray,
-                     scales: _Scales | None = None) -> ActiveSet:
+                     scales: _Scales | None = None, margin: float = 1.0) -> ActiveSet:
     """The rows an answer ``(x, z)`` rests on: OSQP's rule "slack below multiplier".
 
-    A row is taken as tight on its lower bound when ``z_r / dual scale`` exceeds
-    ``(G x - h)_r / primal scale``, and on its upper bound when ``-z_r / dual scale``
-    exceeds ``(u - G x)_r / primal scale``: the comparison OSQP makes in its scaled units,
-    made unit-free by the scales of the KKT check.  A violated row counts as tight.
+    A row is taken as tight on its lower bound when ``z_r / dual scale`` exceeds ``margin``
+    times ``(G x - h)_r / primal scale``, and on its upper bound when ``-z_r / dual scale``
+    exceeds ``margin`` times ``(u - G x)_r / primal scale``: with ``margin`` 1 the comparison
+    OSQP makes in its scaled units, made unit-free by the scales of the KKT check.  A
+    violated row counts as tight.
     """
     scales = _scales(qp, x, np.zeros(qp.n_equalities), ineq_dual) if scales is None else scales
     lhs = qp.ineq_matrix @ x
-    weight = ineq_dual / scales.dual
+    weight = ineq_dual / (margin * scales.dual)
     lower_tight = weight > (lhs - qp.ineq_rhs) / scales.primal
     upper_tight = np.zeros_like(lower_tight)
     rows = qp.upper_rows
@@ -241,13 +249,30 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     each time from the last point, so a row made tight starts with no multiplier.
     The polished point is returned as :data:`POLISHED` only if it is feasible and
     sign-consistent to :data:`ROUND_OFF` and its residuals are no worse than ``residuals``;
-    else :data:`REJECTED` with the reason.
+    else the same is tried once more from a stricter guess (:data:`CLEAR_MARGIN`: only rows
+    whose multiplier clearly exceeds their slack), and if that too fails, :data:`REJECTED`
+    with the first attempt's reason.
     """
     if residuals is None:
         residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
     scales = _scales(qp, x, eq_dual, ineq_dual)
     active = guess_active_set(qp, x, ineq_dual, scales)
-    x_new, y_new, z_new = x, eq_dual, ineq_dual  # each solve starts from the last point
+    first = _polished_on(qp, active, (x, eq_dual, ineq_dual), scales, residuals)
+    if first.outcome == POLISHED or first.reason == "singular":
+        return first
+    strict = guess_active_set(qp, x, ineq_dual, scales, CLEAR_MARGIN)
+    if np.array_equal(strict.lower, active.lower) and np.array_equal(strict.upper, active.upper):
+        return first
+    second = _polished_on(qp, strict, (x, eq_dual, ineq_dual), scales, residuals)
+    return second if second.outcome == POLISHED else first
+
+
+def _polished_on(qp: StepQP, active: ActiveSet,
+                 answer: tuple[FloatArray, FloatArray, FloatArray], scales: _Scales,
+                 residuals: Residuals) -> Polish:
+    """:func:`polish` from the guess ``active``: solves, repairs, and the acceptance check."""
+    x, eq_dual, ineq_dual = answer
+    x_new, y_new, z_new = answer  # each solve starts from the last point
     for _ in range(REPAIRS + 1):
         point = _solve_on(qp, active, x_new, y_new, z_new)
         if point is None:
@@ -304,38 +329,29 @@ def reduced_kkt(qp: StepQP, active: ActiveSet) -> tuple[sp.csc_matrix, FloatArra
 
     ``[[P, A'], [A, 0]]`` and ``[-q; b]``, as :func:`polish` describes them.  Every diagonal
     entry is stored (zeros included), so a regularisation only changes numbers.  Assembled
-    from its entries in one sort (scipy's block assembly costs ten times the factorization
-    on a step's small system).
+    by one compiled loop (:func:`~wuerfel_cvx._sparse.kkt_matrix`; scipy's block assembly
+    costs ten times the factorization on a step's small system).
     """
     n = qp.n_variables
     gradient_at_zero = -2.0 * qp.weights * qp.target
-    h_row: np.ndarray
-    h_col: np.ndarray
+    h_ptr: np.ndarray
+    h_rows: np.ndarray
     if qp.cost_factor is not None and qp.n_cost_rows:
         coupling = 2.0 * (qp.cost_factor.T @ qp.cost_factor)
-        hessian = sp.coo_array(sp.diags_array(2.0 * qp.weights) + coupling)
-        h_row, h_col = hessian.row.astype(np.int64), hessian.col.astype(np.int64)
-        h_val = hessian.data
+        hessian = sp.csc_matrix(sp.diags_array(2.0 * qp.weights) + coupling)
+        hessian.sort_indices()
+        h_ptr, h_rows, h_data = hessian.indptr, hessian.indices, hessian.data
         gradient_at_zero = gradient_at_zero - coupling @ qp.target
     else:
-        h_row = h_col = np.arange(n)
-        h_val = 2.0 * qp.weights
+        h_ptr, h_rows, h_data = np.arange(n + 1), np.arange(n), 2.0 * qp.weights
     if qp.linear is not None:
         gradient_at_zero = gradient_at_zero + qp.linear
-    blocks = [qp.eq_matrix, selected_rows(qp.ineq_matrix, active.lower),
-              selected_rows(qp.ineq_matrix, active.upper)]
-    a_data = np.concatenate([block.data for block in blocks])
-    a_col = np.concatenate([block.indices for block in blocks]).astype(np.int64)
-    counts = np.concatenate([np.diff(block.indptr) for block in blocks])
-    m = counts.size
-    a_row = n + np.repeat(np.arange(m), counts)
-    rows = np.concatenate([h_row, a_row, a_col, n + np.arange(m)])
-    cols = np.concatenate([h_col, a_col, a_row, n + np.arange(m)])
-    values = np.concatenate([h_val, a_data, a_data, np.zeros(m)])
-    order = np.lexsort((rows, cols))
-    indptr = np.zeros(n + m + 1, dtype=np.int64)
-    np.add.accumulate(np.bincount(cols, minlength=n + m), out=indptr[1:])
-    matrix = canonical_csc(values[order], rows[order], indptr, (n + m, n + m))
+    eq, ineq = qp.eq_matrix, qp.ineq_matrix
+    indptr, indices, data = kkt_matrix(
+        h_ptr, h_rows, np.asarray(h_data, dtype=np.float64), eq.data, eq.indices, eq.indptr,
+        ineq.data, ineq.indices, ineq.indptr, np.concatenate([active.lower, active.upper]))
+    size = indptr.size - 1
+    matrix = canonical_csc(data, indices, indptr, (size, size))
     bounds = [qp.eq_rhs, qp.ineq_rhs[active.lower]]
     if active.upper.size:
         assert qp.ineq_upper is not None
@@ -353,20 +369,10 @@ def solve_reduced(matrix: sp.csc_matrix, n: int, rhs: FloatArray) -> FloatArray 
     the matrix does not factor or the result is not finite.  A gradient through a step
     solves this system with the loss's gradient (:mod:`wuerfel_cvx.gradients`).
     """
-    solve = _regularised_solver(matrix, n)
-    if solve is None:
+    factor = _regularised_factor(matrix, n)
+    if factor is None:
         return None
-    point = np.zeros(matrix.shape[0])
-    best, best_norm = point, math.inf
-    for _ in range(REFINEMENTS):
-        residual = rhs - matrix @ point
-        norm = _inf(residual)
-        if not norm < best_norm:
-            break
-        best, best_norm = point, norm
-        if norm == 0.0:
-            break
-        point = point + solve(residual)
+    best = factor.refined(matrix, rhs, np.zeros(matrix.shape[0]))
     return best if np.isfinite(best).all() else None
 
 
@@ -378,21 +384,11 @@ def _solve_on(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,
     """
     n, n_eq = qp.n_variables, qp.n_equalities
     matrix, rhs = reduced_kkt(qp, active)
-    solve = _regularised_solver(matrix, n)
-    if solve is None:
+    factor = _regularised_factor(matrix, n)
+    if factor is None:
         return None
     tight = np.concatenate([active.lower, active.upper])
-    point = np.concatenate([x, eq_dual, -ineq_dual[tight]])
-    best, best_norm = point, math.inf
-    for _ in range(REFINEMENTS):
-        residual = rhs - matrix @ point
-        norm = _inf(residual)
-        if not norm < best_norm:  # stalled at round-off (or diverging): keep the best
-            break
-        best, best_norm = point, norm
-        if norm == 0.0:
-            break
-        point = point + solve(residual)
+    best = factor.refined(matrix, rhs, np.concatenate([x, eq_dual, -ineq_dual[tight]]))
     if not np.isfinite(best).all():
         return None
     z = np.zeros(qp.n_inequalities)
@@ -400,11 +396,34 @@ def _solve_on(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,
     return best[:n], best[n:n + n_eq], z
 
 
-def _regularised_solver(matrix: sp.csc_matrix,
-                        n: int) -> Callable[[FloatArray], FloatArray] | None:
-    """A solve with ``matrix + diag(delta_x I_n, -delta_y I)`` (see :data:`REGULARISATION`).
+@dataclass(frozen=True)
+class _Factor:
+    """``L D L'`` of a permuted regularised reduced KKT matrix (:func:`_regularised_factor`)."""
 
-    ``matrix`` is :func:`reduced_kkt`'s, every diagonal entry stored.
+    l_ptr: np.ndarray
+    l_rows: np.ndarray
+    l_data: FloatArray
+    inverse_pivot: FloatArray
+    new_of_old: np.ndarray
+    """The position of each of the matrix's indices in the factored order."""
+
+    def refined(self, matrix: sp.csc_matrix, rhs: FloatArray, start: FloatArray) -> FloatArray:
+        """``start`` refined towards ``matrix @ point = rhs`` (:data:`REFINEMENTS` sweeps)."""
+        return refined(matrix.data, matrix.indices, matrix.indptr, self.l_ptr, self.l_rows,
+                       self.l_data, self.inverse_pivot, self.new_of_old,
+                       np.asarray(rhs, dtype=np.float64), np.asarray(start, dtype=np.float64),
+                       REFINEMENTS)
+
+
+def _regularised_factor(matrix: sp.csc_matrix, n: int) -> _Factor | None:
+    """The factor of ``matrix + diag(delta_x I_n, -delta_y I)`` (:data:`REGULARISATION`).
+
+    ``matrix`` is :func:`reduced_kkt`'s, every diagonal entry stored.  Factored ``L D L'``
+    without pivoting (:func:`~wuerfel_cvx._sparse.ldl_factor`), which the regularisation
+    makes possible (the matrix is quasi-definite), with the rows eliminated first: their
+    pivots are ``-delta_y`` exactly, ``L`` has no entries beyond the rows' own, and what
+    remains is the unknowns' block ``P + delta_x I + A' A / delta_y``, positive definite.
+    ``None`` if a pivot is zero or not finite.
     """
     size = matrix.shape[0]
     column = np.repeat(np.arange(size), np.diff(matrix.indptr))
@@ -413,15 +432,12 @@ def _regularised_solver(matrix: sp.csc_matrix,
     hessian_scale = hessian_scale or 1.0
     coupling = (column < n) & (matrix.indices >= n)
     row_scale = float(np.max(np.abs(matrix.data[coupling]))) if coupling.any() else 1.0
-    data = matrix.data.copy()
-    data[diagonal[:n]] += REGULARISATION * hessian_scale
-    data[diagonal[n:]] -= REGULARISATION * row_scale**2 / hessian_scale
-    regularised = canonical_csc(data, matrix.indices, matrix.indptr, matrix.shape)
-    try:
-        factor = spla.splu(regularised)
-    except RuntimeError:  # SuperLU: "Factor is exactly singular"
-        return None
-    return lambda rhs: np.asarray(factor.solve(rhs), dtype=np.float64)
+    new_of_old = np.concatenate([np.arange(size - n, size), np.arange(size - n)])
+    shift = np.full(size, -REGULARISATION * row_scale**2 / hessian_scale)
+    shift[size - n:] = REGULARISATION * hessian_scale
+    l_ptr, l_rows, l_data, inverse_pivot, factored = ldl_factor(
+        *permuted_upper(matrix.data, matrix.indices, matrix.indptr, new_of_old, shift))
+    return _Factor(l_ptr, l_rows, l_data, inverse_pivot, new_of_old) if factored else None
 
 
 def reuse_active_set(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,
