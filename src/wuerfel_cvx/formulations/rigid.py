@@ -47,7 +47,7 @@ class RigidFormulation(FrictionSettings):
     """Fraction of a penetration removed per step (1)."""
     contact_margin: float = 0.01
     """Distance (m) within which a point-edge pair is always constrained."""
-    linearisation: Literal["closest-approach", "start"] = "start"
+    linearisation: Literal["closest-approach", "start"] = "closest-approach"
     """Where contact gaps are linearised, as in ``velocity``
     (:attr:`~wuerfel_cvx.formulations.velocity.VelocityFormulation.linearisation`): at the
     step's start, or at each contact's closest approach along the step's rigid motion,
@@ -68,6 +68,11 @@ class RigidFormulation(FrictionSettings):
     @property
     def heavy_tables(self) -> bool:
         """False: three unknowns per body, so tables are fixed."""
+        return False
+
+    @property
+    def rods(self) -> bool:
+        """False: rigid bodies, no rods."""
         return False
 
     def build(self, model: Model, state: State, contacts: Contacts, dt: float) -> StepQP:
