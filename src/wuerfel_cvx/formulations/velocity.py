@@ -64,7 +64,10 @@ rows), linearised along the motion of a velocity estimate ``v0``:
 One row per contact is not enough: the condition can bind at the start and later at once,
 and single rows went into two-cycles between those times.  Gauss-Newton passes re-linearise
 along each solution (:func:`closest_approach`, :func:`rows_along`; the passes are driven by
-:meth:`VelocityFormulation.refine`).
+:meth:`VelocityFormulation.refine`).  Where bodies rest on one another and ``v0`` moves
+them alike, a contact's two rows have the same coefficients, and the rate row's right-hand
+side is the larger: the rate row implies the other.  When that holds for every contact (a
+resting stack) the QP takes the rate rows alone, the same feasible set in half the rows.
 
 Why the closest approach: the motion is homogeneous in ``v`` (``p(tau; s v) = p(s tau; v)``)
 so ``G v0 = phi'(tau*; v0)``, the gap's rate at ``tau*``.  At an interior minimiser of
