@@ -54,6 +54,11 @@ class RigidFormulation(FrictionSettings):
     re-linearised in Gauss-Newton passes."""
     name: str = "rigid"
 
+    @property
+    def velocity_equivalent(self) -> VelocityFormulation:
+        """The velocity formulation whose QP this one poses in three unknowns per body."""
+        return self._velocity
+
     @cached_property
     def _velocity(self) -> VelocityFormulation:
         """The velocity formulation whose reach, contact rows and passes this one takes."""
