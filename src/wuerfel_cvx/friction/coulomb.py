@@ -193,6 +193,13 @@ def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP
                        _forces(contact_qp, solution, friction))
 
 
+SLOW = 0.5
+"""A step that reduces the friction residual by less than this factor is slow; the mixer
+accelerates after two slow steps in a row, and holds the plain answers before: most steps'
+fixed points converge in one to three plain iterations (a slipping contact's impulse reaching
+its cone's edge is exact in one), which Anderson's linear model would only approach."""
+
+
 class FrictionMixer:
     """The friction impulse each contact QP holds: Anderson acceleration, safeguarded.
 
@@ -214,12 +221,14 @@ class FrictionMixer:
         self.memory = memory
         self._held: list[FloatArray] = []
         self._answers: list[FloatArray] = []
+        self._best = math.inf  # the smallest residual since the last reset (N s)
+        self._slow = 0  # successive steps that reduced it by less than SLOW
         self._departure = 0.0  # |held - plain answer| of the last impulse chosen (N s)
         self._radius = 0.0  # the largest cone radius mu lambda_n of its answer (N s)
 
     def reset(self) -> None:
         """Forget the history (the contacts changed, or the safeguard)."""
-        self._held, self._answers = [], []
+        self._held, self._answers, self._best, self._slow = [], [], math.inf, 0
 
     def settled(self, tolerance: float) -> bool:
         """Whether the impulse held last is within ``tolerance`` of its plain answer."""
@@ -231,20 +240,22 @@ class FrictionMixer:
 
         ``plain``: hold ``answer`` itself (and keep the history).
         """
-        residual = answer - held
-        if self._answers and (len(self._answers[-1]) != len(answer) or np.linalg.norm(
-                residual) > min(np.linalg.norm(past - held_past) for past, held_past
-                                in zip(self._answers, self._held, strict=True))):
+        residual = float(np.linalg.norm(answer - held))
+        last = (float(np.linalg.norm(self._answers[-1] - self._held[-1]))
+                if self._answers and len(self._answers[-1]) == len(answer) else math.nan)
+        if not residual <= min(last, self._best):  # NaN: the contacts changed
             self.reset()  # the safeguard: the last impulse did not reduce the residual
+        self._best = min(self._best, residual)
+        self._slow = self._slow + 1 if residual >= SLOW * last else 0
         self._held = [*self._held, held][-(self.memory + 1):]
         self._answers = [*self._answers, answer][-(self.memory + 1):]
         self._radius = _inf(bound)
-        if plain or len(self._answers) < 2:
+        if plain or self._slow < 2:
             self._departure = 0.0
             return answer
         answers = np.array(self._answers).T
         residuals = answers - np.array(self._held).T
-        weights = np.linalg.lstsq(np.diff(residuals, axis=1), residual, rcond=None)[0]
+        weights = np.linalg.lstsq(np.diff(residuals, axis=1), answer - held, rcond=None)[0]
         mixed = np.clip(answer - np.diff(answers, axis=1) @ weights, -bound, bound)
         self._departure = _inf(mixed - answer)
         return np.asarray(mixed, dtype=np.float64)
