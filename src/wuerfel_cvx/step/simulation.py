@@ -71,6 +71,9 @@ state was reached), building the QPs (islands, rows, the closest-approach passes
 Coulomb fixed point's further QPs), the solve calls (the solver's own time, its adapter,
 the KKT check and the polish), the update (advancing the bodies, the physical check,
 merging the islands) and the metrics and recording of the row."""
+STAGE_COLUMNS = tuple(f"{stage}_time_s" for stage in STAGES)
+"""The stages' metrics columns, made once: every row shares these key strings (new strings
+made per step would each be held by that step's row)."""
 
 
 class StageClock:
@@ -97,8 +100,9 @@ class StageClock:
 
     def columns(self) -> dict[str, float]:
         """The metrics columns ``<stage>_time_s`` and ``step_time_s``, their sum (s)."""
-        return {f"{stage}_time_s": seconds for stage, seconds in self.seconds.items()} | {
-            "step_time_s": sum(self.seconds.values())}
+        columns = dict(zip(STAGE_COLUMNS, self.seconds.values(), strict=True))
+        columns["step_time_s"] = sum(self.seconds.values())
+        return columns
 
 
 ASLEEP = "asleep"
