@@ -31,10 +31,13 @@ themselves (which points face which edges) are discrete and held.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from ..formulations.motion import body_motion, corner_velocities
 from ..formulations.qp import StepQP
+from ..formulations.velocity import SAMPLES
 from ..scenes.geometry import FloatArray
 from ..step.contacts import Contacts
 from ..step.model import IntArray, Model
@@ -332,3 +335,275 @@ def _check(model: Model, rows: ContactRows, qp: StepQP, contacts: Contacts) -> N
                                > ROW_CHECK * rhs_scale)):
         raise GradientError("the recomputed contact rows differ from the recorded step QP's: "
                             "the backward pass does not know this formulation's options")
+
+
+# ------------------------------------------------- closest-approach rows (linearisation)
+APPROACH_LOCAL = LOCAL + ("edge_ux", "edge_uy", "edge_omega", "point_ux", "point_uy",
+                          "point_omega")
+"""A closest-approach row's local inputs: :data:`LOCAL`, then the linearisation point
+``about``'s velocities of the edge body and of the point body (m/s, rad/s)."""
+
+COMPLEX_STEP = 1e-30
+"""Imaginary step of the complex-step derivatives (:func:`approach_rows`): far below round-off
+of the values (no truncation error), far above the smallest normal double."""
+
+
+@dataclass(frozen=True)
+class _Held:
+    """The discrete choices of one evaluation of the closest-approach rows, held."""
+
+    grid_faces: tuple[np.ndarray, np.ndarray]
+    """``past`` and ``before`` per contact and sample time (:func:`_face_gaps`)."""
+    refined_faces: tuple[np.ndarray, np.ndarray]
+    """... at the refined time."""
+    pushed: np.ndarray
+    """The ramp ends at ``phi_0 + dt u`` (a deep start), so its rate is ``u``."""
+    best: IntArray
+    """The best sample of the mean rate."""
+    curved: np.ndarray
+    """The parabola through the best sample opens upwards (its vertex is used)."""
+    shift_clip: FloatArray
+    """-1 or +1 where the vertex's shift is clipped to one interval, else 0."""
+    tau_clip: FloatArray
+    """The refined time clipped to ``dt / SAMPLES`` (-1) or ``dt`` (+1), else 0."""
+    take: np.ndarray
+    """The refined time beats the best sample."""
+    at_rate: np.ndarray
+    """The closest-approach row's right side is the ramp's rate (the minimum in
+    :func:`~wuerfel_cvx.formulations.velocity.rows_along`)."""
+
+
+def _turned(ref: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """``R(angle) ref`` for ``ref`` ``(..., 2)`` and ``angle`` ``(...)``."""
+    cos, sin = np.cos(angle), np.sin(angle)
+    return np.stack([cos * ref[..., 0] - sin * ref[..., 1],
+                     sin * ref[..., 0] + cos * ref[..., 1]], axis=-1)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _dot2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
+
+
+def _rot(a: np.ndarray) -> np.ndarray:
+    return np.stack([-a[..., 1], a[..., 0]], axis=-1)
+
+
+@dataclass(frozen=True)
+class _ApproachInputs:
+    """Per contact: the references of its three corners, the fixed numbers, the clearance."""
+
+    ref_i: FloatArray
+    ref_j: FloatArray
+    ref_k: FloatArray
+    """Corner offsets ``(m, 2)`` (m) at angle 0 of the edge's ends and of the point."""
+    beyond_face: np.ndarray
+    """The contact's point started past its face's end (``clearance > 0``)."""
+    dt: float
+    push_speed: float
+
+
+def _approach_corners(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
+                      ) -> tuple[np.ndarray, ...]:
+    """Positions ``p_i, p_j, p_k`` and turned offsets ``o_i, o_j, o_k`` at times ``tau``.
+
+    ``x`` ``(m, 14)`` (:data:`APPROACH_LOCAL`), ``tau`` ``(m, K)``; results ``(m, K, 2)``.
+    """
+    def body(first: int, velocity: int) -> tuple[np.ndarray, ...]:
+        return (x[:, None, first:first + 2], x[:, None, first + 2],
+                x[:, None, velocity:velocity + 2], x[:, None, velocity + 2])
+
+    (c_e, theta_e, u_e, w_e), (c_p, theta_p, u_p, w_p) = body(0, 8), body(3, 11)
+    o_i = _turned(inputs.ref_i[:, None, :], theta_e + w_e * tau)
+    o_j = _turned(inputs.ref_j[:, None, :], theta_e + w_e * tau)
+    o_k = _turned(inputs.ref_k[:, None, :], theta_p + w_p * tau)
+    moved_e = c_e + tau[..., None] * u_e
+    moved_p = c_p + tau[..., None] * u_p
+    return moved_e + o_i, moved_e + o_j, moved_p + o_k, o_i, o_j, o_k
+
+
+def _face_gaps(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
+               choices: tuple[np.ndarray, np.ndarray] | None,
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rows' gaps (m) at ``tau`` ``(m, K)`` and the choices ``past`` and ``before``.
+
+    :func:`~wuerfel_cvx.formulations.velocity.face_gaps_at` in analytic arithmetic:
+    ``choices`` (``past``, ``before``, each ``(m, K)``) held, or made where ``None``.
+    """
+    p_i, p_j, p_k, *_ = _approach_corners(x, inputs, tau)
+    edge, offset = p_j - p_i, p_k - p_i
+    length = np.sqrt(_dot2(edge, edge))
+    gaps = _cross(edge, offset) / length
+    place = _dot2(offset, edge) / length
+    if choices is None:
+        before = (-place.real) >= (place.real - length.real)
+        beyond = np.where(before, -place, place - length)
+        past = inputs.beyond_face[:, None] & (beyond.real > 0.0)
+    else:
+        past, before = choices
+        beyond = np.where(before, -place, place - length)
+    safe = np.where(past, beyond, 1.0)
+    return np.where(past, np.sqrt(safe * safe + gaps * gaps), gaps), past, before
+
+
+def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
+             hold_closest: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+    """``tau*`` (s), ``psi(tau*)`` (m) and the ramp rate ``r'`` (m/s) of each contact.
+
+    The arithmetic of :func:`~wuerfel_cvx.formulations.velocity._closest_approach` with its
+    choices held (``held``) or made (``None``; returned as a dict of :class:`_Held`'s fields
+    but ``at_rate``).  ``hold_closest``: ``tau*`` from the real parts only (its dependence
+    on the inputs dropped; for measuring what that dependence contributes).
+    """
+    m, samples, dt = x.shape[0], SAMPLES, inputs.dt
+    grid = np.linspace(0.0, dt, samples + 1)
+    gaps, *grid_faces = _face_gaps(x, inputs, np.broadcast_to(grid, (m, samples + 1)),
+                                   None if held is None else held.grid_faces)
+    start = gaps[:, 0]
+    pushed = (start.real + dt * inputs.push_speed < 0.0) if held is None else held.pushed
+    rate = np.where(pushed, inputs.push_speed + 0.0 * start, -start / dt)
+    margin = gaps - start[:, None] - rate[:, None] * grid
+    mean_rate = margin[:, 1:] / grid[1:]
+    best = 1 + np.argmin(mean_rate.real, axis=1) if held is None else held.best
+    inner = np.minimum(best, samples - 1)
+    rows = np.arange(m)
+    at = np.concatenate([(2.0 * mean_rate[:, 0] - mean_rate[:, 1])[:, None], mean_rate], axis=1)
+    left, mid, right = (at[rows, inner + shift] for shift in (-1, 0, 1))
+    curvature = left - 2.0 * mid + right
+    curved = curvature.real > 0.0 if held is None else held.curved
+    shift = np.where(curved, 0.5 * (left - right) / np.where(curved, curvature, 1.0), 0.0)
+    shift_clip = (np.sign(shift.real) * (np.abs(shift.real) > 1.0) if held is None
+                  else held.shift_clip)
+    shift = np.where(shift_clip != 0.0, shift_clip + 0.0 * shift, shift)
+    refined = (inner + shift) * dt / samples
+    tau_clip = ((refined.real > dt).astype(float) - (refined.real < dt / samples)
+                if held is None else held.tau_clip)
+    refined = np.where(tau_clip < 0.0, dt / samples + 0.0 * refined,
+                       np.where(tau_clip > 0.0, dt + 0.0 * refined, refined))
+    gap_refined, *refined_faces = _face_gaps(x, inputs, refined[:, None],
+                                             None if held is None else held.refined_faces)
+    refined_margin = gap_refined[:, 0] - start - rate * refined
+    take = (refined_margin.real / refined.real < mean_rate.real[rows, best - 1]
+            if held is None else held.take)
+    tau = np.where(take, refined, grid[best] + 0.0 * refined)
+    psi = np.where(take, refined_margin, margin[rows, best])
+    if hold_closest:  # tau* as a constant: the gap at it again, the faces' choices as seen
+        tau = tau.real + 0.0 * tau
+        faces = tuple(np.where(take[:, None], r, g[rows, best][:, None])
+                      for r, g in zip(refined_faces, grid_faces, strict=True))
+        psi = (_face_gaps(x, inputs, tau[:, None], faces)[0][:, 0]  # type: ignore[arg-type]
+               - start - rate * tau)
+    choices = dict(grid_faces=tuple(grid_faces), refined_faces=tuple(refined_faces),
+                   pushed=pushed, best=best, curved=curved, shift_clip=shift_clip,
+                   tau_clip=tau_clip, take=take)
+    return tau, psi, rate, choices
+
+
+def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArray, FloatArray],
+                     held: _Held | None, hold_closest: bool,
+                     ) -> tuple[np.ndarray, np.ndarray, _Held]:
+    """Each QP row's six body-column entries ``(r, 6)`` and right side ``(r,)``, the choices.
+
+    ``x`` ``(m, 14)`` per contact (:data:`APPROACH_LOCAL`, real or complex), ``rows`` each
+    QP row's normal row (the rate rows ``0..m-1``, the closest-approach rows ``m..2m-1``) and
+    cone edge (+1, -1, 0).  The rows are ``d phi(tau; v) / d v / tau`` in the bodies'
+    columns at ``tau = 0`` and ``tau = tau*``: ``(g_i + g_j, g_i . rot90(o_i) + g_j . rot90(o_j))``
+    for the edge body and ``(g_k, g_k . rot90(o_k))`` for the point body, ``g`` the side
+    gradients of the corners at ``tau`` over the edge's length, ``o`` the corners' offsets
+    at ``tau``; plus ``sign mu s`` with the slip row ``s`` at the start.
+    """
+    m = x.shape[0]
+    tau, psi, rate, choices = _closest(x, inputs, held, hold_closest)
+    times = np.stack([0.0 * tau, tau], axis=1)  # (m, 2): the rate row, the closest-approach row
+    p_i, p_j, p_k, o_i, o_j, o_k = _approach_corners(x, inputs, times)
+    g_i, g_j, g_k = _rot(p_k - p_j), _rot(p_i - p_k), _rot(p_j - p_i)
+    scale = 1.0 / np.sqrt(_dot2(g_k, g_k))
+    normal = np.concatenate([(g_i + g_j) * scale[..., None],
+                             ((_dot2(g_i, _rot(o_i)) + _dot2(g_j, _rot(o_j))) * scale)[..., None],
+                             g_k * scale[..., None], (_dot2(g_k, _rot(o_k)) * scale)[..., None]],
+                            axis=-1)  # (m, 2, 6)
+    along = np.sum(normal[:, 1, :3] * x[:, 8:11], axis=1) + np.sum(normal[:, 1, 3:]
+                                                                   * x[:, 11:14], axis=1)
+    closest = along - psi / tau
+    at_rate = rate.real < closest.real if held is None else held.at_rate
+    rhs = np.concatenate([rate, np.where(at_rate, rate, closest)])
+    edge = p_j[:, 0] - p_i[:, 0]
+    length = np.sqrt(_dot2(edge, edge))
+    tangent = edge / length[:, None]
+    alpha = _dot2(p_k[:, 0] - p_i[:, 0], edge) / (length * length)
+    slip = np.concatenate([-tangent, (-(1.0 - alpha) * _dot2(tangent, _rot(o_i[:, 0]))
+                                      - alpha * _dot2(tangent, _rot(o_j[:, 0])))[:, None],
+                           tangent, _dot2(tangent, _rot(o_k[:, 0]))[:, None]], axis=1)
+    product = x[:, 6] * x[:, 7]
+    rough = product.real > 0.0
+    mu = np.where(rough, np.sqrt(np.where(rough, product, 1.0)), 0.0)
+    normal_row, sign = rows
+    contact = normal_row % max(m, 1)
+    entries = (np.concatenate([normal[:, 0], normal[:, 1]])[normal_row]
+               + (sign * mu[contact])[:, None] * slip[contact])
+    return entries, rhs[normal_row], held or _Held(at_rate=at_rate, **choices)
+
+
+def approach_rows(model: Model, points: FloatArray, contacts: Contacts, qp: StepQP,
+                  push_speed: float, dt: float, *, hold_closest: bool = False) -> ContactRows:
+    """The rows of ``qp`` (a closest-approach pass of ``rigid``) with derivatives.
+
+    Derivatives with respect to :data:`APPROACH_LOCAL`: the start coordinates of each
+    contact's bodies, their friction coefficients and the pass's linearisation point
+    ``qp.linearised_about``, through the closest-approach time ``tau*`` as the forward pass
+    computes it (sampled, refined by a parabola: a smooth function of the inputs while its
+    discrete choices, :class:`_Held`, stay).  By complex steps (:data:`COMPLEX_STEP`) through
+    the same arithmetic, exact to round-off.  ``hold_closest`` drops ``tau*``'s dependence.
+    """
+    about = qp.linearised_about
+    if about is None:
+        raise GradientError("a closest-approach pass without its linearisation point")
+    motion = body_motion(model, points, corner_velocities(points, about.reshape(-1, 3)))
+    edge, point = contacts.edge_body, contacts.point_body
+    x = np.concatenate([motion.center[edge], motion.angle[edge, None],
+                        motion.center[point], motion.angle[point, None],
+                        model.friction[point, None], model.friction[edge, None],
+                        motion.velocity[edge], motion.spin[edge, None],
+                        motion.velocity[point], motion.spin[point, None]], axis=1)
+    beyond = (np.zeros(len(contacts), dtype=bool) if contacts.clearance is None
+              else contacts.clearance > 0.0)
+    inputs = _ApproachInputs(motion.reference[edge, contacts.edge_i % 4],
+                             motion.reference[edge, contacts.edge_j % 4],
+                             motion.reference[point, contacts.point % 4], beyond, dt, push_speed)
+    rows = _normal_rows(qp, len(contacts))
+    entries, rhs, held = _approach_values(x, inputs, rows, None, hold_closest)
+    grad_entries = np.empty(entries.shape + (len(APPROACH_LOCAL),))
+    grad_rhs = np.empty(rhs.shape + (len(APPROACH_LOCAL),))
+    for column in range(len(APPROACH_LOCAL)):
+        stepped = x.astype(np.complex128)
+        stepped[:, column] += 1j * COMPLEX_STEP
+        d_entries, d_rhs, _ = _approach_values(stepped, inputs, rows, held, hold_closest)
+        grad_entries[..., column] = d_entries.imag / COMPLEX_STEP
+        grad_rhs[:, column] = d_rhs.imag / COMPLEX_STEP
+    tangents = [Tangent(entries[:, k].real, grad_entries[:, k]) for k in range(6)]
+    result = ContactRows((tangents[0], tangents[1], tangents[2]),
+                         (tangents[3], tangents[4], tangents[5]),
+                         Tangent(rhs.real, grad_rhs), rows[0] % max(len(contacts), 1))
+    _check(model, result, qp, contacts)
+    return result
+
+
+def _normal_rows(qp: StepQP, n_contacts: int) -> tuple[IntArray, FloatArray]:
+    """Each row's normal row (``0..2m-1``) and cone edge (+1, -1, 0) of a closest-approach QP."""
+    cones = qp.cones
+    count = 2 * n_contacts
+    if cones is None or not np.any(cones.minus >= 0):
+        return np.arange(count, dtype=np.int64), np.zeros(count)
+    rough = np.flatnonzero(cones.minus >= 0)
+    normal = np.concatenate([np.arange(count), rough]).astype(np.int64)
+    sign = np.concatenate([np.where(cones.minus >= 0, 1.0, 0.0), -np.ones(rough.size)])
+    return normal, sign
+
+
+def approach_contacts(qp: StepQP) -> IntArray:
+    """The contact of each inequality row of a closest-approach ``rigid`` step QP."""
+    normal, _ = _normal_rows(qp, len(qp.contacts))
+    return normal % max(len(qp.contacts), 1)
