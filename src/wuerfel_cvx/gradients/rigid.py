@@ -348,6 +348,15 @@ COMPLEX_STEP = 1e-30
 of the values (no truncation error), far above the smallest normal double."""
 
 
+FLAT_CURVATURE = 1e3
+"""A parabola through three mean rates whose curvature (m/s) is below this many times their
+round-off (64 ulp of the coordinates over the sample spacing) is *flat*: the gap moves
+(nearly) linearly along the step, ``psi / tau`` is constant to round-off, ``tau*`` is
+whichever sample its noise picks, and neither the rows nor the forward pass depend on it
+to first order; ``tau*`` is then held constant rather than differentiated through a vertex
+of noise."""
+
+
 @dataclass(frozen=True)
 class _Held:
     """The discrete choices of one evaluation of the closest-approach rows, held."""
@@ -371,6 +380,9 @@ class _Held:
     at_rate: np.ndarray
     """The closest-approach row's right side is the ramp's rate (the minimum in
     :func:`~wuerfel_cvx.formulations.velocity.rows_along`)."""
+    flat: np.ndarray
+    """``tau*`` is held constant: a sample (not refined), or refined by a parabola whose
+    curvature is at round-off (:data:`FLAT_CURVATURE`)."""
 
 
 def _turned(ref: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -490,15 +502,23 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
             if held is None else held.take)
     tau = np.where(take, refined, grid[best] + 0.0 * refined)
     psi = np.where(take, refined_margin, margin[rows, best])
-    if hold_closest:  # tau* as a constant: the gap at it again, the faces' choices as seen
-        tau = tau.real + 0.0 * tau
+    if held is None:
+        noise = (64.0 * np.finfo(float).eps * (1.0 + np.max(np.abs(x.real[:, :6]), axis=1))
+                 / grid[1])
+        flat = ~take | (np.abs(curvature.real) <= FLAT_CURVATURE * noise)
+    else:
+        flat = held.flat
+    constant = flat | hold_closest
+    if np.any(constant):  # tau* as a constant: the gap at it again, the faces' choices as seen
         faces = tuple(np.where(take[:, None], r, g[rows, best][:, None])
                       for r, g in zip(refined_faces, grid_faces, strict=True))
-        psi = (_face_gaps(x, inputs, tau[:, None], faces)[0][:, 0]  # type: ignore[arg-type]
-               - start - rate * tau)
+        fixed = tau.real + 0.0 * tau
+        gap_fixed = _face_gaps(x, inputs, fixed[:, None], faces)[0][:, 0]  # type: ignore[arg-type]
+        tau = np.where(constant, fixed, tau)
+        psi = np.where(constant, gap_fixed - start - rate * fixed, psi)
     choices = dict(grid_faces=tuple(grid_faces), refined_faces=tuple(refined_faces),
                    pushed=pushed, best=best, curved=curved, shift_clip=shift_clip,
-                   tau_clip=tau_clip, take=take)
+                   tau_clip=tau_clip, take=take, flat=flat)
     return tau, psi, rate, choices
 
 
@@ -574,7 +594,8 @@ def approach_rows(model: Model, points: FloatArray, contacts: Contacts, qp: Step
                              motion.reference[edge, contacts.edge_j % 4],
                              motion.reference[point, contacts.point % 4], beyond, dt, push_speed)
     rows = _normal_rows(qp, len(contacts))
-    entries, rhs, held = _approach_values(x, inputs, rows, None, hold_closest)
+    entries, rhs, held = _approach_values(x.astype(np.complex128), inputs, rows, None,
+                                          hold_closest)
     grad_entries = np.empty(entries.shape + (len(APPROACH_LOCAL),))
     grad_rhs = np.empty(rhs.shape + (len(APPROACH_LOCAL),))
     for column in range(len(APPROACH_LOCAL)):
