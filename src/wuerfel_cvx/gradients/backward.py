@@ -29,8 +29,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..scenes.geometry import FloatArray, rot90
 from ..formulations.qp import StepQP
+from ..scenes.geometry import FloatArray, rot90
 from ..solve.kkt import POLISHED, REUSED, ActiveSet, guess_active_set
 from ..solve.paths import StepSolution
 from ..step.model import IntArray, Model

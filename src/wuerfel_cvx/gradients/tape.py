@@ -15,7 +15,6 @@ from typing import Any
 
 from ..errors import InputError
 from ..formulations.qp import Formulation, StepQP
-from ..formulations.rigid import RigidFormulation
 from ..friction.forces import ContactForces
 from ..solve.paths import StepSolution
 from ..step.model import Model
@@ -76,8 +75,7 @@ class GradientTape:
     def record(self, step: int, qps: tuple[StepQP, ...], solutions: tuple[StepSolution, ...],
                forces: tuple[ContactForces | None, ...] = (None,),
                passes: tuple[tuple[tuple[StepQP, StepSolution], ...], ...] = ((),)) -> None:
-        """Keep step ``step``'s QP, answer, Coulomb forces and earlier passes (one QP: no
-        islands)."""
+        """Keep step ``step``'s QP, answer, Coulomb forces and earlier passes (one QP)."""
         if len(qps) != 1:
             raise GradientError(f"step {step} solved {len(qps)} QPs; a gradient needs one "
                                 f"QP per step (islands off, sleep off)")
