@@ -27,8 +27,8 @@ in the scene) its initial ``center`` ``(n, 2)`` (m), ``angle`` ``(n,)`` (rad), `
 (1) and ``mass`` ``(n,)`` (kg); and the scene's ``gravity`` ``(2,)`` (m/s^2)."""
 
 SUPPORTED_FORMULATIONS = ("rigid",)
-"""Formulations a gradient can be taken through (the module docstring of
-:mod:`wuerfel_cvx.gradients` says why the others are not yet)."""
+"""Formulations a gradient can be taken through, with either linearisation (the module
+docstring of :mod:`wuerfel_cvx.gradients` says why the others are not yet)."""
 
 SUPPORTED_FRICTION_MODELS = ("ccp", "coulomb")
 """Friction models a gradient can be taken through (frictionless contacts always)."""
@@ -93,8 +93,8 @@ def check_supported(formulation: Formulation, friction_model: str | None, *,
 
     if formulation.name not in SUPPORTED_FORMULATIONS:
         refuse(f"gradients are implemented for the {', '.join(SUPPORTED_FORMULATIONS)} "
-               f"formulation only, not '{formulation.name}' (its closest-approach passes "
-               f"and rods are not differentiated yet)")
+               f"formulation only (either linearisation), not '{formulation.name}' (its "
+               f"corner-velocity unknowns and rods are not differentiated yet)")
     model = (friction_model or (formulation.friction.friction_model
                                 if formulation.friction is not None else "ccp"))
     if str(model).strip().lower() not in SUPPORTED_FRICTION_MODELS:
