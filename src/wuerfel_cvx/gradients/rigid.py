@@ -35,9 +35,9 @@ from typing import Any
 
 import numpy as np
 
-from ..formulations.motion import body_motion, corner_velocities
+from ..formulations.motion import corner_velocities
 from ..formulations.qp import StepQP
-from ..formulations.velocity import SAMPLES
+from ..formulations.velocity import SAMPLES, closest_approach
 from ..scenes.geometry import FloatArray
 from ..step.contacts import Contacts
 from ..step.model import IntArray, Model
@@ -383,6 +383,9 @@ class _Held:
     flat: np.ndarray
     """``tau*`` is held constant: a sample (not refined), or refined by a parabola whose
     curvature is at round-off (:data:`FLAT_CURVATURE`)."""
+    tau: FloatArray | None = None
+    """The forward pass's ``tau*`` (s): the value taken, this arithmetic's derivative (a
+    vertex near flat parabolas moves with round-off between the two evaluations)."""
 
 
 def _turned(ref: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -462,13 +465,16 @@ def _face_gaps(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
 
 
 def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
-             hold_closest: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+             hold_closest: bool, forced: FloatArray | None = None,
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
     """``tau*`` (s), ``psi(tau*)`` (m) and the ramp rate ``r'`` (m/s) of each contact.
 
     The arithmetic of :func:`~wuerfel_cvx.formulations.velocity._closest_approach` with its
     choices held (``held``) or made (``None``; returned as a dict of :class:`_Held`'s fields
     but ``at_rate``).  ``hold_closest``: ``tau*`` from the real parts only (its dependence
-    on the inputs dropped; for measuring what that dependence contributes).
+    on the inputs dropped; for measuring what that dependence contributes).  ``forced``: the
+    forward pass's own ``tau*``, whose choice between a sample and the refined time (and
+    which sample) is taken where the two are within round-off of each other.
     """
     m, samples, dt = x.shape[0], SAMPLES, inputs.dt
     grid = np.linspace(0.0, dt, samples + 1)
@@ -480,6 +486,10 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
     margin = gaps - start[:, None] - rate[:, None] * grid
     mean_rate = margin[:, 1:] / grid[1:]
     best = 1 + np.argmin(mean_rate.real, axis=1) if held is None else held.best
+    sampled = None
+    if held is None and forced is not None:  # the forward pass's sample, where it took one
+        sampled = np.isin(forced, grid)
+        best = np.where(sampled, np.rint(forced / grid[1]).astype(np.int64), best)
     inner = np.minimum(best, samples - 1)
     rows = np.arange(m)
     at = np.concatenate([(2.0 * mean_rate[:, 0] - mean_rate[:, 1])[:, None], mean_rate], axis=1)
@@ -500,30 +510,31 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
     refined_margin = gap_refined[:, 0] - start - rate * refined
     take = (refined_margin.real / refined.real < mean_rate.real[rows, best - 1]
             if held is None else held.take)
+    if sampled is not None:
+        take = ~sampled
     tau = np.where(take, refined, grid[best] + 0.0 * refined)
-    psi = np.where(take, refined_margin, margin[rows, best])
+    forward = forced if held is None else held.tau
+    if forward is not None:  # the forward pass's value, this arithmetic's derivative
+        tau = tau - tau.real + forward
     if held is None:
         noise = (64.0 * np.finfo(float).eps * (1.0 + np.max(np.abs(x.real[:, :6]), axis=1))
                  / grid[1])
         flat = ~take | (np.abs(curvature.real) <= FLAT_CURVATURE * noise)
     else:
         flat = held.flat
-    constant = flat | hold_closest
-    if np.any(constant):  # tau* as a constant: the gap at it again, the faces' choices as seen
-        faces = tuple(np.where(take[:, None], r, g[rows, best][:, None])
-                      for r, g in zip(refined_faces, grid_faces, strict=True))
-        fixed = tau.real + 0.0 * tau
-        gap_fixed = _face_gaps(x, inputs, fixed[:, None], faces)[0][:, 0]  # type: ignore[arg-type]
-        tau = np.where(constant, fixed, tau)
-        psi = np.where(constant, gap_fixed - start - rate * fixed, psi)
+    tau = np.where(flat | hold_closest, tau.real + 0.0 * tau, tau)
+    faces = tuple(np.where(take[:, None], r, g[rows, best][:, None])
+                  for r, g in zip(refined_faces, grid_faces, strict=True))
+    psi = (_face_gaps(x, inputs, tau[:, None], faces)[0][:, 0]  # type: ignore[arg-type]
+           - start - rate * tau)
     choices = dict(grid_faces=tuple(grid_faces), refined_faces=tuple(refined_faces),
                    pushed=pushed, best=best, curved=curved, shift_clip=shift_clip,
-                   tau_clip=tau_clip, take=take, flat=flat)
+                   tau_clip=tau_clip, take=take, flat=flat, tau=forced)
     return tau, psi, rate, choices
 
 
 def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArray, FloatArray],
-                     held: _Held | None, hold_closest: bool,
+                     held: _Held | None, hold_closest: bool, forced: FloatArray | None = None,
                      ) -> tuple[np.ndarray, np.ndarray, _Held]:
     """Each QP row's six body-column entries ``(r, 6)`` and right side ``(r,)``, the choices.
 
@@ -536,7 +547,7 @@ def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArra
     at ``tau``; plus ``sign mu s`` with the slip row ``s`` at the start.
     """
     m = x.shape[0]
-    tau, psi, rate, choices = _closest(x, inputs, held, hold_closest)
+    tau, psi, rate, choices = _closest(x, inputs, held, hold_closest, forced)
     times = np.stack([0.0 * tau, tau], axis=1)  # (m, 2): the rate row, the closest-approach row
     p_i, p_j, p_k, o_i, o_j, o_k = _approach_corners(x, inputs, times)
     g_i, g_j, g_k = _rot(p_k - p_j), _rot(p_i - p_k), _rot(p_j - p_i)
@@ -581,7 +592,10 @@ def approach_rows(model: Model, points: FloatArray, contacts: Contacts, qp: Step
     about = qp.linearised_about
     if about is None:
         raise GradientError("a closest-approach pass without its linearisation point")
-    motion = body_motion(model, points, corner_velocities(points, about.reshape(-1, 3)))
+    forward = closest_approach(model, points, contacts,
+                               corner_velocities(points, about.reshape(-1, 3)).ravel(), dt,
+                               push_speed)
+    motion = forward.motion
     edge, point = contacts.edge_body, contacts.point_body
     x = np.concatenate([motion.center[edge], motion.angle[edge, None],
                         motion.center[point], motion.angle[point, None],
@@ -595,7 +609,7 @@ def approach_rows(model: Model, points: FloatArray, contacts: Contacts, qp: Step
                              motion.reference[point, contacts.point % 4], beyond, dt, push_speed)
     rows = _normal_rows(qp, len(contacts))
     entries, rhs, held = _approach_values(x.astype(np.complex128), inputs, rows, None,
-                                          hold_closest)
+                                          hold_closest, forward.closest)
     grad_entries = np.empty(entries.shape + (len(APPROACH_LOCAL),))
     grad_rhs = np.empty(rhs.shape + (len(APPROACH_LOCAL),))
     for column in range(len(APPROACH_LOCAL)):
