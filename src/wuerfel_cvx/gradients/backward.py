@@ -268,7 +268,8 @@ def _rows_back(tape: GradientTape, qp: StepQP, x: FloatArray, points: FloatArray
     about = np.zeros(3 * model.n_boxes)
     if _closest_approach(tape):
         rows = approach_rows(model, points, qp.contacts, qp,
-                             float(getattr(tape.formulation, "push_speed", 1.0)), tape.dt)
+                             float(getattr(tape.formulation, "push_speed", 1.0)), tape.dt,
+                             needed=tight)
     else:
         beta = float(getattr(tape.formulation, "beta", 0.2))
         rows = contact_rows(model, points, qp.contacts, qp, tape.dt, beta)
