@@ -463,11 +463,10 @@ Time of `Trajectory.gradient` (centre, velocity, friction, mass) over the time o
 that recorded it (`simulate(..., gradients=True)`, dt 1/60, 200 steps, CLARABEL, `rigid`
 with its rows linearised at the start or at closest approach),
 repeats alternated over the scenes; times are medians, the ratio's min and median over the
-repeats.  The target is a gradient at most 2x the run.  With closest-approach rows it is not
-met yet: each pass's rows are differentiated by 14 complex evaluations (one per local input)
-of every contact's 17-sample closest-approach search, all contacts, not only those with a
-tight row; restricting them to the tight rows' contacts and reusing the forward pass's
-search are the open work.""",
+repeats.  The target is a gradient at most 2x the run.  With closest-approach rows each pass's
+tight rows are differentiated by complex steps (14 local inputs, stacked into one
+evaluation; the sampled search for tau* is skipped where tau* is held, which is nearly
+everywhere).""",
     "closest": """## Closest-approach rows
 
 `RigidFormulation(linearisation="closest-approach")`: velocity's two rows per contact (the
