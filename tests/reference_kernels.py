@@ -2,7 +2,8 @@
 
 Each function here is the batched NumPy code a stage ran before the compiled kernel
 replaced it (the compiled loops in the stage's own module: ``step/contacts.py``,
-``formulations/rows.py``, ``formulations/motion.py``, ``solve/residual_kernel.py``); the
+``formulations/rows.py``, ``formulations/motion.py``, ``formulations/velocity.py``,
+``solve/residual_kernel.py``); the
 product runs the kernels only, and ``tests/test_kernels.py`` checks them against these, bit
 for bit.  The KKT check keeps its
 general NumPy code in the product (QPs with a coupling cost or upper bounds):
@@ -17,11 +18,11 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from wuerfel_cvx.formulations.motion import _fit, _rotated
+from wuerfel_cvx.formulations.motion import BodyMotion
 from wuerfel_cvx.formulations.qp import StepQP
 from wuerfel_cvx.formulations.rigid import body_velocities
 from wuerfel_cvx.formulations.rows import n_unknown_points, unknown_index
-from wuerfel_cvx.scenes.geometry import FloatArray, corner_mean, rot90, side_gradients
+from wuerfel_cvx.scenes.geometry import FloatArray, corner_mean, cross, rot90, side_gradients
 from wuerfel_cvx.step.contacts import TIE_TOLERANCE, Contacts, pair_distances, tree_pairs
 from wuerfel_cvx.step.model import IntArray, Model, State
 
@@ -265,6 +266,41 @@ def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
 # --------------------------------------------------------------------------------------
 
 
+def _fit(reference: FloatArray, points: FloatArray, velocities: FloatArray,
+         ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Each box's centroid, fitted angle, centre velocity and spin.
+
+    ``reference`` ``(n, 4, 2)`` (m), ``points`` and ``velocities`` ``(4 n, 2)``; see
+    ``wuerfel_cvx.formulations.motion``.  Returns ``center (n, 2)``, ``angle (n,)``,
+    ``center_velocity (n, 2)`` and ``spin (n,)``.
+    """
+    corners = points.reshape(-1, 4, 2)
+    vel = velocities.reshape(-1, 4, 2)
+    center = corner_mean(corners)
+    offsets = corners - center[:, None, :]
+    angle = np.arctan2(
+        np.sum(reference[..., 0] * offsets[..., 1] - reference[..., 1] * offsets[..., 0], axis=1),
+        np.sum(reference * offsets, axis=(1, 2)),
+    )
+    fitted = _rotated(angle, reference)
+    center_velocity = corner_mean(vel)
+    relative = vel - center_velocity[:, None, :]
+    spin = (np.sum(fitted[..., 0] * relative[..., 1] - fitted[..., 1] * relative[..., 0], axis=1)
+            / np.sum(fitted * fitted, axis=(1, 2)))
+    return center, angle, center_velocity, spin
+
+
+def _rotated(angles: FloatArray, reference: FloatArray) -> FloatArray:
+    """``reference`` ``(n, 4, 2)`` with body ``k`` turned by ``angles[k]`` (rad)."""
+    cos, sin = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    x, y = reference[..., 0], reference[..., 1]
+    turned = np.empty(reference.shape)
+    np.subtract(cos * x, sin * y, out=turned[..., 0])
+    np.add(sin * x, cos * y, out=turned[..., 1])
+    return turned
+
+
+
 def rigid_step(reference: FloatArray, points: FloatArray, velocities: FloatArray,
                dt: float) -> State:
     """``motion.rigid_step``: each box moved rigidly by its fitted motion over ``dt`` (s)."""
@@ -300,6 +336,152 @@ def body_reach(model: Model, state: State, dt: float, contact_margin: float) -> 
     speeds = np.linalg.norm(state.velocities, axis=1).reshape(-1, 4).max(axis=1)
     reach_squares = 0.5 * contact_margin + dt * (speeds + dt * np.linalg.norm(model.gravity))
     return np.concatenate([reach_squares, np.full(model.n_tables, 0.5 * contact_margin)])
+
+
+# --------------------------------------------------------------------------------------
+# Closest approach (wuerfel_cvx.formulations.velocity and .motion, compiled there)
+# --------------------------------------------------------------------------------------
+SAMPLES = 16
+
+
+def body_motion(model: Model, points: FloatArray, velocities: FloatArray) -> BodyMotion:
+    """``motion.body_motion``: the boxes fitted by :func:`_fit`, then the tables."""
+    center, angle, center_velocity, spin = _fit(model.reference_corners, points, velocities)
+    tables = model.table_points.reshape(-1, 4, 2)
+    table_center = corner_mean(tables)
+    t = tables.shape[0]
+    angle = np.concatenate([angle, np.zeros(t)])
+    reference = np.concatenate([model.reference_corners, tables - table_center[:, None, :]])
+    return BodyMotion(
+        center=np.concatenate([center, table_center]), angle=angle,
+        velocity=np.concatenate([center_velocity, np.zeros((t, 2))]),
+        spin=np.concatenate([spin, np.zeros(t)]), reference=reference,
+        fitted=_rotated(angle, reference), n_boxes=model.n_boxes)
+
+
+def _contact_corners(contacts: Contacts) -> tuple[IntArray, ...]:
+    """Each contact's edge body, point body and the corners ``i``, ``j``, ``k`` involved."""
+    return (contacts.edge_body, contacts.point_body, contacts.edge_i % 4,
+            contacts.edge_j % 4, contacts.point % 4)
+
+
+def _corners_at(motion: BodyMotion, contacts: Contacts,
+                tau: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Each contact's edge ends ``p_i``, ``p_j`` and point ``p_k`` (m) at times ``tau``."""
+    edge_body, point_body, corner_i, corner_j, corner_k = _contact_corners(contacts)
+    shape = np.shape(tau)
+    a, b = (np.reshape(body, (-1,) + (1,) * (len(shape) - 1)) for body in (edge_body,
+                                                                              point_body))
+
+    def at(body: IntArray, corner: IntArray) -> FloatArray:
+        return motion.positions(body, np.reshape(corner, a.shape), tau)
+
+    return at(a, corner_i), at(a, corner_j), at(b, corner_k)
+
+
+def gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArray:
+    """Signed distances (m) of the contacts' points from their edge lines at times ``tau``.
+
+    ``tau`` (s) is ``(m,)`` or ``(m, K)`` for ``m`` contacts; the result has its shape.
+    """
+    p_i, p_j, p_k = _corners_at(motion, contacts, tau)
+    return _line_distances(p_j - p_i, p_k - p_i)
+
+
+def _line_distances(edge: FloatArray, offset: FloatArray) -> FloatArray:
+    """Signed distances (m) of points at ``offset`` from an edge's start along ``edge``."""
+    return np.asarray(cross(edge, offset) / np.hypot(edge[..., 0], edge[..., 1]))
+
+
+def face_gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArray:
+    """The rows' gaps (m) at times ``tau``: the points' distances from their faces.
+
+    :func:`gaps_at`, but a point that starts past its face's end is held off the face (the
+    segment) while it is past the end: ``hypot(beyond, line distance)``.
+    """
+    if contacts.clearance is None or not np.any(contacts.clearance > 0.0):
+        return gaps_at(motion, contacts, tau)
+    p_i, p_j, p_k = _corners_at(motion, contacts, tau)
+    edge, offset = p_j - p_i, p_k - p_i
+    gaps = _line_distances(edge, offset)
+    length = np.hypot(edge[..., 0], edge[..., 1])
+    place = (offset[..., 0] * edge[..., 0] + offset[..., 1] * edge[..., 1]) / length
+    beyond = np.maximum(-place, place - length)
+    past = np.reshape(contacts.clearance > 0.0, (-1,) + (1,) * (np.ndim(tau) - 1)) & (
+        beyond > 0.0)
+    return np.asarray(np.where(past, np.hypot(beyond, gaps), gaps))
+
+
+def closest_approach(model: Model, points: FloatArray, contacts: Contacts, about: FloatArray,
+                     dt: float, push_speed: float,
+                     ) -> tuple[BodyMotion, FloatArray, FloatArray, FloatArray, float]:
+    """``velocity.closest_approach``: the motion, ``tau*``, ``psi(tau*)``, ``r'``, violation."""
+    motion = body_motion(model, points, about.reshape(-1, 2)[: model.n_points])
+    m = len(contacts)
+    if m == 0:
+        return motion, np.zeros(0), np.zeros(0), np.zeros(0), 0.0
+    grid = np.linspace(0.0, dt, SAMPLES + 1)
+    gaps = face_gaps_at(motion, contacts, np.broadcast_to(grid, (m, SAMPLES + 1)))
+    start = gaps[:, 0]
+    ramp_rate = (np.minimum(0.0, start + dt * push_speed) - start) / dt
+    margin = gaps - start[:, None] - ramp_rate[:, None] * grid
+    mean_rate = np.empty_like(margin)
+    mean_rate[:, 1:] = margin[:, 1:] / grid[1:]
+    mean_rate[:, 0] = 2.0 * mean_rate[:, 1] - mean_rate[:, 2]  # for the parabola only
+    best = 1 + np.argmin(mean_rate[:, 1:], axis=1)
+    inner = np.minimum(best, SAMPLES - 1)
+    rows = np.arange(m)
+    left, mid, right = (mean_rate[rows, inner + shift] for shift in (-1, 0, 1))
+    curvature = left - 2.0 * mid + right
+    shift = np.where(curvature > 0.0, 0.5 * (left - right) / np.where(curvature > 0.0,
+                                                                      curvature, 1.0), 0.0)
+    refined = np.clip((inner + np.clip(shift, -1.0, 1.0)) * dt / SAMPLES, dt / SAMPLES, dt)
+    refined_margin = face_gaps_at(motion, contacts, refined) - start - ramp_rate * refined
+    sampled_tau, sampled_margin = grid[best], margin[rows, best]
+    take = refined_margin / refined < mean_rate[rows, best]
+    violation = float(max(0.0, -np.min(margin), -np.min(refined_margin)))
+    return (motion, np.where(take, refined, sampled_tau),
+            np.where(take, refined_margin, sampled_margin), ramp_rate, violation)
+
+
+def rows_along(model: Model, contacts: Contacts, motion: BodyMotion, about: FloatArray,
+               closest: FloatArray, margin: FloatArray, rate: FloatArray,
+               ) -> tuple[sp.csr_array, FloatArray]:
+    """``velocity.rows_along``: the rate rows, then the closest-approach rows, and ``h``."""
+    m = len(contacts)
+    corners = tuple(np.concatenate([values, values]) for values in _contact_corners(contacts))
+    blocks = _approach_blocks(motion, corners, np.concatenate([np.zeros(m), closest]))
+    matrix = point_rows(2 * m, n_unknown_points(model), blocks)
+    lifted = matrix[m:] @ about - margin / closest
+    return matrix, np.concatenate([rate, np.minimum(lifted, rate)])
+
+
+def _approach_blocks(motion: BodyMotion, corners: tuple[IntArray, ...],
+                     tau: FloatArray) -> list[tuple[IntArray, FloatArray]]:
+    """Blocks of ``d phi(tau; v) / d v / tau`` over the corners of both bodies of each row."""
+    edge_body, point_body, corner_i, corner_j, corner_k = corners
+    ends = ((edge_body, corner_i), (edge_body, corner_j), (point_body, corner_k))
+    o_i, o_j, o_k = (motion.offsets(body, corner, tau) for body, corner in ends)
+    p_i, p_j, p_k = (motion.center[body] + tau[:, None] * motion.velocity[body] + offset
+                     for (body, _), offset in zip(ends, (o_i, o_j, o_k), strict=True))
+    g_i, g_j, g_k = side_gradients(p_i, p_j, p_k)
+    scale = 1.0 / np.linalg.norm(g_k, axis=1)[:, None]  # |g_k| = edge length (m)
+    g_i, g_j, g_k = g_i * scale, g_j * scale, g_k * scale
+    edge_push = g_i + g_j
+    edge_turn = np.sum(g_i * rot90(o_i) + g_j * rot90(o_j), axis=1)
+    point_turn = np.sum(g_k * rot90(o_k), axis=1)
+    return (_approach_body_blocks(motion, edge_body, edge_push, edge_turn)
+            + _approach_body_blocks(motion, point_body, g_k, point_turn))
+
+
+def _approach_body_blocks(motion: BodyMotion, body: IntArray, push: FloatArray,
+                          turn: FloatArray) -> list[tuple[IntArray, FloatArray]]:
+    """Four blocks (one per corner of ``body``): ``push / 4 + turn rot90(f_q) / S``."""
+    fitted = motion.fitted[body]  # (m, 4, 2)
+    weight = turn / np.sum(fitted * fitted, axis=(1, 2))
+    coefficients = 0.25 * push[:, None, :] + weight[:, None, None] * rot90(fitted)
+    index = np.where((body < motion.n_boxes)[:, None], 4 * body[:, None] + np.arange(4), -1)
+    return [(index[:, corner], coefficients[:, corner]) for corner in range(4)]
 
 
 # --------------------------------------------------------------------------------------

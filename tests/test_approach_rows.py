@@ -5,7 +5,8 @@ along the rigid motion of the step.  These tests check, independently of the row
 formulas, that the rows are those derivatives (central differences in ``v`` and in
 ``tau``), that the motion is the one the state update performs, that the closest
 approach is the minimiser of the mean rate, and the homogeneity ``G v = phi'(tau*)``
-that the energy bound rests on.
+that the energy bound rests on.  The gaps along the motion are the NumPy code's
+(``tests/reference_kernels.py``), which the compiled loops match bit for bit.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import reference_kernels as reference
 from wuerfel_cvx import Scene, Simulation
 from wuerfel_cvx.formulations import VelocityFormulation, rigid_step
 from wuerfel_cvx.formulations.motion import body_motion
@@ -21,7 +23,6 @@ from wuerfel_cvx.formulations.velocity import (
     Approach,
     ApproachRows,
     closest_approach,
-    gaps_at,
     ramp_end,
     rows_along,
 )
@@ -82,7 +83,7 @@ def approach_rows(model: Model, state: State, contacts: Contacts,
 def gaps(model: Model, state: State, contacts: Contacts, velocities: FloatArray,
          tau: FloatArray) -> FloatArray:
     motion = body_motion(model, state.points, velocities.reshape(-1, 2))
-    return gaps_at(motion, contacts, tau)
+    return reference.gaps_at(motion, contacts, tau)
 
 
 def test_motion_at_the_end_of_the_step_is_the_state_update(

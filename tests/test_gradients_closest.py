@@ -221,7 +221,8 @@ def _spinning_corner() -> tuple[np.ndarray, object, object]:
                           angle=np.array([values[5], 0.0]),
                           velocity=np.array([values[11:13], [0.0, 0.0]]),
                           spin=np.array([values[13], 0.0]),
-                          reference=np.stack([box, table]), n_boxes=1)
+                          reference=np.stack([box, table]), n_boxes=1,
+                          fitted=np.stack([box @ _rotation(values[5]).T, table]))
 
     inputs = _ApproachInputs(table[[1]], table[[0]], box[[0]], np.array([False]), 1 / 240, 1.0)
     return x, (motion, contacts), inputs
@@ -231,19 +232,20 @@ def test_closest_approach_time_is_differentiated_where_it_moves() -> None:
     """``tau*`` at a parabola's vertex: its and ``psi``'s derivatives against differences.
 
     Differences of the formulation's own
-    :func:`~wuerfel_cvx.formulations.velocity._closest_approach`.  Also the envelope
+    :func:`~wuerfel_cvx.formulations.velocity.approach_along`.  Also the envelope
     theorem, checked rather than assumed: ``psi / tau`` at ``tau*`` has the same derivative
     with ``tau*`` held, ``psi`` alone (and with it the row's right side ``G v0 - psi / tau*``
     and its matrix ``G(tau*)``) does not.
     """
-    from wuerfel_cvx.formulations.velocity import _closest_approach
+    from wuerfel_cvx.formulations.velocity import approach_along
     from wuerfel_cvx.gradients.rigid import COMPLEX_STEP, _closest, _Held
 
     x, (motion, contacts), inputs = _spinning_corner()
     dt, step = 1 / 240, 1e-7
 
     def forward(values: np.ndarray) -> tuple[float, float]:
-        tau, psi, _, _ = _closest_approach(motion(values), contacts, dt, 1.0)
+        approach = approach_along(motion(values), contacts, np.zeros(0), dt, 1.0)
+        tau, psi = approach.closest, approach.margin
         return float(tau[0]), float(psi[0])
 
     tau, psi, _, choices = _closest(x[None, :].astype(complex), inputs, None, False)
@@ -273,3 +275,8 @@ def test_closest_approach_time_is_differentiated_where_it_moves() -> None:
     stepped[0, 5] += 1j * COMPLEX_STEP
     moving, fixed = (_closest(stepped, inputs, held, hold)[1][0].imag for hold in (False, True))
     assert abs(moving - fixed) > 0.1 * abs(moving)
+
+
+def _rotation(angle: float) -> np.ndarray:
+    """The rotation matrix of ``angle`` (rad)."""
+    return np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])

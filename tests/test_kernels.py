@@ -1,7 +1,8 @@
 """The compiled kernels give their NumPy references' results bit for bit, stage by stage.
 
 The product runs the compiled kernels only (each in its stage's module: ``step/contacts.py``,
-``formulations/rows.py``, ``formulations/motion.py``, ``solve/residual_kernel.py``); the
+``formulations/rows.py``, ``formulations/motion.py``, ``formulations/velocity.py``,
+``solve/residual_kernel.py``); the
 batched NumPy code they replaced is kept in ``tests/reference_kernels.py``.  One test per stage
 compares the two on the same inputs: the states of ``tests/test_contacts_fast.py``
 (library scenes, random overlapping squares of random size and angle against random
@@ -28,7 +29,7 @@ from test_contacts_fast import (
     random_model,
     random_points,
 )
-from wuerfel_cvx import simulate
+from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations.motion import rigid_step
 from wuerfel_cvx.formulations.qp import StepQP
@@ -42,7 +43,11 @@ from wuerfel_cvx.formulations.rows import (
     seed_side_blocks,
     side_rows,
 )
-from wuerfel_cvx.formulations.velocity import VelocityFormulation
+from wuerfel_cvx.formulations.velocity import (
+    VelocityFormulation,
+    closest_approach,
+    rows_along,
+)
 from wuerfel_cvx.scenes.geometry import FloatArray, rectangle_corners
 from wuerfel_cvx.solve import residual_kernel
 from wuerfel_cvx.solve.paths import Residuals, StepSolution, _checked_scales, kkt_residuals
@@ -282,6 +287,80 @@ def test_the_rigid_motion_is_the_references(kind: str, key: str | int) -> None:
         same_library_motion(str(key))
     else:
         same_random_motion(int(key))
+
+
+# --------------------------------------------------------------------------------------
+# Closest approach
+# --------------------------------------------------------------------------------------
+
+
+def same_approach(model: Model, state: State, about: FloatArray) -> tuple[int, int]:
+    """The body motion, the closest approaches and their rows along ``about``'s motion.
+
+    Where the compiled rows are one per contact, the reference's two rows of each contact
+    must be one row (the closest-approach row's right-hand side at most the rate row's).
+    Returns the contacts compared and how many of them start past their face's end.
+    """
+    formulation = VelocityFormulation()
+    found = find_contacts(model, state.points, formulation.body_reach(model, state, DT))
+    ours = closest_approach(model, state.points, found, about, DT, formulation.push_speed)
+    motion, closest, margin, rate, violation = reference.closest_approach(
+        model, state.points, found, about, DT, formulation.push_speed)
+    for field in dataclasses.fields(motion):
+        assert_same_bits(getattr(ours.motion, field.name), getattr(motion, field.name))
+    if len(found) == 0:
+        return 0, 0
+    for compiled, expected in ((ours.closest, closest), (ours.margin, margin),
+                               (ours.rate, rate), (ours.violation, violation)):
+        assert_same_bits(compiled, expected)
+    rows = rows_along(model, found, ours)
+    matrix, rhs = reference.rows_along(model, found, motion, about, closest, margin, rate)
+    m = len(found)
+    if rows.matrix.shape[0] == m:  # one row per contact: each contact's two rows are one
+        rate_rows = matrix[:m]
+        assert (rate_rows != matrix[m:]).nnz == 0 and np.all(rhs[m:] <= rhs[:m])
+        matrix, rhs = rate_rows, rhs[:m]
+    assert_same_matrix(rows.matrix, matrix)
+    assert_same_bits(rows.rhs, rhs)
+    past = 0 if found.clearance is None else int(np.sum(found.clearance > 0.0))
+    return len(found), past
+
+
+def approach_estimates(model: Model, state: State,
+                       rng: np.random.Generator) -> list[FloatArray]:
+    """Velocity estimates: the unconstrained ``v + dt g``, random ones, fast spins, rest."""
+    n_unknown = n_unknown_points(model)
+    free = np.zeros((n_unknown, 2))
+    free[: model.n_points] = state.velocities + DT * model.gravity
+    spins = np.zeros((n_unknown, 2))
+    turned = state.points.reshape(-1, 4, 2) - state.points.reshape(-1, 4, 2).mean(axis=1)[
+        :, None, :]
+    spins[: model.n_points] = (rng.uniform(-30.0, 30.0, size=(model.n_boxes, 1, 1))
+                               * turned[..., ::-1] * np.array([-1.0, 1.0])).reshape(-1, 2)
+    return [free.ravel(), rng.normal(scale=3.0, size=2 * n_unknown), spins.ravel(),
+            -np.zeros(2 * n_unknown)]
+
+
+APPROACH_CASES = ([("library", name) for name in sorted(LIBRARY)]
+                  + [("random", seed) for seed in range(16)])
+
+
+@pytest.mark.parametrize(("kind", "key"), APPROACH_CASES)
+def test_the_closest_approach_is_the_references(kind: str, key: str | int) -> None:
+    rng = np.random.default_rng(17)
+    compared = [same_approach(model, state, about)
+                for model, state in row_states(kind, key)
+                for about in approach_estimates(model, state, rng)]
+    assert sum(count for count, _ in compared) > 0
+
+
+def test_the_closest_approach_of_points_past_a_face_is_the_references() -> None:
+    """The card house starts with corners past their faces' ends (``test_face_gap.py``)."""
+    scene = Scene.named("card-house")
+    model, state = Model.from_scene(scene), State.initial(scene)
+    rng = np.random.default_rng(19)
+    assert sum(same_approach(model, state, about)[1]
+               for about in approach_estimates(model, state, rng)) > 0
 
 
 # --------------------------------------------------------------------------------------

@@ -11,6 +11,7 @@ import scipy.sparse as sp
 from qp_bank import AGREEMENT
 from wuerfel_cvx import Scene, Simulation, simulate
 from wuerfel_cvx.formulations import StepQP, get_formulation, step_qp
+from wuerfel_cvx.formulations.motion import corner_velocities
 from wuerfel_cvx.solve.registry import available_solvers
 from wuerfel_cvx.solve.warm_start import WarmStarts, row_blocks
 from wuerfel_cvx.step.contacts import Contacts
@@ -21,9 +22,14 @@ pytestmark = pytest.mark.integration
 WARM_SOLVERS = [name for name in ("OSQP", "PROXQP", "DAQP") if name in available_solvers()]
 
 
-def _qp(scene: str, formulation: str = "rigid") -> StepQP:
+def _qp(scene: str, formulation: str = "rigid", spin: float = 0.0) -> StepQP:
+    """The first step's QP; the boxes turning at ``spin``, ``-spin``, ... (rad/s) if given."""
     model = Model.from_scene(Scene.named(scene))
     state = State.initial(Scene.named(scene))
+    if spin:
+        turns = spin * (-1.0) ** np.arange(model.n_boxes)
+        body = np.column_stack([np.zeros((model.n_boxes, 2)), turns])
+        state = State(state.points, corner_velocities(state.points, body))
     return step_qp(get_formulation(formulation), model, state, 0.01)
 
 
@@ -45,10 +51,13 @@ def _reordered_rows(qp: StepQP, order: np.ndarray) -> np.ndarray:
     return (np.arange(blocks)[:, None] * count + order).ravel()
 
 
-@pytest.mark.parametrize(("formulation", "blocks"), [("rigid", 1), ("velocity", 2)])
+# velocity: two blocks (rate rows, closest-approach rows) where the boxes move against
+# each other, one where they rest on one another (each contact's two rows are one)
+@pytest.mark.parametrize(("formulation", "spin", "blocks"),
+                         [("rigid", 0.0, 1), ("velocity", 2.0, 2), ("velocity", 0.0, 1)])
 def test_the_guess_carries_each_multiplier_to_the_row_of_the_same_block_and_contact(
-        formulation: str, blocks: int) -> None:
-    qp = _qp("stack-3", formulation)
+        formulation: str, spin: float, blocks: int) -> None:
+    qp = _qp("stack-3", formulation, spin)
     assert row_blocks(qp) == blocks and qp.n_inequalities == blocks * len(qp.contacts)
     multipliers = np.arange(1.0, qp.n_inequalities + 1)
     store = WarmStarts()

@@ -1,8 +1,9 @@
 """The decorator that compiles the step path's kernels with numba (a core dependency).
 
 The kernels (the compiled loops of :mod:`~wuerfel_cvx.step.contacts`, the contact search and
-the contact matcher, of :mod:`~wuerfel_cvx.formulations.rows` and
-:mod:`~wuerfel_cvx.formulations.motion`, :mod:`~wuerfel_cvx.solve.residual_kernel`,
+the contact matcher, of :mod:`~wuerfel_cvx.formulations.rows`,
+:mod:`~wuerfel_cvx.formulations.motion` and :mod:`~wuerfel_cvx.formulations.velocity` (the
+closest approach), :mod:`~wuerfel_cvx.solve.residual_kernel`,
 :func:`~wuerfel_cvx._sparse.add_rows` and the polish's sparse ``L D L'``) are plain Python
 functions over arrays;
 :func:`compiled` hands them to ``numba.njit`` with its default strict IEEE semantics (no

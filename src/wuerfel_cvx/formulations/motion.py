@@ -33,12 +33,11 @@ checked by ``tests/test_kernels.py``).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 
 from .._numba import compiled
-from ..scenes.geometry import FloatArray, corner_mean
+from ..scenes.geometry import FloatArray
 from ..step.model import IntArray, Model, State
 
 
@@ -56,12 +55,9 @@ class BodyMotion:
     """Angular velocity ``(B,)`` (rad/s)."""
     reference: FloatArray
     """Corners ``(B, 4, 2)`` about the centroid at angle 0 (m)."""
+    fitted: FloatArray
+    """Corner offsets ``(B, 4, 2)`` (m) of the fitted bodies at the start of the step."""
     n_boxes: int
-
-    @cached_property
-    def fitted(self) -> FloatArray:
-        """Corner offsets ``(B, 4, 2)`` (m) of the fitted bodies at the start of the step."""
-        return _rotated(self.angle, self.reference)
 
     def offsets(self, body: IntArray, corner: IntArray, tau: FloatArray) -> FloatArray:
         """Offsets ``(m, 2)`` (m) from the centre of corner ``corner`` of ``body`` at ``tau``.
@@ -87,18 +83,20 @@ def body_motion(model: Model, points: FloatArray, velocities: FloatArray) -> Bod
     """The rigid motion of every body for corner ``points`` and ``velocities`` ``(4 n, 2)``.
 
     Boxes are fitted as in the module docstring; tables keep their corners and do not move.
+    By the compiled loops of :func:`rigid_step` (:func:`fit_sums`, :func:`fit_motion`) and
+    :func:`_bodies`, with NumPy's ``arctan2``, ``cos`` and ``sin`` between them.
     """
-    center, angle, center_velocity, spin = _fit(model.reference_corners, points, velocities)
-    tables = model.table_points.reshape(-1, 4, 2)
-    table_center = corner_mean(tables)
-    t = tables.shape[0]
-    return BodyMotion(
-        center=np.concatenate([center, table_center]),
-        angle=np.concatenate([angle, np.zeros(t)]),
-        velocity=np.concatenate([center_velocity, np.zeros((t, 2))]),
-        spin=np.concatenate([spin, np.zeros(t)]),
-        reference=np.concatenate([model.reference_corners, tables - table_center[:, None, :]]),
-        n_boxes=model.n_boxes)
+    reference = model.reference_corners
+    center, cross_sum, dot_sum = fit_sums(reference, points)
+    angle = np.concatenate([np.arctan2(cross_sum, dot_sum), np.zeros(model.n_tables)])
+    cos, sin = np.cos(angle), np.sin(angle)
+    n = model.n_boxes
+    center_velocity, spin, _ = fit_motion(reference, cos[:n], sin[:n], velocities,
+                                          angle[:n], 0.0)
+    all_center, all_velocity, all_spin, all_reference, fitted = _bodies(
+        reference, model.table_points, center, center_velocity, spin, cos, sin)
+    return BodyMotion(center=all_center, angle=angle, velocity=all_velocity, spin=all_spin,
+                      reference=all_reference, fitted=fitted, n_boxes=n)
 
 
 def rigid_step(reference: FloatArray, points: FloatArray, velocities: FloatArray,
@@ -118,40 +116,6 @@ def rigid_step(reference: FloatArray, points: FloatArray, velocities: FloatArray
     moved(reference, np.cos(turned), np.sin(turned), center, center_velocity, omega, dt,
           new_points, new_velocities)
     return State(new_points, new_velocities)
-
-
-def _fit(reference: FloatArray, points: FloatArray, velocities: FloatArray,
-         ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Each box's centroid, fitted angle, centre velocity and spin.
-
-    ``reference`` ``(n, 4, 2)`` (m), ``points`` and ``velocities`` ``(4 n, 2)``; see the
-    module docstring.  Returns ``center (n, 2)``, ``angle (n,)``, ``center_velocity (n, 2)``
-    and ``spin (n,)``.
-    """
-    corners = points.reshape(-1, 4, 2)
-    vel = velocities.reshape(-1, 4, 2)
-    center = corner_mean(corners)
-    offsets = corners - center[:, None, :]
-    angle = np.arctan2(
-        np.sum(reference[..., 0] * offsets[..., 1] - reference[..., 1] * offsets[..., 0], axis=1),
-        np.sum(reference * offsets, axis=(1, 2)),
-    )
-    fitted = _rotated(angle, reference)
-    center_velocity = corner_mean(vel)
-    relative = vel - center_velocity[:, None, :]
-    spin = (np.sum(fitted[..., 0] * relative[..., 1] - fitted[..., 1] * relative[..., 0], axis=1)
-            / np.sum(fitted * fitted, axis=(1, 2)))
-    return center, angle, center_velocity, spin
-
-
-def _rotated(angles: FloatArray, reference: FloatArray) -> FloatArray:
-    """``reference`` ``(n, 4, 2)`` with body ``k`` turned by ``angles[k]`` (rad)."""
-    cos, sin = np.cos(angles)[:, None], np.sin(angles)[:, None]
-    x, y = reference[..., 0], reference[..., 1]
-    turned = np.empty(reference.shape)
-    np.subtract(cos * x, sin * y, out=turned[..., 0])
-    np.add(sin * x, cos * y, out=turned[..., 1])
-    return turned
 
 
 # ---------------------------------------------------------------------- compiled loops
@@ -257,6 +221,42 @@ def moved(reference: FloatArray, cos: FloatArray, sin: FloatArray, center: Float
             points[4 * b + k, 1] = new_y + offset_y
             velocities[4 * b + k, 0] = center_velocity[b, 0] + spin[b] * -offset_y
             velocities[4 * b + k, 1] = center_velocity[b, 1] + spin[b] * offset_x
+
+
+@compiled
+def _bodies(reference: FloatArray, table_points: FloatArray, center: FloatArray,
+            center_velocity: FloatArray, spin: FloatArray, cos: FloatArray, sin: FloatArray,
+            ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The boxes' fitted motion and the tables, as :class:`BodyMotion` holds them.
+
+    ``center``, ``center_velocity`` ``(n, 2)`` and ``spin`` ``(n,)`` of the boxes;
+    ``cos`` and ``sin`` ``(n + t,)`` of every body's angle (0 for the tables).  Returns
+    centres, velocities, spins, reference corners and fitted corners of all bodies; a
+    table's centre is the mean of its corners, its reference its corners about it.
+    """
+    n, t = reference.shape[0], table_points.shape[0] // 4
+    all_center = np.empty((n + t, 2))
+    all_velocity = np.zeros((n + t, 2))
+    all_spin = np.zeros(n + t)
+    all_reference = np.empty((n + t, 4, 2))
+    fitted = np.empty((n + t, 4, 2))
+    for b in range(n + t):
+        for d in range(2):
+            if b < n:
+                all_center[b, d] = center[b, d]
+                all_velocity[b, d] = center_velocity[b, d]
+            else:
+                all_center[b, d] = _centre(table_points, b - n, d)
+        if b < n:
+            all_spin[b] = spin[b]
+        for k in range(4):
+            for d in range(2):
+                all_reference[b, k, d] = (reference[b, k, d] if b < n else
+                                          table_points[4 * (b - n) + k, d] - all_center[b, d])
+            x, y = all_reference[b, k, 0], all_reference[b, k, 1]
+            fitted[b, k, 0] = cos[b] * x - sin[b] * y
+            fitted[b, k, 1] = sin[b] * x + cos[b] * y
+    return all_center, all_velocity, all_spin, all_reference, fitted
 
 
 @compiled

@@ -64,7 +64,10 @@ rows), linearised along the motion of a velocity estimate ``v0``:
 One row per contact is not enough: the condition can bind at the start and later at once,
 and single rows went into two-cycles between those times.  Gauss-Newton passes re-linearise
 along each solution (:func:`closest_approach`, :func:`rows_along`; the passes are driven by
-:meth:`VelocityFormulation.refine`).
+:meth:`VelocityFormulation.refine`).  Where bodies rest on one another and ``v0`` moves
+them alike, a contact's two rows have the same coefficients, and the rate row's right-hand
+side is the larger: the rate row implies the other.  When that holds for every contact (a
+resting stack) the QP takes the rate rows alone, the same feasible set in half the rows.
 
 Why the closest approach: the motion is homogeneous in ``v`` (``p(tau; s v) = p(s tau; v)``)
 so ``G v0 = phi'(tau*; v0)``, the gap's rate at ``tau*``.  At an interior minimiser of
@@ -78,18 +81,20 @@ first-order contact with restitution 0 does (the bounds are derived in
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 
-from ..scenes.geometry import FloatArray, cross, rot90, side_gradients
+from .._numba import compiled
+from ..scenes.geometry import FloatArray
 from ..step.contacts import Contacts, find_contacts
 from ..step.model import IntArray, Model, State
 from . import motion
 from .cone import ConeRows, contact_cones
-from .motion import BodyMotion, body_motion, rigid_step
+from .motion import BodyMotion, _pairwise8, body_motion, rigid_step
 from .qp import FrictionSettings, RowUnits, StepQP, declare_qp, velocity_rows
 from .rows import (
     held_table_blocks,
@@ -97,6 +102,7 @@ from .rows import (
     point_rows,
     rod_rows,
     side_rows,
+    stacked_point_rows,
     unknown_masses,
 )
 
@@ -275,80 +281,10 @@ class ApproachRows:
 
     matrix: sp.csr_array
     """``G`` ``(2 contacts, unknowns)``: the rate rows, then the closest-approach rows, one
-    of each per contact (1: rows in m/s per m/s)."""
+    of each per contact; ``(contacts, unknowns)``, the rate rows alone, where each
+    contact's two rows are one (:func:`rows_along`) (1: rows in m/s per m/s)."""
     rhs: FloatArray
     """``h`` (m/s)."""
-
-
-@dataclass(frozen=True)
-class _ContactCorners:
-    """Each contact's edge body and point body, and the corners involved."""
-
-    edge_body: IntArray
-    point_body: IntArray
-    corner_i: IntArray
-    corner_j: IntArray
-    corner_k: IntArray
-
-    @classmethod
-    def of(cls, contacts: Contacts) -> _ContactCorners:
-        return cls(contacts.edge_body, contacts.point_body, contacts.edge_i % 4,
-                   contacts.edge_j % 4, contacts.point % 4)
-
-    def twice(self) -> _ContactCorners:
-        """Every contact twice: the rate rows, then the closest-approach rows."""
-        return _ContactCorners(*(np.concatenate([values, values]) for values in (
-            self.edge_body, self.point_body, self.corner_i, self.corner_j, self.corner_k)))
-
-
-def _corners_at(motion: BodyMotion, contacts: Contacts,
-                tau: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Each contact's edge ends ``p_i``, ``p_j`` and point ``p_k`` (m) at times ``tau``."""
-    c = _ContactCorners.of(contacts)
-    shape = np.shape(tau)
-    a, b = (np.reshape(body, (-1,) + (1,) * (len(shape) - 1)) for body in (c.edge_body,
-                                                                              c.point_body))
-
-    def at(body: IntArray, corner: IntArray) -> FloatArray:
-        return motion.positions(body, np.reshape(corner, a.shape), tau)
-
-    return at(a, c.corner_i), at(a, c.corner_j), at(b, c.corner_k)
-
-
-def gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArray:
-    """Signed distances (m) of the contacts' points from their edge lines at times ``tau``.
-
-    ``tau`` (s) is ``(m,)`` or ``(m, K)`` for ``m`` contacts; the result has its shape.
-    """
-    p_i, p_j, p_k = _corners_at(motion, contacts, tau)
-    return _line_distances(p_j - p_i, p_k - p_i)
-
-
-def _line_distances(edge: FloatArray, offset: FloatArray) -> FloatArray:
-    """Signed distances (m) of points at ``offset`` from an edge's start along ``edge``."""
-    return np.asarray(cross(edge, offset) / np.hypot(edge[..., 0], edge[..., 1]))
-
-
-def face_gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArray:
-    """The rows' gaps (m) at times ``tau``: the points' distances from their faces.
-
-    :func:`gaps_at` for a contact whose point starts on its face.  A point that starts past
-    its face's end (:attr:`~wuerfel_cvx.step.contacts.Contacts.clearance` above 0) is held off
-    the face, not off the line past the end: while it is past the end its gap is its
-    distance from the face (the segment), ``hypot(beyond, line distance)``, and once it
-    has moved over the face, its line distance.
-    """
-    if contacts.clearance is None or not np.any(contacts.clearance > 0.0):
-        return gaps_at(motion, contacts, tau)
-    p_i, p_j, p_k = _corners_at(motion, contacts, tau)
-    edge, offset = p_j - p_i, p_k - p_i
-    gaps = _line_distances(edge, offset)
-    length = np.hypot(edge[..., 0], edge[..., 1])
-    place = (offset[..., 0] * edge[..., 0] + offset[..., 1] * edge[..., 1]) / length
-    beyond = np.maximum(-place, place - length)
-    past = np.reshape(contacts.clearance > 0.0, (-1,) + (1,) * (np.ndim(tau) - 1)) & (
-        beyond > 0.0)
-    return np.asarray(np.where(past, np.hypot(beyond, gaps), gaps))
 
 
 def ramp_end(start_gap: FloatArray, dt: float, push_speed: float) -> FloatArray:
@@ -371,6 +307,11 @@ class Approach:
     """The ramp's rate ``r' = (c - phi_0) / dt`` (m/s) of each contact."""
     violation: float
     """Largest ``-psi`` (m) along the motion (0 if none)."""
+    row_cos: FloatArray
+    """``cos`` of the edge body's and the point body's angles ``(2 contacts, 2)`` at each
+    row's time (``tau = 0`` for the rate rows, ``tau*`` for the closest-approach rows)."""
+    row_sin: FloatArray
+    """``sin`` of the same angles."""
 
 
 def closest_approach(model: Model, points: FloatArray, contacts: Contacts, about: FloatArray,
@@ -378,89 +319,361 @@ def closest_approach(model: Model, points: FloatArray, contacts: Contacts, about
     """The contacts' closest approaches along the motion of the unknowns ``about``.
 
     ``points`` ``(4 n, 2)`` (m) is the state at the start of the step; ``about`` the QP's
-    unknowns (m/s), whose first ``8 n`` are the corner velocities.
+    unknowns (m/s), whose first ``8 n`` are the corner velocities.  ``tau*`` minimises the
+    mean rate ``psi(tau) / tau`` (m/s), sampled on :data:`SAMPLES` intervals and refined by
+    a parabola; the violation (m) is the largest ``-psi`` over the samples and refined
+    times.  By compiled loops (:func:`_sampled_approach`, :func:`_refined_approach`), the
+    angles' ``cos`` and ``sin`` by NumPy between them.
     """
     motion = body_motion(model, points, about.reshape(-1, 2)[: model.n_points])
+    return approach_along(motion, contacts, about, dt, push_speed)
+
+
+def approach_along(motion: BodyMotion, contacts: Contacts, about: FloatArray, dt: float,
+                   push_speed: float) -> Approach:
+    """:func:`closest_approach` along a given rigid ``motion`` (that of ``about``)."""
     if len(contacts) == 0:
         none = np.zeros(0)
-        return Approach(about, motion, none, none, none, 0.0)
-    tau, margin, rate, violation = _closest_approach(motion, contacts, dt, push_speed)
-    return Approach(about, motion, tau, margin, rate, violation)
+        return Approach(about, motion, none, none, none, 0.0, np.zeros((0, 2)),
+                        np.zeros((0, 2)))
+    grid, turned = _sample_turns(motion.angle, motion.spin, dt, SAMPLES)
+    cos, sin = np.cos(turned), np.sin(turned)
+    corners = _ContactCorners.of(contacts)
+    clearance = (contacts.clearance if contacts.clearance is not None
+                 else np.zeros(len(contacts)))
+    sampled = _sampled_approach(motion.center, motion.velocity, motion.reference, motion.angle,
+                                motion.spin, cos, sin, grid, *corners, clearance, dt,
+                                push_speed)
+    start, rate, refined, best, best_rate, best_margin, lowest, refined_turns = sampled
+    closest, margin, lowest_refined, row_cos, row_sin = _refined_approach(
+        motion.center, motion.velocity, motion.reference, cos, sin,
+        np.cos(refined_turns), np.sin(refined_turns), grid, *corners, clearance, start, rate,
+        refined, best, best_rate, best_margin)
+    violation = float(max(0.0, -lowest, -lowest_refined))
+    return Approach(about, motion, closest, margin, rate, violation, row_cos, row_sin)
 
 
 def rows_along(model: Model, contacts: Contacts, approach: Approach) -> ApproachRows:
-    """The rate rows and the closest-approach rows of ``approach`` (of ``contacts``)."""
+    """The rate rows and the closest-approach rows of ``approach`` (of ``contacts``).
+
+    Where every contact's closest-approach row is its rate row (bodies at rest on one
+    another, moved alike by the estimate: a resting stack), only the rate rows: a
+    closest-approach row's right-hand side is at most its rate row's, so the rate row
+    implies it, and the QP keeps its feasible set with half the rows.  The rows' blocks by
+    a compiled loop (:func:`_row_blocks`), written as CSR rows by
+    :func:`~wuerfel_cvx.formulations.rows.stacked_point_rows`.
+    """
     m = len(contacts)
-    tau, rate = approach.closest, approach.rate
-    blocks = _row_blocks(approach.motion, _ContactCorners.of(contacts).twice(),
-                         np.concatenate([np.zeros(m), tau]))
-    matrix = point_rows(2 * m, n_unknown_points(model), blocks)
+    motion = approach.motion
+    index, gradient = _row_blocks(motion.center, motion.velocity, motion.reference,
+                                  motion.fitted, motion.n_boxes, *_ContactCorners.of(contacts),
+                                  approach.closest, approach.row_cos, approach.row_sin)
+    rate = approach.rate
+    if _same_rows(gradient, m):
+        return ApproachRows(stacked_point_rows(index[:m], gradient[:m],
+                                               n_unknown_points(model)), rate)
+    matrix = stacked_point_rows(index, gradient, n_unknown_points(model))
     # at an interior minimiser of psi / tau the right-hand side is exactly ``rate``; the
     # minimum keeps it there where the sampled minimiser is inexact or on the boundary
-    closest = matrix[m:] @ approach.about - approach.margin / tau
+    closest = (_row_products(matrix.data, matrix.indices, matrix.indptr, m, approach.about)
+               - approach.margin / approach.closest)
     return ApproachRows(matrix, np.concatenate([rate, np.minimum(closest, rate)]))
 
 
-def _closest_approach(motion: BodyMotion, contacts: Contacts, dt: float,
-                      push_speed: float) -> tuple[FloatArray, FloatArray, FloatArray, float]:
-    """Each contact's ``tau*`` (s), ``psi(tau*)`` (m), ramp rate ``r'`` (m/s), the violation.
+class _ContactCorners(NamedTuple):
+    """Each contact's edge body and point body, and the corners involved."""
 
-    ``tau*`` minimises the mean rate ``psi(tau) / tau`` (m/s; ``psi'(0)`` at ``tau = 0``),
-    sampled on :data:`SAMPLES` intervals and refined by a parabola.  The violation (m) is
-    the largest ``-psi`` over the samples and refined times.
+    edge_body: IntArray
+    point_body: IntArray
+    corner_i: IntArray
+    corner_j: IntArray
+    corner_k: IntArray
+
+    @classmethod
+    def of(cls, contacts: Contacts) -> _ContactCorners:
+        return cls(contacts.edge_body, contacts.point_body, contacts.edge_i % 4,
+                   contacts.edge_j % 4, contacts.point % 4)
+
+
+# ---------------------------------------------------------------------- compiled loops
+# The closest approach and its rows, written contact by contact: the batched NumPy code they
+# replaced (kept in ``tests/reference_kernels.py`` and checked against them bit for bit by
+# ``tests/test_kernels.py``) ran some two hundred operations on arrays of a few contacts a
+# step.  Each operation is the NumPy code's, in its order; the trigonometry stays NumPy's
+# (as in :mod:`~wuerfel_cvx.formulations.motion`), computed between the loops for every body
+# at the sample times and for each contact's two bodies at its refined time.
+@compiled
+def _sample_turns(angle: FloatArray, spin: FloatArray, dt: float,
+                  samples: int) -> tuple[FloatArray, FloatArray]:
+    """The sample times ``linspace(0, dt, samples + 1)`` (s) and each body's angles there."""
+    grid = np.empty(samples + 1)
+    step = dt / samples
+    for s in range(samples):
+        grid[s] = s * step + 0.0
+    grid[samples] = dt
+    turned = np.empty((angle.shape[0], samples + 1))
+    for b in range(angle.shape[0]):
+        for s in range(samples + 1):
+            turned[b, s] = angle[b] + spin[b] * grid[s]
+    return grid, turned
+
+
+@compiled
+def _corner_at(center: FloatArray, velocity: FloatArray, reference: FloatArray, body: int,
+               corner: int, tau: float, cos: float, sin: float,
+               ) -> tuple[float, float, float, float]:
+    """A corner's position and its offset from its body's centre (m) at ``tau`` (s).
+
+    ``cos`` and ``sin`` of the body's angle at ``tau``; as :meth:`BodyMotion.positions`.
     """
-    m = len(contacts)
-    grid = np.linspace(0.0, dt, SAMPLES + 1)
-    gaps = face_gaps_at(motion, contacts, np.broadcast_to(grid, (m, SAMPLES + 1)))
-    start = gaps[:, 0]
-    ramp_rate = (ramp_end(start, dt, push_speed) - start) / dt
-    margin = gaps - start[:, None] - ramp_rate[:, None] * grid
-    mean_rate = np.empty_like(margin)
-    mean_rate[:, 1:] = margin[:, 1:] / grid[1:]
-    mean_rate[:, 0] = 2.0 * mean_rate[:, 1] - mean_rate[:, 2]  # for the parabola only
-    best = 1 + np.argmin(mean_rate[:, 1:], axis=1)
-    inner = np.minimum(best, SAMPLES - 1)
-    rows = np.arange(m)
-    left, mid, right = (mean_rate[rows, inner + shift] for shift in (-1, 0, 1))
+    x, y = reference[body, corner, 0], reference[body, corner, 1]
+    offset_x = cos * x - sin * y
+    offset_y = sin * x + cos * y
+    return (center[body, 0] + tau * velocity[body, 0] + offset_x,
+            center[body, 1] + tau * velocity[body, 1] + offset_y, offset_x, offset_y)
+
+
+@compiled
+def _nan_max(a: float, b: float) -> float:
+    """``np.maximum(a, b)``: NaN if either is."""
+    if a != a or a > b:
+        return a
+    return b
+
+
+@compiled
+def _nan_min(a: float, b: float) -> float:
+    """``np.minimum(a, b)`` where the sign of a zero does not matter: NaN if either is."""
+    if a != a or a < b:
+        return a
+    return b
+
+
+@compiled
+def _face_gap(center: FloatArray, velocity: FloatArray, reference: FloatArray,
+              edge_body: int, point_body: int, corner_i: int, corner_j: int, corner_k: int,
+              clearance: float, tau: float, edge_cos: float, edge_sin: float,
+              point_cos: float, point_sin: float) -> float:
+    """A contact's gap (m) at ``tau`` (s), as the NumPy code's ``face_gaps_at``.
+
+    Its point's distance from its edge's line, or, if the point starts past the face's end
+    (``clearance`` above 0) and is still past it, from the face (the segment).  ``cos`` and
+    ``sin`` of the bodies' angles at ``tau``.
+    """
+    p_i = _corner_at(center, velocity, reference, edge_body, corner_i, tau, edge_cos, edge_sin)
+    p_j = _corner_at(center, velocity, reference, edge_body, corner_j, tau, edge_cos, edge_sin)
+    p_k = _corner_at(center, velocity, reference, point_body, corner_k, tau, point_cos,
+                     point_sin)
+    edge_x, edge_y = p_j[0] - p_i[0], p_j[1] - p_i[1]
+    offset_x, offset_y = p_k[0] - p_i[0], p_k[1] - p_i[1]
+    length = math.hypot(edge_x, edge_y)
+    gap: float = (edge_x * offset_y - edge_y * offset_x) / length
+    if clearance > 0.0:
+        place = (offset_x * edge_x + offset_y * edge_y) / length
+        beyond = _nan_max(-place, place - length)
+        if beyond > 0.0:
+            gap = math.hypot(beyond, gap)
+    return gap
+
+
+@compiled
+def _best_sample(mean_rate: FloatArray) -> int:
+    """``1 + argmin(mean_rate[1:])`` (the first NaN if there is one)."""
+    best, lowest = 1, mean_rate[1]
+    if lowest != lowest:
+        return best
+    for s in range(2, mean_rate.shape[0]):
+        if mean_rate[s] != mean_rate[s]:
+            return s
+        if mean_rate[s] < lowest:
+            best, lowest = s, mean_rate[s]
+    return best
+
+
+@compiled
+def _parabola_time(mean_rate: FloatArray, best: int, dt: float) -> float:
+    """The time (s) of the parabola's vertex through the best sample and its neighbours.
+
+    Clipped to one interval about the sample and to ``[dt / samples, dt]``.
+    """
+    samples = mean_rate.shape[0] - 1
+    inner = min(best, samples - 1)
+    left, mid, right = mean_rate[inner - 1], mean_rate[inner], mean_rate[inner + 1]
     curvature = left - 2.0 * mid + right
-    shift = np.where(curvature > 0.0, 0.5 * (left - right) / np.where(curvature > 0.0,
-                                                                      curvature, 1.0), 0.0)
-    refined = np.clip((inner + np.clip(shift, -1.0, 1.0)) * dt / SAMPLES, dt / SAMPLES, dt)
-    refined_margin = face_gaps_at(motion, contacts, refined) - start - ramp_rate * refined
-    sampled_tau, sampled_margin = grid[best], margin[rows, best]
-    take = refined_margin / refined < mean_rate[rows, best]
-    violation = float(max(0.0, -np.min(margin), -np.min(refined_margin)))
-    return (np.where(take, refined, sampled_tau), np.where(take, refined_margin, sampled_margin),
-            ramp_rate, violation)
+    shift = 0.5 * (left - right) / curvature if curvature > 0.0 else 0.0
+    shift = _nan_min(_nan_max(shift, -1.0), 1.0)
+    time: float = _nan_min(_nan_max((inner + shift) * dt / samples, dt / samples), dt)
+    return time
 
 
-def _row_blocks(motion: BodyMotion, c: _ContactCorners,
-                tau: FloatArray) -> list[tuple[IntArray, FloatArray]]:
-    """Blocks of ``d phi(tau; v) / d v / tau`` over the corners of both bodies of each row.
+@compiled
+def _sampled_approach(center: FloatArray, velocity: FloatArray, reference: FloatArray,
+                      angle: FloatArray, spin: FloatArray, cos: FloatArray, sin: FloatArray,
+                      grid: FloatArray, edge_body: IntArray, point_body: IntArray,
+                      corner_i: IntArray, corner_j: IntArray, corner_k: IntArray,
+                      clearance: FloatArray, dt: float, push_speed: float,
+                      ) -> tuple[FloatArray, FloatArray, FloatArray, IntArray, FloatArray,
+                                 FloatArray, float, FloatArray]:
+    """Each contact's ramp margins on the samples, their minimiser and its refinement.
+
+    ``cos`` and ``sin`` ``(B, samples + 1)`` of each body's angle at the sample times
+    ``grid`` (s).  Returns the start gaps (m), the ramps' rates (m/s), the refined times
+    (s), the best samples, their mean rates (m/s) and margins (m), the lowest sampled margin
+    (m; NaN if any is) and the angles ``(m, 2)`` (rad) of the contacts' edge and point
+    bodies at their refined times.
+    """
+    m, samples = edge_body.shape[0], grid.shape[0] - 1
+    start, rate, refined = np.empty(m), np.empty(m), np.empty(m)
+    best = np.empty(m, dtype=np.int64)
+    best_rate, best_margin = np.empty(m), np.empty(m)
+    refined_turns = np.empty((m, 2))
+    gaps, mean_rate = np.empty(samples + 1), np.empty(samples + 1)
+    lowest = np.inf
+    for c in range(m):
+        a, b = edge_body[c], point_body[c]
+        for s in range(samples + 1):
+            gaps[s] = _face_gap(center, velocity, reference, a, b, corner_i[c], corner_j[c],
+                                corner_k[c], clearance[c], grid[s], cos[a, s], sin[a, s],
+                                cos[b, s], sin[b, s])
+        start[c] = gaps[0]
+        rate[c] = (_nan_min(0.0, gaps[0] + dt * push_speed) - gaps[0]) / dt
+        for s in range(samples + 1):
+            margin = gaps[s] - start[c] - rate[c] * grid[s]
+            lowest = _nan_min(lowest, margin)
+            gaps[s] = margin  # the gaps are not needed further
+            if s > 0:
+                mean_rate[s] = margin / grid[s]
+        mean_rate[0] = 2.0 * mean_rate[1] - mean_rate[2]  # for the parabola only
+        best[c] = _best_sample(mean_rate)
+        best_rate[c], best_margin[c] = mean_rate[best[c]], gaps[best[c]]
+        refined[c] = _parabola_time(mean_rate, best[c], dt)
+        refined_turns[c, 0] = angle[a] + spin[a] * refined[c]
+        refined_turns[c, 1] = angle[b] + spin[b] * refined[c]
+    return start, rate, refined, best, best_rate, best_margin, lowest, refined_turns
+
+
+@compiled
+def _refined_approach(center: FloatArray, velocity: FloatArray, reference: FloatArray,
+                      cos: FloatArray, sin: FloatArray, refined_cos: FloatArray,
+                      refined_sin: FloatArray, grid: FloatArray, edge_body: IntArray,
+                      point_body: IntArray, corner_i: IntArray, corner_j: IntArray,
+                      corner_k: IntArray, clearance: FloatArray, start: FloatArray,
+                      rate: FloatArray, refined: FloatArray, best: IntArray,
+                      best_rate: FloatArray, best_margin: FloatArray,
+                      ) -> tuple[FloatArray, FloatArray, float, FloatArray, FloatArray]:
+    """Each contact's closest approach: the refined time where its mean rate is lower.
+
+    ``refined_cos`` and ``refined_sin`` ``(m, 2)`` of the angles at the refined times.
+    Returns ``tau*`` (s), ``psi(tau*)`` (m), the lowest refined margin (m; NaN if any is),
+    and ``cos`` and ``sin`` ``(2 m, 2)`` of the bodies' angles at the rows' times.
+    """
+    m = edge_body.shape[0]
+    closest, margin = np.empty(m), np.empty(m)
+    row_cos, row_sin = np.empty((2 * m, 2)), np.empty((2 * m, 2))
+    lowest = np.inf
+    for c in range(m):
+        a, b = edge_body[c], point_body[c]
+        gap = _face_gap(center, velocity, reference, a, b, corner_i[c], corner_j[c],
+                        corner_k[c], clearance[c], refined[c], refined_cos[c, 0],
+                        refined_sin[c, 0], refined_cos[c, 1], refined_sin[c, 1])
+        refined_margin = gap - start[c] - rate[c] * refined[c]
+        lowest = _nan_min(lowest, refined_margin)
+        row_cos[c, 0], row_sin[c, 0] = cos[a, 0], sin[a, 0]
+        row_cos[c, 1], row_sin[c, 1] = cos[b, 0], sin[b, 0]
+        if refined_margin / refined[c] < best_rate[c]:
+            closest[c], margin[c] = refined[c], refined_margin
+            row_cos[m + c, 0], row_sin[m + c, 0] = refined_cos[c, 0], refined_sin[c, 0]
+            row_cos[m + c, 1], row_sin[m + c, 1] = refined_cos[c, 1], refined_sin[c, 1]
+        else:
+            s = best[c]
+            closest[c], margin[c] = grid[s], best_margin[c]
+            row_cos[m + c, 0], row_sin[m + c, 0] = cos[a, s], sin[a, s]
+            row_cos[m + c, 1], row_sin[m + c, 1] = cos[b, s], sin[b, s]
+    return closest, margin, lowest, row_cos, row_sin
+
+
+@compiled
+def _body_blocks(fitted: FloatArray, n_boxes: int, body: int, push_x: float, push_y: float,
+                 turn: float, index: IntArray, gradient: FloatArray, row: int,
+                 first: int) -> None:
+    """Write blocks ``first`` to ``first + 3`` of ``row``: ``push / 4 + turn rot90(f_q) / S``.
+
+    One block per corner ``q`` of ``body`` (``f`` its fitted corners, ``S = sum |f|^2``),
+    in the column of the corner, ``-1`` for a table.
+    """
+    squares = np.empty(8)
+    for q in range(4):
+        for d in range(2):
+            squares[2 * q + d] = fitted[body, q, d] * fitted[body, q, d]
+    weight = turn / _pairwise8(squares)
+    for q in range(4):
+        index[row, first + q] = 4 * body + q if body < n_boxes else -1
+        gradient[row, first + q, 0] = 0.25 * push_x + weight * -fitted[body, q, 1]
+        gradient[row, first + q, 1] = 0.25 * push_y + weight * fitted[body, q, 0]
+
+
+@compiled
+def _row_blocks(center: FloatArray, velocity: FloatArray, reference: FloatArray,
+                fitted: FloatArray, n_boxes: int, edge_body: IntArray, point_body: IntArray,
+                corner_i: IntArray, corner_j: IntArray, corner_k: IntArray,
+                closest: FloatArray, row_cos: FloatArray, row_sin: FloatArray,
+                ) -> tuple[IntArray, FloatArray]:
+    """Blocks ``(2 m, 8)`` of ``d phi(tau; v) / d v / tau``: rate rows, then closest rows.
 
     A corner ``p`` of a box moves by ``tau (I / 4 + rot90(o_p) rot90(f_q)' / S)`` per unit
     velocity of the box's corner ``q`` (``o`` its offsets at ``tau``, ``f`` at the start,
-    ``S = sum |f|^2``); tables do not move and take no column.
+    ``S = sum |f|^2``); the gap's gradient in the corners is that of the side function
+    divided by the edge length.  Four blocks of the edge body's corners, then four of the
+    point body's; tables do not move and take no column (``-1``).
     """
-    ends = ((c.edge_body, c.corner_i), (c.edge_body, c.corner_j), (c.point_body, c.corner_k))
-    o_i, o_j, o_k = (motion.offsets(body, corner, tau) for body, corner in ends)
-    p_i, p_j, p_k = (motion.center[body] + tau[:, None] * motion.velocity[body] + offset
-                     for (body, _), offset in zip(ends, (o_i, o_j, o_k), strict=True))
-    g_i, g_j, g_k = side_gradients(p_i, p_j, p_k)
-    scale = 1.0 / np.linalg.norm(g_k, axis=1)[:, None]  # |g_k| = edge length (m)
-    g_i, g_j, g_k = g_i * scale, g_j * scale, g_k * scale
-    edge_push = g_i + g_j
-    edge_turn = np.sum(g_i * rot90(o_i) + g_j * rot90(o_j), axis=1)
-    point_turn = np.sum(g_k * rot90(o_k), axis=1)
-    return (_body_blocks(motion, c.edge_body, edge_push, edge_turn)
-            + _body_blocks(motion, c.point_body, g_k, point_turn))
+    m = edge_body.shape[0]
+    index = np.empty((2 * m, 8), dtype=np.int64)
+    gradient = np.empty((2 * m, 8, 2))
+    for r in range(2 * m):
+        c = r % m
+        a, b = edge_body[c], point_body[c]
+        tau = 0.0 if r < m else closest[c]
+        p_i = _corner_at(center, velocity, reference, a, corner_i[c], tau, row_cos[r, 0],
+                         row_sin[r, 0])
+        p_j = _corner_at(center, velocity, reference, a, corner_j[c], tau, row_cos[r, 0],
+                         row_sin[r, 0])
+        p_k = _corner_at(center, velocity, reference, b, corner_k[c], tau, row_cos[r, 1],
+                         row_sin[r, 1])
+        # side_gradients: rot90(p_k - p_j), rot90(p_i - p_k), rot90(p_j - p_i)
+        g_ix, g_iy = -(p_k[1] - p_j[1]), p_k[0] - p_j[0]
+        g_jx, g_jy = -(p_i[1] - p_k[1]), p_i[0] - p_k[0]
+        g_kx, g_ky = -(p_j[1] - p_i[1]), p_j[0] - p_i[0]
+        scale = 1.0 / np.sqrt(g_kx * g_kx + g_ky * g_ky)  # |g_k| = edge length (m)
+        g_ix, g_iy, g_jx, g_jy = g_ix * scale, g_iy * scale, g_jx * scale, g_jy * scale
+        g_kx, g_ky = g_kx * scale, g_ky * scale
+        edge_turn = ((g_ix * -p_i[3] + g_jx * -p_j[3]) + (g_iy * p_i[2] + g_jy * p_j[2]))
+        point_turn = g_kx * -p_k[3] + g_ky * p_k[2]
+        _body_blocks(fitted, n_boxes, a, g_ix + g_jx, g_iy + g_jy, edge_turn, index,
+                     gradient, r, 0)
+        _body_blocks(fitted, n_boxes, b, g_kx, g_ky, point_turn, index, gradient, r, 4)
+    return index, gradient
 
 
-def _body_blocks(motion: BodyMotion, body: IntArray, push: FloatArray,
-                 turn: FloatArray) -> list[tuple[IntArray, FloatArray]]:
-    """Four blocks (one per corner of ``body``): ``push / 4 + turn rot90(f_q) / S``."""
-    fitted = motion.fitted[body]  # (m, 4, 2)
-    weight = turn / np.sum(fitted * fitted, axis=(1, 2))
-    coefficients = 0.25 * push[:, None, :] + weight[:, None, None] * rot90(fitted)
-    index = np.where((body < motion.n_boxes)[:, None], 4 * body[:, None] + np.arange(4), -1)
-    return [(index[:, corner], coefficients[:, corner]) for corner in range(4)]
+@compiled
+def _same_rows(gradient: FloatArray, m: int) -> bool:
+    """Whether the blocks of rows ``m`` on (of the same points) equal those of the first ``m``."""
+    for r in range(m):
+        for block in range(gradient.shape[1]):
+            for d in range(2):
+                if gradient[r, block, d] != gradient[m + r, block, d]:
+                    return False
+    return True
+
+
+@compiled
+def _row_products(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, first: int,
+                  about: FloatArray) -> FloatArray:
+    """Rows ``first`` on of the CSR matrix times ``about``, summed as scipy sums them."""
+    n = indptr.shape[0] - 1 - first
+    products = np.empty(n)
+    for r in range(n):
+        total = 0.0
+        for e in range(indptr[first + r], indptr[first + r + 1]):
+            total += data[e] * about[indices[e]]
+        products[r] = total
+    return products

@@ -453,7 +453,7 @@ def _face_gaps(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The rows' gaps (m) at ``tau`` ``(m, K)`` and the choices ``past`` and ``before``.
 
-    :func:`~wuerfel_cvx.formulations.velocity.face_gaps_at` in analytic arithmetic:
+    ``face_gaps_at`` of the NumPy reference (tests/reference_kernels.py) in analytic arithmetic:
     ``choices`` (``past``, ``before``, each ``(m, K)``) held, or made where ``None``.
     """
     p_i, p_j, p_k, *_ = _approach_corners(x, inputs, tau)
@@ -477,7 +477,7 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
     """``tau*`` (s), ``psi(tau*)`` (m) and the ramp rate ``r'`` (m/s) of each contact.
 
-    The arithmetic of :func:`~wuerfel_cvx.formulations.velocity._closest_approach` with its
+    The arithmetic of :func:`~wuerfel_cvx.formulations.velocity.closest_approach` with its
     choices held (``held``) or made (``None``; returned as a dict of :class:`_Held`'s fields
     but ``at_rate``).  ``hold_closest``: ``tau*`` from the real parts only (its dependence
     on the inputs dropped; for measuring what that dependence contributes).  ``forced``: the
@@ -706,9 +706,14 @@ def _complex_steps(x: FloatArray, inputs: _ApproachInputs, rows: tuple[IntArray,
 
 
 def _normal_rows(qp: StepQP, n_contacts: int) -> tuple[IntArray, FloatArray]:
-    """Each row's normal row (``0..2m-1``) and cone edge (+1, -1, 0) of a closest-approach QP."""
+    """Each row's normal row and cone edge (+1, -1, 0) of a closest-approach QP.
+
+    Normal rows ``0..m-1`` are the rate rows, ``m..2m-1`` the closest-approach rows; a QP
+    whose contacts' two rows all coincide takes the rate rows alone (``m`` normal rows,
+    :func:`~wuerfel_cvx.formulations.velocity.rows_along`).
+    """
     cones = qp.cones
-    count = 2 * n_contacts
+    count = len(cones.row_contact) if cones is not None else qp.n_inequalities
     if cones is None or not np.any(cones.minus >= 0):
         return np.arange(count, dtype=np.int64), np.zeros(count)
     rough = np.flatnonzero(cones.minus >= 0)

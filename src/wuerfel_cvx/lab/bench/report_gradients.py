@@ -338,7 +338,7 @@ def _multi_pass_steps(scene: Scene, steps: int, dt: float, model: str) -> str:
 def closest_time_rows() -> list[list[str]]:
     """A corner spinning past an edge (tau* a parabola's vertex): derivatives, tau* held."""
     from ...formulations.motion import BodyMotion
-    from ...formulations.velocity import _closest_approach
+    from ...formulations.velocity import approach_along
     from ...gradients.rigid import COMPLEX_STEP, _ApproachInputs, _closest, _Held
     from ...step.contacts import Contacts
 
@@ -356,8 +356,9 @@ def closest_time_rows() -> list[list[str]]:
                             angle=np.array([values[5], 0.0]),
                             velocity=np.array([values[11:13], [0.0, 0.0]]),
                             spin=np.array([values[13], 0.0]), reference=np.stack([box, table]),
-                            n_boxes=1)
-        tau, psi, _, _ = _closest_approach(motion, contacts, DT, 1.0)
+                            n_boxes=1, fitted=np.stack([box @ _rotation(values[5]).T, table]))
+        approach = approach_along(motion, contacts, np.zeros(0), DT, 1.0)
+        tau, psi = approach.closest, approach.margin
         return float(tau[0]), float(psi[0])
 
     tau, psi, _, choices = _closest(x[None, :].astype(complex), inputs, None, False)
@@ -379,6 +380,11 @@ def closest_time_rows() -> list[list[str]]:
                      f"{differences[1]:.5f}", f"{fixed:.5f}",
                      f"{(moving[1] * t - p * moving[0]) / t**2:.3f}", f"{fixed / t:.3f}"])
     return rows
+
+
+def _rotation(angle: float) -> np.ndarray:
+    """The rotation matrix of ``angle`` (rad)."""
+    return np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
 
 
 def _header(command: str) -> str:
@@ -498,7 +504,7 @@ mean rate psi/tau* (its derivative is the same with tau* held, up to the parabol
 but not for the rows: psi itself, the closest-approach row's right side G v0 - psi/tau* and
 its matrix G(tau*) depend on tau* to first order.  Measured on a corner of a square spinning
 at -200 rad/s past a table's edge, its gap concave at the start (dt 1/240), against central
-differences (step 1e-7) of the formulation's own `_closest_approach`:""",
+differences (step 1e-7) of the formulation's own `approach_along`:""",
     "velocity": """## Why the `velocity` formulation is not covered
 
 `simulate(..., formulation="velocity", gradients=True)` raises a `GradientError` naming
