@@ -488,6 +488,8 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
     grid = np.linspace(0.0, dt, samples + 1)
     if held is not None and held.tau is not None and np.all(held.flat | hold_closest):
         return _held_closest(x, inputs, held)
+    if held is None and forced is not None and np.all(np.isin(forced, grid)):
+        return _held_closest(x, inputs, _sampled_choices(x, inputs, grid, forced))
     gaps, *grid_faces = _face_gaps(x, inputs, np.broadcast_to(grid, (m, samples + 1)),
                                    None if held is None else held.grid_faces)
     start = gaps[:, 0]
@@ -543,11 +545,35 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
     return tau, psi, rate, choices
 
 
+def _sampled_choices(x: np.ndarray, inputs: _ApproachInputs, grid: FloatArray,
+                     forced: FloatArray) -> _Held:
+    """The choices of a pass whose every ``tau*`` is a sample (``forced``, the forward's).
+
+    Only the gaps at the start and at ``tau*`` are needed then (the faces' choices there,
+    the ramp's): the search over the samples moves nothing.
+    """
+    m, columns = x.shape[0], grid.size
+    best = np.rint(forced / grid[1]).astype(np.int64)
+    rows = np.arange(m)
+    grid_faces = (np.zeros((m, columns), dtype=bool), np.zeros((m, columns), dtype=bool))
+    for tau, column in ((np.zeros(m), np.zeros(m, dtype=np.int64)), (grid[best], best)):
+        _, past, before = _face_gaps(x, inputs, tau[:, None], None)
+        grid_faces[0][rows, column], grid_faces[1][rows, column] = past[:, 0], before[:, 0]
+    start = _face_gaps(x, inputs, np.zeros((m, 1)),
+                       (grid_faces[0][:, :1], grid_faces[1][:, :1]))[0][:, 0]
+    none, false = np.zeros(m), np.zeros(m, dtype=bool)
+    return _Held(grid_faces=grid_faces, refined_faces=(false[:, None], false[:, None]),
+                 pushed=start.real + inputs.dt * inputs.push_speed < 0.0, best=best,
+                 curved=false, shift_clip=none, tau_clip=none, take=false,
+                 at_rate=false, flat=~false, tau=np.asarray(forced, dtype=np.float64))
+
+
 def _held_closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
     """:func:`_closest` where every ``tau*`` is held: the gaps at the start and at ``tau*``.
 
-    The same numbers without the sampled search (which then moves nothing).
+    The same numbers without the sampled search (which then moves nothing).  Returns the
+    choices too (``held``'s fields but ``at_rate``).
     """
     rows = np.arange(x.shape[0])
     start = _face_gaps(x, inputs, np.zeros((x.shape[0], 1)),
@@ -559,7 +585,9 @@ def _held_closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
                   for r, g in zip(held.refined_faces, held.grid_faces, strict=True))
     psi = (_face_gaps(x, inputs, tau[:, None], faces)[0][:, 0]  # type: ignore[arg-type]
            - start - rate * tau)
-    return tau, psi, rate, {}
+    choices = {name: getattr(held, name) for name in held.__dataclass_fields__
+               if name != "at_rate"}
+    return tau, psi, rate, choices
 
 
 def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArray, FloatArray],
