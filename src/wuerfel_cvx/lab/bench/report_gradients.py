@@ -454,7 +454,8 @@ steps with a weakly active row or a contact at the stick-slip boundary (none her
 resting stack a velocity pushed into the sticking contacts is stopped in the first step
 (the derivative is 0), but the perturbed `coulomb` runs' first fixed point stops at its 50
 iterations without converging (staggered projections converge slowly through a stack of
-sticking contacts): the difference then carries the fixed point's own error (about 3e-7),
+sticking contacts): the difference then carries the fixed point's own error (its
+size depends on where each solver's unconverged iteration stops: the rows marked *no*),
 not the adjoint's.""",
     "cvxpy": """## cvxpy's derivative
 
