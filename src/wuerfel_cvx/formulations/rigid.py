@@ -66,6 +66,11 @@ class RigidFormulation(FrictionSettings):
                                    linearisation=self.linearisation,
                                    friction_model=self.friction_model)
 
+    @property
+    def push_speed(self) -> float:
+        """Closest-approach rows: largest push-out speed (m/s), as in ``velocity``."""
+        return self._velocity.push_speed
+
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
         """Contact reach (m) per body, as in the velocity formulation."""
         return self._velocity.body_reach(model, state, dt)

@@ -331,6 +331,12 @@ def closest_approach(model: Model, points: FloatArray, contacts: Contacts, about
     angles' ``cos`` and ``sin`` by NumPy between them.
     """
     motion = body_motion(model, points, about.reshape(-1, 2)[: model.n_points])
+    return approach_along(motion, contacts, about, dt, push_speed)
+
+
+def approach_along(motion: BodyMotion, contacts: Contacts, about: FloatArray, dt: float,
+                   push_speed: float) -> Approach:
+    """:func:`closest_approach` along a given rigid ``motion`` (that of ``about``)."""
     if len(contacts) == 0:
         none = np.zeros(0)
         return Approach(about, motion, none, none, none, 0.0, np.zeros((0, 2)),

@@ -32,7 +32,10 @@ top of the QP's (:mod:`wuerfel_cvx.friction.problem`).
 the step before (``coulomb_warm_start``, :class:`FrictionMemory`): contact QP ->
 ``lambda_n`` -> friction problem -> ``lambda_t`` -> contact QP ..., until two successive
 contact QPs' normal impulses differ by at most ``tolerance`` times the largest of them. The
-closest-approach passes of ``velocity``
+impulse each contact QP holds is the friction problems' answers mixed by Anderson
+acceleration (:class:`FrictionMixer`: inside the cones, safeguarded, and the plain answer
+itself once the normal impulses settle), which reaches the plain iteration's fixed point in
+fewer friction problems. The closest-approach passes of ``velocity``
 (:meth:`~wuerfel_cvx.formulations.velocity.VelocityFormulation.refine`) interleave: after
 each contact QP its rows are re-linearised about its solution when the formulation asks so,
 and the next contact QP takes the new rows with the current ``lambda_t``. The formulation's
@@ -40,11 +43,12 @@ pass limit counts the passes since ``lambda_t`` last changed, so that each frict
 has the passes a frictionless step has to meet the gap acceptance (a limit counted over the
 whole iteration let steps be accepted by the limit, with penetrations beyond the bound). The
 fixed point is converged only when the formulation also accepts the last contact QP's
-solution, so the step's state, always the last contact QP's, meets the formulation's gap
-acceptance (and with it the penetration bound) exactly as a frictionless step does. After
-``max_iterations`` friction problems without convergence the step goes on with the last
-iterate: further passes, ``lambda_t`` fixed, until the formulation accepts;
-:attr:`CoulombStep.converged` says so.
+solution; a settled impulse is held fixed through the formulation's further passes (a new
+friction problem only if they unsettle the normal impulses), so the step's state, always the
+last contact QP's, meets the formulation's gap acceptance (and with it the penetration
+bound) exactly as a frictionless step does. After ``max_iterations`` friction problems
+without convergence the step goes on with the last iterate: further passes, ``lambda_t``
+fixed, until the formulation accepts; :attr:`CoulombStep.converged` says so.
 """
 
 from __future__ import annotations
@@ -114,6 +118,9 @@ class CoulombSettings:
     tolerance: float
     """Converged when successive normal impulses differ by at most this times the largest
     (1)."""
+    memory: int = 5
+    """Past iterates the Anderson acceleration of the friction impulse mixes
+    (:class:`FrictionMixer`); 0: the plain iteration."""
 
     def __post_init__(self) -> None:
         if isinstance(self.max_iterations, bool) or not isinstance(self.max_iterations, int) \
@@ -141,7 +148,8 @@ def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP
     friction = np.zeros(len(qp.contacts)) if initial is None else np.asarray(initial, float)
     solved: list[tuple[StepSolution, str]] = []
     answers: list[FrictionAnswer] = []
-    previous: FloatArray | None = None
+    previous: FloatArray | None = None  # the normal impulses the held friction was made of
+    mixer = FrictionMixer(settings.memory)
     linearisations, converged = 1, False  # passes since the friction impulse last changed
     while True:
         contact_qp = with_friction_impulse(base, friction)
@@ -155,27 +163,102 @@ def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP
             linearisations += 1
             base, friction = dataclasses.replace(refined, target=target), \
                 np.zeros(len(refined.contacts))
+            mixer.reset()
             continue
         normal = normal_impulses(contact_qp, solution.ineq_dual)
-        if refined is None and previous is not None and _settled(normal, previous, settings):
-            converged = True
+        settled = previous is not None and _settled(normal, previous, settings) \
+            and mixer.settled(settings.tolerance)
+        if refined is None and (settled or len(answers) >= settings.max_iterations):
+            converged = settled
             break
-        if refined is None and len(answers) >= settings.max_iterations:
-            break
-        new_impulse = len(answers) < settings.max_iterations
+        # a settled impulse is held through the formulation's further passes
+        new_impulse = not settled and len(answers) < settings.max_iterations
         if new_impulse:
-            answers.append(solve_friction(friction_problem(contact_qp, solution, target),
-                                          solve, tol))
-            friction, previous = answers[-1].friction, normal
+            problem = friction_problem(contact_qp, solution, target)
+            answers.append(solve_friction(problem, solve, tol))
+            friction = mixer.next(friction, answers[-1].friction, problem.bound,
+                                  plain=previous is not None
+                                  and _settled(normal, previous, settings))
+            previous = normal
         # the next contact QP is the first pass of a new impulse, or the next pass of this one
         linearisations = 1 if new_impulse else linearisations + 1
         if refined is not None:
             base = dataclasses.replace(refined, target=target)
+            if base.contacts is not contact_qp.contacts:
+                mixer.reset()
             friction = _carried(friction, contact_qp.contacts, base.contacts)
             previous = None if previous is None else _carried(previous, contact_qp.contacts,
                                                               base.contacts)
     return CoulombStep(contact_qp, solved, answers, converged,
                        _forces(contact_qp, solution, friction))
+
+
+SLOW = 0.5
+"""A step that reduces the friction residual by less than this factor is slow; the mixer
+accelerates after two slow steps in a row, and holds the plain answers before: most steps'
+fixed points converge in one to three plain iterations (a slipping contact's impulse reaching
+its cone's edge is exact in one), which Anderson's linear model would only approach."""
+
+
+class FrictionMixer:
+    """The friction impulse each contact QP holds: Anderson acceleration, safeguarded.
+
+    The fixed point is ``lambda_t = g(lambda_t)``, ``g`` the friction problem's answer after
+    the contact QP holding ``lambda_t``; the plain iteration holds ``g`` of the last impulse
+    next.  Anderson's type-II mixing (Walker and Ni 2011) holds instead the combination of
+    the last ``memory + 1`` answers whose residuals ``f = g(lambda_t) - lambda_t`` combine
+    to the smallest (least squares over their differences), projected onto each contact's
+    cone ``|lambda_t| <= mu lambda_n`` of the last normal impulses, so that every held
+    impulse is one the cone admits.  Safeguard: a residual larger than the smallest in the
+    history forgets the history and holds the plain answer.  An accelerated impulse is
+    settled only when it lies within the tolerance (relative to the largest cone radius) of
+    the plain answer, so that a converged step holds (to the tolerance) the friction
+    problem's own answer, as the plain iteration does; near convergence (the normal impulses
+    settled) the plain answer is held, which settles it.
+    """
+
+    def __init__(self, memory: int) -> None:
+        self.memory = memory
+        self._held: list[FloatArray] = []
+        self._answers: list[FloatArray] = []
+        self._best = math.inf  # the smallest residual since the last reset (N s)
+        self._slow = 0  # successive steps that reduced it by less than SLOW
+        self._departure = 0.0  # |held - plain answer| of the last impulse chosen (N s)
+        self._radius = 0.0  # the largest cone radius mu lambda_n of its answer (N s)
+
+    def reset(self) -> None:
+        """Forget the history (the contacts changed, or the safeguard)."""
+        self._held, self._answers, self._best, self._slow = [], [], math.inf, 0
+
+    def settled(self, tolerance: float) -> bool:
+        """Whether the impulse held last is within ``tolerance`` of its plain answer."""
+        return self._departure <= tolerance * self._radius
+
+    def next(self, held: FloatArray, answer: FloatArray, bound: FloatArray, *,
+             plain: bool = False) -> FloatArray:
+        """The impulse (N s) to hold after ``answer`` = ``g(held)``, within ``|.| <= bound``.
+
+        ``plain``: hold ``answer`` itself (and keep the history).
+        """
+        residual = float(np.linalg.norm(answer - held))
+        last = (float(np.linalg.norm(self._answers[-1] - self._held[-1]))
+                if self._answers and len(self._answers[-1]) == len(answer) else math.nan)
+        if not residual <= min(last, self._best):  # NaN: the contacts changed
+            self.reset()  # the safeguard: the last impulse did not reduce the residual
+        self._best = min(self._best, residual)
+        self._slow = self._slow + 1 if residual >= SLOW * last else 0
+        self._held = [*self._held, held][-(self.memory + 1):]
+        self._answers = [*self._answers, answer][-(self.memory + 1):]
+        self._radius = _inf(bound)
+        if plain or self._slow < 2:
+            self._departure = 0.0
+            return answer
+        answers = np.array(self._answers).T
+        residuals = answers - np.array(self._held).T
+        weights = np.linalg.lstsq(np.diff(residuals, axis=1), answer - held, rcond=None)[0]
+        mixed = np.clip(answer - np.diff(answers, axis=1) @ weights, -bound, bound)
+        self._departure = _inf(mixed - answer)
+        return np.asarray(mixed, dtype=np.float64)
 
 
 def _forces(qp: StepQP, solution: StepSolution, friction: FloatArray) -> ContactForces:

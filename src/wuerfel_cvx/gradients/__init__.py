@@ -14,11 +14,24 @@ What is covered: the ``rigid`` formulation, frictionless contacts, ``ccp`` frict
 ``coulomb`` friction (through its converged fixed point:
 :mod:`wuerfel_cvx.gradients.adjoint`), with respect to the initial centres, angles,
 velocities and angular velocities, the bodies' friction coefficients and masses, and
-gravity.  What is not, and why:
+gravity; its rows linearised at the step's start or at closest approach
+(``RigidFormulation(linearisation="closest-approach")``).
 
-* ``velocity`` (the default) and ``velocity-baumgarte``: their rows come from Gauss-Newton
-  passes linearised about the previous pass's answer (closest approach), and their rods are
-  equalities in corner velocities; the chain through the passes is not written yet.
+*Closest-approach rows and their passes: what is differentiated.*  Each pass's rows are
+functions of the start coordinates, the friction coefficients and the pass's linearisation
+point ``about``, also through the closest-approach time ``tau*`` as the forward pass
+computes it (:func:`~wuerfel_cvx.gradients.rigid.approach_rows`).  A step of several
+Gauss-Newton passes is differentiated as the computation it was, not as the passes' fixed
+point (which the forward pass stops short of, within its gap tolerance): pass 1 is
+linearised about the target ``(u + dt g, omega)``, pass 2 about pass 1's answer, pass
+``q >= 3`` about the mean of pass ``q - 1``'s answer and point, and the adjoint of each
+pass's ``about`` is carried to those (:mod:`~wuerfel_cvx.gradients.backward`).  A ``coulomb``
+step whose fixed point re-linearised its rows (passes interleaved with friction problems)
+is refused.  What is not covered, and why:
+
+* ``velocity`` (the default) and ``velocity-baumgarte``: their unknowns are corner velocities
+  held by rod equalities, and their rows are in corner space; the rows' derivatives here
+  are in three columns per body.
 * ``seed`` formulations: acceleration-level, no friction; not covered.
 
 Where the active set changes, the derivative is one-sided: the backward pass holds the

@@ -29,18 +29,22 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..formulations.qp import StepQP
 from ..scenes.geometry import FloatArray, rot90
-from ..solve.kkt import POLISHED, REUSED, guess_active_set
+from ..solve.kkt import POLISHED, REUSED, ActiveSet, guess_active_set
+from ..solve.paths import StepSolution
 from ..step.model import IntArray, Model
 from .adjoint import (
+    GAP_SWITCH,
     FrictionAdjoint,
+    QPAdjoint,
     coulomb_adjoint,
     gap_switch_rows,
     qp_adjoint,
     unshifted_target,
     weak_rows,
 )
-from .rigid import LOCAL, contact_rows, row_contacts, slip_rows
+from .rigid import LOCAL, approach_contacts, approach_rows, contact_rows, row_contacts, slip_rows
 from .tape import WRT_NAMES, GradientError, GradientTape, StepTape
 
 if TYPE_CHECKING:
@@ -126,6 +130,11 @@ def gradient(trajectory: Trajectory, tape: GradientTape | None, dloss_dpoints: F
     return result
 
 
+def _closest_approach(tape: GradientTape) -> bool:
+    """Whether the run's rows are rigid's closest-approach rows (Gauss-Newton passes)."""
+    return getattr(tape.formulation, "linearisation", "start") == "closest-approach"
+
+
 def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
                adjoints: _Adjoints) -> tuple[int, int]:
     """Carry ``adjoints`` from the state after ``record``'s step to the state before it.
@@ -133,46 +142,137 @@ def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
     Returns how many of its rows are weakly active (at least 1 for an answer whose polish
     was rejected, whose active set is then guessed from the answer), and how many of its
     tight rows sit at the gap switch (:func:`~wuerfel_cvx.gradients.adjoint.gap_switch_rows`).
+
+    With closest-approach rows the step's passes are chained (:func:`_about_rule`): pass
+    ``q``'s rows depend on its linearisation point, the target for the first pass, the first
+    answer for the second, the mean of the last answer and the last point after that.
     """
-    qp, solution, dt, model = record.qp, record.solution, tape.dt, tape.model
-    n = model.n_boxes
-    outputs = np.concatenate([dt * adjoints.center + adjoints.velocity,
-                              (dt * adjoints.angle + adjoints.angular_velocity)[:, None]],
-                             axis=1).ravel()
+    dt, n = tape.dt, tape.model.n_boxes
+    closest = _closest_approach(tape)
+    chain = record.passes + ((record.qp, record.solution),)
+    if closest:
+        _about_rule(record, chain)
+    a_x = np.concatenate([dt * adjoints.center + adjoints.velocity,
+                          (dt * adjoints.angle + adjoints.angular_velocity)[:, None]],
+                         axis=1).ravel()
+    a_target, a_weights, carried = np.zeros(3 * n), np.zeros(3 * n), np.zeros(3 * n)
+    weak, switches = 0, 0
+    for index in range(len(chain) - 1, -1, -1):
+        qp, solution = chain[index]
+        adjoint, friction, flagged, active = _pass_adjoint(record, qp, solution, a_x,
+                                                           index == len(chain) - 1)
+        weak, switches = weak + flagged, switches + _switches(tape, qp, active)
+        a_target += adjoint.target
+        a_weights += adjoint.weights
+        about = carried + (_rows_back(tape, qp, solution.x, points, adjoint, adjoints)
+                           if adjoint.rows.size else 0.0)
+        if friction is not None:
+            _slips_back(tape, record, points, friction, adjoint.unknowns_adjoint, adjoints)
+        if not closest:
+            continue
+        if index == 0:  # the first pass is linearised about the target
+            a_target += about
+        elif index == 1:  # the second about the first answer
+            a_x, carried = about, np.zeros(3 * n)
+        else:  # later ones about the mean of the last answer and the last point
+            a_x, carried = 0.5 * about, 0.5 * about
+    target = a_target.reshape(n, 3)
+    adjoints.velocity = target[:, :2].copy()
+    adjoints.angular_velocity = target[:, 2].copy()
+    adjoints.gravity += dt * target[:, :2].sum(axis=0)
+    weights = a_weights.reshape(n, 3)
+    inertia_per_mass = record.qp.weights[2::3] / record.qp.weights[0::3]
+    adjoints.mass += weights[:, 0] + weights[:, 1] + weights[:, 2] * inertia_per_mass
+    return weak, switches
+
+
+ABOUT_CHECK = 1e-9
+"""Largest difference (relative to the largest velocity, plus 1 m/s) between a pass's
+recorded linearisation point and the one :func:`_about_rule` expects."""
+
+
+def _about_rule(record: StepTape, chain: tuple[tuple[StepQP, StepSolution], ...]) -> None:
+    """Refuse a step whose passes were not linearised as the backward pass chains them.
+
+    Pass 1 about the step's target (without a Coulomb step's friction impulse), pass 2
+    about pass 1's answer, pass ``q >= 3`` about the mean of pass ``q - 1``'s answer and
+    point (:meth:`RigidFormulation.refine <wuerfel_cvx.formulations.rigid.RigidFormulation.
+    refine>`).  A Coulomb step whose fixed point re-linearised its rows is refused: its
+    passes interleave with friction problems, and are not chained.
+    """
+    target = (record.qp.target if record.forces is None
+              else unshifted_target(record.qp, record.forces))
+    expected = [target]
+    for index in range(1, len(chain)):
+        answer, last = chain[index - 1][1].x, chain[index - 1][0].linearised_about
+        expected.append(answer if index == 1 or last is None else 0.5 * (answer + last))
+    for (qp, _), about in zip(chain, expected, strict=True):
+        recorded = qp.linearised_about
+        scale = 1.0 + float(np.max(np.abs(about), initial=0.0))
+        if recorded is None or np.max(np.abs(recorded - about), initial=0.0) > ABOUT_CHECK * scale:
+            raise GradientError(
+                f"step {record.step}: its closest-approach rows were linearised about a point "
+                f"the backward pass does not chain (a Coulomb fixed point that re-linearised "
+                f"its rows, or an unknown pass rule)")
+
+
+def _pass_adjoint(record: StepTape, qp: StepQP, solution: StepSolution, a_x: FloatArray,
+                  last: bool) -> tuple[QPAdjoint, FrictionAdjoint | None, int, ActiveSet]:
+    """One pass's adjoint (a Coulomb step's fixed point for the last), its weak rows."""
+    if not solution.verified:
+        raise GradientError(f"step {record.step}: a pass was not verified")
     active = solution.active
     guessed = solution.polish not in (POLISHED, REUSED) or active is None
     if active is None:
         active = guess_active_set(qp, solution.x, solution.ineq_dual)
     friction, weak = None, 0
-    if record.forces is not None and qp.cones is not None:  # a coulomb step's fixed point
+    if last and record.forces is not None and qp.cones is not None:  # the fixed point
         adjoint, friction, weak = coulomb_adjoint(
             qp, unshifted_target(qp, record.forces), solution.x, solution.ineq_dual, active,
-            record.forces, outputs, record.step)
+            record.forces, a_x, record.step)
     else:
-        adjoint = qp_adjoint(qp, solution.x, solution.ineq_dual, active, outputs, record.step)
-    target = adjoint.target.reshape(n, 3)
-    adjoints.velocity = target[:, :2].copy()
-    adjoints.angular_velocity = target[:, 2].copy()
-    adjoints.gravity += dt * target[:, :2].sum(axis=0)
-    weights = adjoint.weights.reshape(n, 3)
-    inertia_per_mass = qp.weights[2::3] / qp.weights[0::3]
-    adjoints.mass += weights[:, 0] + weights[:, 1] + weights[:, 2] * inertia_per_mass
-    if adjoint.rows.size:
-        _rows_back(tape, record, points, adjoint.rows, adjoint.row_multiplier,
-                   adjoint.row_adjoint, adjoint.unknowns_adjoint, adjoints)
-    if friction is not None:
-        _slips_back(tape, record, points, friction, adjoint.unknowns_adjoint, adjoints)
-    return (weak_rows(qp, solution.x, solution.ineq_dual, active) + int(guessed) + weak,
-            gap_switch_rows(qp, active, row_contacts(qp)))
+        adjoint = qp_adjoint(qp, solution.x, solution.ineq_dual, active, a_x, record.step)
+    return (adjoint, friction,
+            weak_rows(qp, solution.x, solution.ineq_dual, active) + int(guessed) + weak, active)
 
 
-def _rows_back(tape: GradientTape, record: StepTape, points: FloatArray, tight: np.ndarray,
-               multiplier: FloatArray, row_adjoint: FloatArray, unknowns_adjoint: FloatArray,
-               adjoints: _Adjoints) -> None:
-    """The tight rows' part: ``dL/dG_r = z_r a_x - a_nu,r x``, ``dL/dh_r = a_nu,r``."""
-    model, qp, x = tape.model, record.qp, record.solution.x
-    beta = float(getattr(tape.formulation, "beta", 0.2))
-    rows = contact_rows(model, points, qp.contacts, qp, tape.dt, beta)
+def _switches(tape: GradientTape, qp: StepQP, active: ActiveSet) -> int:
+    """Tight rows at a switch of their right side's formula (one-sided there).
+
+    ``start``: the speculative/Baumgarte switch at a gap of 0
+    (:func:`~wuerfel_cvx.gradients.adjoint.gap_switch_rows`).  Closest approach: the ramp's
+    switch at a start gap of ``-dt u`` (``u`` the push-out speed), where its rate turns
+    from ``-phi_0 / dt`` to ``u``.
+    """
+    if not _closest_approach(tape):
+        return gap_switch_rows(qp, active, row_contacts(qp))
+    tight = np.concatenate([active.lower, active.upper]).astype(np.int64)
+    if not tight.size:
+        return 0
+    push = float(getattr(tape.formulation, "push_speed", 1.0))
+    contact = approach_contacts(qp)[tight]
+    return int(np.count_nonzero(np.abs(qp.contacts.gap[contact] + tape.dt * push)
+                                <= GAP_SWITCH))
+
+
+def _rows_back(tape: GradientTape, qp: StepQP, x: FloatArray, points: FloatArray,
+               adjoint: QPAdjoint, adjoints: _Adjoints) -> FloatArray:
+    """The tight rows' part: ``dL/dG_r = z_r a_x - a_nu,r x``, ``dL/dh_r = a_nu,r``.
+
+    Carried to the contacts' bodies' coordinates and friction coefficients; returns the
+    adjoint of the pass's linearisation point ``(u_x, u_y, omega)`` per body (zeros for
+    rows linearised at the step's start).
+    """
+    model, tight = tape.model, adjoint.rows
+    multiplier, row_adjoint = adjoint.row_multiplier, adjoint.row_adjoint
+    about = np.zeros(3 * model.n_boxes)
+    if _closest_approach(tape):
+        rows = approach_rows(model, points, qp.contacts, qp,
+                             float(getattr(tape.formulation, "push_speed", 1.0)), tape.dt,
+                             needed=tight)
+    else:
+        beta = float(getattr(tape.formulation, "beta", 0.2))
+        rows = contact_rows(model, points, qp.contacts, qp, tape.dt, beta)
     contact = rows.contact[tight]
     local = row_adjoint[:, None] * rows.rhs.grad[tight]
     for bodies, entries in ((qp.contacts.edge_body[contact], rows.edge_entries),
@@ -180,11 +280,17 @@ def _rows_back(tape: GradientTape, record: StepTape, points: FloatArray, tight: 
         moving = bodies < model.n_boxes
         column = 3 * np.where(moving, bodies, 0)
         for axis, entry in enumerate(entries):
-            coefficient = np.where(moving, multiplier * unknowns_adjoint[column + axis]
+            coefficient = np.where(moving, multiplier * adjoint.unknowns_adjoint[column + axis]
                                    - row_adjoint * x[column + axis], 0.0)
             local += coefficient[:, None] * entry.grad[tight]
-    _scatter(model, qp.contacts.edge_body[contact], qp.contacts.point_body[contact], local,
-             adjoints)
+    edge_bodies, point_bodies = qp.contacts.edge_body[contact], qp.contacts.point_body[contact]
+    _scatter(model, edge_bodies, point_bodies, local[:, :len(LOCAL)], adjoints)
+    if local.shape[1] > len(LOCAL):  # the linearisation point's columns
+        for bodies, first in ((edge_bodies, len(LOCAL)), (point_bodies, len(LOCAL) + 3)):
+            moving = np.flatnonzero(bodies < model.n_boxes)
+            for axis in range(3):
+                np.add.at(about, 3 * bodies[moving] + axis, local[moving, first + axis])
+    return about
 
 
 def _slips_back(tape: GradientTape, record: StepTape, points: FloatArray,

@@ -31,10 +31,13 @@ themselves (which points face which edges) are discrete and held.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from ..formulations.motion import corner_velocities
 from ..formulations.qp import StepQP
+from ..formulations.velocity import SAMPLES, closest_approach
 from ..scenes.geometry import FloatArray
 from ..step.contacts import Contacts
 from ..step.model import IntArray, Model
@@ -332,3 +335,422 @@ def _check(model: Model, rows: ContactRows, qp: StepQP, contacts: Contacts) -> N
                                > ROW_CHECK * rhs_scale)):
         raise GradientError("the recomputed contact rows differ from the recorded step QP's: "
                             "the backward pass does not know this formulation's options")
+
+
+# ------------------------------------------------- closest-approach rows (linearisation)
+APPROACH_LOCAL = LOCAL + ("edge_ux", "edge_uy", "edge_omega", "point_ux", "point_uy",
+                          "point_omega")
+"""A closest-approach row's local inputs: :data:`LOCAL`, then the linearisation point
+``about``'s velocities of the edge body and of the point body (m/s, rad/s)."""
+
+COMPLEX_STEP = 1e-30
+"""Imaginary step of the complex-step derivatives (:func:`approach_rows`): far below round-off
+of the values (no truncation error), far above the smallest normal double."""
+
+
+FLAT_CURVATURE = 1e3
+"""A parabola through three mean rates whose curvature (m/s) is below this many times their
+round-off (64 ulp of the coordinates over the sample spacing) is *flat*: the gap moves
+(nearly) linearly along the step, ``psi / tau`` is constant to round-off, ``tau*`` is
+whichever sample its noise picks, and neither the rows nor the forward pass depend on it
+to first order; ``tau*`` is then held constant rather than differentiated through a vertex
+of noise."""
+
+
+@dataclass(frozen=True)
+class _Held:
+    """The discrete choices of one evaluation of the closest-approach rows, held."""
+
+    grid_faces: tuple[np.ndarray, np.ndarray]
+    """``past`` and ``before`` per contact and sample time (:func:`_face_gaps`)."""
+    refined_faces: tuple[np.ndarray, np.ndarray]
+    """... at the refined time."""
+    pushed: np.ndarray
+    """The ramp ends at ``phi_0 + dt u`` (a deep start), so its rate is ``u``."""
+    best: IntArray
+    """The best sample of the mean rate."""
+    curved: np.ndarray
+    """The parabola through the best sample opens upwards (its vertex is used)."""
+    shift_clip: FloatArray
+    """-1 or +1 where the vertex's shift is clipped to one interval, else 0."""
+    tau_clip: FloatArray
+    """The refined time clipped to ``dt / SAMPLES`` (-1) or ``dt`` (+1), else 0."""
+    take: np.ndarray
+    """The refined time beats the best sample."""
+    at_rate: np.ndarray
+    """The closest-approach row's right side is the ramp's rate (the minimum in
+    :func:`~wuerfel_cvx.formulations.velocity.rows_along`)."""
+    flat: np.ndarray
+    """``tau*`` is held constant: a sample (not refined), or refined by a parabola whose
+    curvature is at round-off (:data:`FLAT_CURVATURE`)."""
+    tau: FloatArray | None = None
+    """``tau*`` (s) taken: the forward pass's where it was given (a vertex of a nearly flat
+    parabola moves with round-off between two evaluations), this arithmetic's derivative."""
+
+
+def _turned(ref: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """``R(angle) ref`` for ``ref`` ``(..., 2)`` and ``angle`` ``(...)``.
+
+    A complex angle ``a + i b`` carries a complex step (``b`` of order
+    :data:`COMPLEX_STEP`, ``b^2`` below round-off): ``cos = cos a - i b sin a``, ``sin =
+    sin a + i b cos a``, exactly to round-off and without complex trigonometry.
+    """
+    real, step = np.real(angle), np.imag(angle)
+    cos, sin = np.cos(real), np.sin(real)
+    if np.iscomplexobj(angle):
+        cos, sin = cos - 1j * step * sin, sin + 1j * step * cos
+    return np.stack([cos * ref[..., 0] - sin * ref[..., 1],
+                     sin * ref[..., 0] + cos * ref[..., 1]], axis=-1)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.asarray(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0])
+
+
+def _dot2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.asarray(a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1])
+
+
+def _rot(a: np.ndarray) -> np.ndarray:
+    return np.stack([-a[..., 1], a[..., 0]], axis=-1)
+
+
+@dataclass(frozen=True)
+class _ApproachInputs:
+    """Per contact: the references of its three corners, the fixed numbers, the clearance."""
+
+    ref_i: FloatArray
+    ref_j: FloatArray
+    ref_k: FloatArray
+    """Corner offsets ``(m, 2)`` (m) at angle 0 of the edge's ends and of the point."""
+    beyond_face: np.ndarray
+    """The contact's point started past its face's end (``clearance > 0``)."""
+    dt: float
+    push_speed: float
+
+
+def _approach_corners(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
+                      ) -> tuple[np.ndarray, ...]:
+    """Positions ``p_i, p_j, p_k`` and turned offsets ``o_i, o_j, o_k`` at times ``tau``.
+
+    ``x`` ``(m, 14)`` (:data:`APPROACH_LOCAL`), ``tau`` ``(m, K)``; results ``(m, K, 2)``.
+    """
+    def body(first: int, velocity: int) -> tuple[np.ndarray, ...]:
+        return (x[:, None, first:first + 2], x[:, None, first + 2],
+                x[:, None, velocity:velocity + 2], x[:, None, velocity + 2])
+
+    (c_e, theta_e, u_e, w_e), (c_p, theta_p, u_p, w_p) = body(0, 8), body(3, 11)
+    o_i = _turned(inputs.ref_i[:, None, :], theta_e + w_e * tau)
+    o_j = _turned(inputs.ref_j[:, None, :], theta_e + w_e * tau)
+    o_k = _turned(inputs.ref_k[:, None, :], theta_p + w_p * tau)
+    moved_e = c_e + tau[..., None] * u_e
+    moved_p = c_p + tau[..., None] * u_p
+    return moved_e + o_i, moved_e + o_j, moved_p + o_k, o_i, o_j, o_k
+
+
+def _face_gaps(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
+               choices: tuple[np.ndarray, np.ndarray] | None,
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rows' gaps (m) at ``tau`` ``(m, K)`` and the choices ``past`` and ``before``.
+
+    ``face_gaps_at`` of the NumPy reference (tests/reference_kernels.py) in analytic arithmetic:
+    ``choices`` (``past``, ``before``, each ``(m, K)``) held, or made where ``None``.
+    """
+    p_i, p_j, p_k, *_ = _approach_corners(x, inputs, tau)
+    edge, offset = p_j - p_i, p_k - p_i
+    length = np.sqrt(_dot2(edge, edge))
+    gaps = _cross(edge, offset) / length
+    place = _dot2(offset, edge) / length
+    if choices is None:
+        before = (-place.real) >= (place.real - length.real)
+        beyond = np.where(before, -place, place - length)
+        past = inputs.beyond_face[:, None] & (beyond.real > 0.0)
+    else:
+        past, before = choices
+        beyond = np.where(before, -place, place - length)
+    safe = np.where(past, beyond, 1.0)
+    return np.where(past, np.sqrt(safe * safe + gaps * gaps), gaps), past, before
+
+
+def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
+             hold_closest: bool, forced: FloatArray | None = None,
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+    """``tau*`` (s), ``psi(tau*)`` (m) and the ramp rate ``r'`` (m/s) of each contact.
+
+    The arithmetic of :func:`~wuerfel_cvx.formulations.velocity.closest_approach` with its
+    choices held (``held``) or made (``None``; returned as a dict of :class:`_Held`'s fields
+    but ``at_rate``).  ``hold_closest``: ``tau*`` from the real parts only (its dependence
+    on the inputs dropped; for measuring what that dependence contributes).  ``forced``: the
+    forward pass's own ``tau*``, whose choice between a sample and the refined time (and
+    which sample) is taken where the two are within round-off of each other.
+    """
+    m, samples, dt = x.shape[0], SAMPLES, inputs.dt
+    grid = np.linspace(0.0, dt, samples + 1)
+    if held is not None and held.tau is not None and np.all(held.flat | hold_closest):
+        return _held_closest(x, inputs, held)
+    if held is None and forced is not None and np.all(np.isin(forced, grid)):
+        return _held_closest(x, inputs, _sampled_choices(x, inputs, grid, forced))
+    gaps, *grid_faces = _face_gaps(x, inputs, np.broadcast_to(grid, (m, samples + 1)),
+                                   None if held is None else held.grid_faces)
+    start = gaps[:, 0]
+    pushed = (start.real + dt * inputs.push_speed < 0.0) if held is None else held.pushed
+    rate = np.where(pushed, inputs.push_speed + 0.0 * start, -start / dt)
+    margin = gaps - start[:, None] - rate[:, None] * grid
+    mean_rate = margin[:, 1:] / grid[1:]
+    best = 1 + np.argmin(mean_rate.real, axis=1) if held is None else held.best
+    sampled = None
+    if held is None and forced is not None:  # the forward pass's sample, where it took one
+        sampled = np.isin(forced, grid)
+        best = np.where(sampled, np.rint(forced / grid[1]).astype(np.int64), best)
+    inner = np.minimum(best, samples - 1)
+    rows = np.arange(m)
+    at = np.concatenate([(2.0 * mean_rate[:, 0] - mean_rate[:, 1])[:, None], mean_rate], axis=1)
+    left, mid, right = (at[rows, inner + shift] for shift in (-1, 0, 1))
+    curvature = left - 2.0 * mid + right
+    curved = curvature.real > 0.0 if held is None else held.curved
+    shift = np.where(curved, 0.5 * (left - right) / np.where(curved, curvature, 1.0), 0.0)
+    shift_clip = (np.sign(shift.real) * (np.abs(shift.real) > 1.0) if held is None
+                  else held.shift_clip)
+    shift = np.where(shift_clip != 0.0, shift_clip + 0.0 * shift, shift)
+    refined = (inner + shift) * dt / samples
+    tau_clip = ((refined.real > dt).astype(float) - (refined.real < dt / samples)
+                if held is None else held.tau_clip)
+    refined = np.where(tau_clip < 0.0, dt / samples + 0.0 * refined,
+                       np.where(tau_clip > 0.0, dt + 0.0 * refined, refined))
+    gap_refined, *refined_faces = _face_gaps(x, inputs, refined[:, None],
+                                             None if held is None else held.refined_faces)
+    refined_margin = gap_refined[:, 0] - start - rate * refined
+    take = (refined_margin.real / refined.real < mean_rate.real[rows, best - 1]
+            if held is None else held.take)
+    if sampled is not None:
+        take = ~sampled
+    tau = np.where(take, refined, grid[best] + 0.0 * refined)
+    forward = forced if held is None else held.tau
+    if forward is not None:  # the forward pass's value, this arithmetic's derivative
+        tau = tau - tau.real + forward
+    if held is None:
+        noise = (64.0 * np.finfo(float).eps * (1.0 + np.max(np.abs(x.real[:, :6]), axis=1))
+                 / grid[1])
+        flat = ~take | (np.abs(curvature.real) <= FLAT_CURVATURE * noise)
+    else:
+        flat = held.flat
+    tau = np.where(flat | hold_closest, tau.real + 0.0 * tau, tau)
+    faces = tuple(np.where(take[:, None], r, g[rows, best][:, None])
+                  for r, g in zip(refined_faces, grid_faces, strict=True))
+    psi = (_face_gaps(x, inputs, tau[:, None], faces)[0][:, 0]  # type: ignore[arg-type]
+           - start - rate * tau)
+    choices = dict(grid_faces=tuple(grid_faces), refined_faces=tuple(refined_faces),
+                   pushed=pushed, best=best, curved=curved, shift_clip=shift_clip,
+                   tau_clip=tau_clip, take=take, flat=flat, tau=tau.real.copy())
+    return tau, psi, rate, choices
+
+
+def _sampled_choices(x: np.ndarray, inputs: _ApproachInputs, grid: FloatArray,
+                     forced: FloatArray) -> _Held:
+    """The choices of a pass whose every ``tau*`` is a sample (``forced``, the forward's).
+
+    Only the gaps at the start and at ``tau*`` are needed then (the faces' choices there,
+    the ramp's): the search over the samples moves nothing.
+    """
+    m, columns = x.shape[0], grid.size
+    best = np.rint(forced / grid[1]).astype(np.int64)
+    rows = np.arange(m)
+    grid_faces = (np.zeros((m, columns), dtype=bool), np.zeros((m, columns), dtype=bool))
+    for tau, column in ((np.zeros(m), np.zeros(m, dtype=np.int64)), (grid[best], best)):
+        _, past, before = _face_gaps(x, inputs, tau[:, None], None)
+        grid_faces[0][rows, column], grid_faces[1][rows, column] = past[:, 0], before[:, 0]
+    start = _face_gaps(x, inputs, np.zeros((m, 1)),
+                       (grid_faces[0][:, :1], grid_faces[1][:, :1]))[0][:, 0]
+    none, false = np.zeros(m), np.zeros(m, dtype=bool)
+    return _Held(grid_faces=grid_faces, refined_faces=(false[:, None], false[:, None]),
+                 pushed=start.real + inputs.dt * inputs.push_speed < 0.0, best=best,
+                 curved=false, shift_clip=none, tau_clip=none, take=false,
+                 at_rate=false, flat=~false, tau=np.asarray(forced, dtype=np.float64))
+
+
+def _held_closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+    """:func:`_closest` where every ``tau*`` is held: the gaps at the start and at ``tau*``.
+
+    The same numbers without the sampled search (which then moves nothing).  Returns the
+    choices too (``held``'s fields but ``at_rate``).
+    """
+    rows = np.arange(x.shape[0])
+    start = _face_gaps(x, inputs, np.zeros((x.shape[0], 1)),
+                       (held.grid_faces[0][:, :1], held.grid_faces[1][:, :1]))[0][:, 0]
+    rate = np.where(held.pushed, inputs.push_speed + 0.0 * start, -start / inputs.dt)
+    assert held.tau is not None
+    tau = held.tau + 0.0 * start
+    faces = tuple(np.where(held.take[:, None], r, g[rows, held.best][:, None])
+                  for r, g in zip(held.refined_faces, held.grid_faces, strict=True))
+    psi = (_face_gaps(x, inputs, tau[:, None], faces)[0][:, 0]  # type: ignore[arg-type]
+           - start - rate * tau)
+    choices = {name: getattr(held, name) for name in held.__dataclass_fields__
+               if name != "at_rate"}
+    return tau, psi, rate, choices
+
+
+def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArray, FloatArray],
+                     held: _Held | None, hold_closest: bool, forced: FloatArray | None = None,
+                     ) -> tuple[np.ndarray, np.ndarray, _Held]:
+    """Each QP row's six body-column entries ``(r, 6)`` and right side ``(r,)``, the choices.
+
+    ``x`` ``(m, 14)`` per contact (:data:`APPROACH_LOCAL`, real or complex), ``rows`` each
+    QP row's normal row (the rate rows ``0..m-1``, the closest-approach rows ``m..2m-1``) and
+    cone edge (+1, -1, 0).  The rows are ``d phi(tau; v) / d v / tau`` in the bodies'
+    columns at ``tau = 0`` and ``tau = tau*``: ``(g_i + g_j, g_i . rot90(o_i) + g_j . rot90(o_j))``
+    for the edge body and ``(g_k, g_k . rot90(o_k))`` for the point body, ``g`` the side
+    gradients of the corners at ``tau`` over the edge's length, ``o`` the corners' offsets
+    at ``tau``; plus ``sign mu s`` with the slip row ``s`` at the start.
+    """
+    m = x.shape[0]
+    tau, psi, rate, choices = _closest(x, inputs, held, hold_closest, forced)
+    times = np.stack([0.0 * tau, tau], axis=1)  # (m, 2): the rate row, the closest-approach row
+    p_i, p_j, p_k, o_i, o_j, o_k = _approach_corners(x, inputs, times)
+    g_i, g_j, g_k = _rot(p_k - p_j), _rot(p_i - p_k), _rot(p_j - p_i)
+    scale = 1.0 / np.sqrt(_dot2(g_k, g_k))
+    normal = np.concatenate([(g_i + g_j) * scale[..., None],
+                             ((_dot2(g_i, _rot(o_i)) + _dot2(g_j, _rot(o_j))) * scale)[..., None],
+                             g_k * scale[..., None], (_dot2(g_k, _rot(o_k)) * scale)[..., None]],
+                            axis=-1)  # (m, 2, 6)
+    along = np.sum(normal[:, 1, :3] * x[:, 8:11], axis=1) + np.sum(normal[:, 1, 3:]
+                                                                   * x[:, 11:14], axis=1)
+    closest = along - psi / tau
+    at_rate = rate.real < closest.real if held is None else held.at_rate
+    rhs = np.concatenate([rate, np.where(at_rate, rate, closest)])
+    edge = p_j[:, 0] - p_i[:, 0]
+    length = np.sqrt(_dot2(edge, edge))
+    tangent = edge / length[:, None]
+    alpha = _dot2(p_k[:, 0] - p_i[:, 0], edge) / (length * length)
+    slip = np.concatenate([-tangent, (-(1.0 - alpha) * _dot2(tangent, _rot(o_i[:, 0]))
+                                      - alpha * _dot2(tangent, _rot(o_j[:, 0])))[:, None],
+                           tangent, _dot2(tangent, _rot(o_k[:, 0]))[:, None]], axis=1)
+    product = x[:, 6] * x[:, 7]
+    rough = product.real > 0.0
+    mu = np.where(rough, np.sqrt(np.where(rough, product, 1.0)), 0.0)
+    normal_row, sign = rows
+    contact = normal_row % max(m, 1)
+    entries = (np.concatenate([normal[:, 0], normal[:, 1]])[normal_row]
+               + (sign * mu[contact])[:, None] * slip[contact])
+    return entries, rhs[normal_row], held or _Held(at_rate=at_rate, **choices)
+
+
+def approach_rows(model: Model, points: FloatArray, contacts: Contacts, qp: StepQP,
+                  push_speed: float, dt: float, *, hold_closest: bool = False,
+                  needed: IntArray | None = None) -> ContactRows:
+    """The rows of ``qp`` (a closest-approach pass of ``rigid``) with derivatives.
+
+    Derivatives with respect to :data:`APPROACH_LOCAL`: the start coordinates of each
+    contact's bodies, their friction coefficients and the pass's linearisation point
+    ``qp.linearised_about``, through the closest-approach time ``tau*`` as the forward pass
+    computes it (sampled, refined by a parabola: a smooth function of the inputs while its
+    discrete choices, :class:`_Held`, stay).  By complex steps (:data:`COMPLEX_STEP`) through
+    the same arithmetic, exact to round-off.  ``hold_closest`` drops ``tau*``'s dependence;
+    ``needed``: the rows whose derivatives are wanted (the others' are left 0; all by
+    default).
+    """
+    about = qp.linearised_about
+    if about is None:
+        raise GradientError("a closest-approach pass without its linearisation point")
+    forward = closest_approach(model, points, contacts,
+                               corner_velocities(points, about.reshape(-1, 3)).ravel(), dt,
+                               push_speed)
+    motion = forward.motion
+    edge, point = contacts.edge_body, contacts.point_body
+    x = np.concatenate([motion.center[edge], motion.angle[edge, None],
+                        motion.center[point], motion.angle[point, None],
+                        model.friction[point, None], model.friction[edge, None],
+                        motion.velocity[edge], motion.spin[edge, None],
+                        motion.velocity[point], motion.spin[point, None]], axis=1)
+    beyond = (np.zeros(len(contacts), dtype=bool) if contacts.clearance is None
+              else contacts.clearance > 0.0)
+    inputs = _ApproachInputs(motion.reference[edge, contacts.edge_i % 4],
+                             motion.reference[edge, contacts.edge_j % 4],
+                             motion.reference[point, contacts.point % 4], beyond, dt, push_speed)
+    rows = _normal_rows(qp, len(contacts))
+    entries, rhs, held = _approach_values(x.astype(np.complex128), inputs, rows, None,
+                                          hold_closest, forward.closest)
+    grad_entries = np.zeros(entries.shape + (len(APPROACH_LOCAL),))
+    grad_rhs = np.zeros(rhs.shape + (len(APPROACH_LOCAL),))
+    wanted = np.arange(len(rows[0])) if needed is None else np.asarray(needed, dtype=np.int64)
+    if wanted.size:  # derivatives of the wanted rows only, from their contacts' inputs
+        m = len(contacts)
+        sub = np.unique(rows[0][wanted] % m)
+        place = np.full(m, -1, dtype=np.int64)
+        place[sub] = np.arange(sub.size)
+        normal = rows[0][wanted]
+        sub_rows = ((normal // m) * sub.size + place[normal % m], rows[1][wanted])
+        sub_held = _Held(**{name: _taken(getattr(held, name), sub)
+                            for name in held.__dataclass_fields__})
+        sub_inputs = _ApproachInputs(inputs.ref_i[sub], inputs.ref_j[sub], inputs.ref_k[sub],
+                                     inputs.beyond_face[sub], dt, push_speed)
+        grad_entries[wanted], grad_rhs[wanted] = _complex_steps(x[sub], sub_inputs, sub_rows,
+                                                                sub_held, hold_closest)
+    tangents = [Tangent(entries[:, k].real, grad_entries[:, k]) for k in range(6)]
+    result = ContactRows((tangents[0], tangents[1], tangents[2]),
+                         (tangents[3], tangents[4], tangents[5]),
+                         Tangent(rhs.real, grad_rhs), rows[0] % max(len(contacts), 1))
+    _check(model, result, qp, contacts)
+    return result
+
+
+def _taken(value: Any, sub: IntArray) -> Any:
+    """``value`` (a held choice: an array over contacts, a tuple of them, or None) at ``sub``."""
+    if isinstance(value, tuple):
+        return tuple(_taken(part, sub) for part in value)
+    return value[sub] if isinstance(value, np.ndarray) else value
+
+
+def _complex_steps(x: FloatArray, inputs: _ApproachInputs, rows: tuple[IntArray, FloatArray],
+                   held: _Held, hold_closest: bool) -> tuple[FloatArray, FloatArray]:
+    """The rows' derivatives ``(r, 6, 14)`` and ``(r, 14)``: one complex step per input.
+
+    The 14 stepped copies of the contacts are evaluated at once (stacked, their choices
+    tiled): one evaluation of ``14 m`` contacts instead of 14 of ``m``.
+    """
+    m, width = x.shape
+    stepped = np.repeat(x[None].astype(np.complex128), width, axis=0)
+    stepped[np.arange(width), :, np.arange(width)] += 1j * COMPLEX_STEP
+    def tiled(value: Any) -> Any:
+        if value is None or not isinstance(value, (np.ndarray, tuple)):
+            return value
+        if isinstance(value, tuple):
+            return tuple(tiled(part) for part in value)
+        return np.tile(value, (width,) + (1,) * (value.ndim - 1))
+    stacked_held = _Held(**{name: tiled(getattr(held, name))
+                            for name in held.__dataclass_fields__})
+    stacked_inputs = _ApproachInputs(tiled(inputs.ref_i), tiled(inputs.ref_j),
+                                     tiled(inputs.ref_k), tiled(inputs.beyond_face),
+                                     inputs.dt, inputs.push_speed)
+    normal, sign = rows
+    block = np.arange(width)[:, None] * m
+    stacked_rows = ((normal // max(m, 1)) * (width * m) + block + normal % max(m, 1)).ravel()
+    entries, rhs, _ = _approach_values(stepped.reshape(width * m, width), stacked_inputs,
+                                       (stacked_rows, np.tile(sign, width)), stacked_held,
+                                       hold_closest)
+    count = len(normal)
+    return (np.moveaxis(entries.imag.reshape(width, count, 6), 0, -1) / COMPLEX_STEP,
+            rhs.imag.reshape(width, count).T / COMPLEX_STEP)
+
+
+def _normal_rows(qp: StepQP, n_contacts: int) -> tuple[IntArray, FloatArray]:
+    """Each row's normal row and cone edge (+1, -1, 0) of a closest-approach QP.
+
+    Normal rows ``0..m-1`` are the rate rows, ``m..2m-1`` the closest-approach rows; a QP
+    whose contacts' two rows all coincide takes the rate rows alone (``m`` normal rows,
+    :func:`~wuerfel_cvx.formulations.velocity.rows_along`).
+    """
+    cones = qp.cones
+    count = len(cones.row_contact) if cones is not None else qp.n_inequalities
+    if cones is None or not np.any(cones.minus >= 0):
+        return np.arange(count, dtype=np.int64), np.zeros(count)
+    rough = np.flatnonzero(cones.minus >= 0)
+    normal = np.concatenate([np.arange(count), rough]).astype(np.int64)
+    sign = np.concatenate([np.where(cones.minus >= 0, 1.0, 0.0), -np.ones(rough.size)])
+    return normal, sign
+
+
+def approach_contacts(qp: StepQP) -> IntArray:
+    """The contact of each inequality row of a closest-approach ``rigid`` step QP."""
+    normal, _ = _normal_rows(qp, len(qp.contacts))
+    return normal % max(len(qp.contacts), 1)

@@ -15,7 +15,6 @@ from typing import Any
 
 from ..errors import InputError
 from ..formulations.qp import Formulation, StepQP
-from ..formulations.rigid import RigidFormulation
 from ..friction.forces import ContactForces
 from ..solve.paths import StepSolution
 from ..step.model import Model
@@ -28,8 +27,8 @@ in the scene) its initial ``center`` ``(n, 2)`` (m), ``angle`` ``(n,)`` (rad), `
 (1) and ``mass`` ``(n,)`` (kg); and the scene's ``gravity`` ``(2,)`` (m/s^2)."""
 
 SUPPORTED_FORMULATIONS = ("rigid",)
-"""Formulations a gradient can be taken through (the module docstring of
-:mod:`wuerfel_cvx.gradients` says why the others are not yet)."""
+"""Formulations a gradient can be taken through, with either linearisation (the module
+docstring of :mod:`wuerfel_cvx.gradients` says why the others are not yet)."""
 
 SUPPORTED_FRICTION_MODELS = ("ccp", "coulomb")
 """Friction models a gradient can be taken through (frictionless contacts always)."""
@@ -57,6 +56,10 @@ class StepTape:
     """With ``coulomb`` friction: the fixed point's impulses and slips per contact of
     :attr:`qp` (:attr:`CoulombStep.forces <wuerfel_cvx.friction.coulomb.CoulombStep.forces>`);
     ``None`` for a step without the fixed point."""
+    passes: tuple[tuple[StepQP, StepSolution], ...] = ()
+    """The Gauss-Newton passes before :attr:`qp` (closest-approach rows), each QP with its
+    polished answer, first first: the backward pass chains through them (each pass's rows
+    are linearised about the earlier passes' answers)."""
 
 
 @dataclass
@@ -70,12 +73,13 @@ class GradientTape:
     steps: list[StepTape] = field(default_factory=list)
 
     def record(self, step: int, qps: tuple[StepQP, ...], solutions: tuple[StepSolution, ...],
-               forces: tuple[ContactForces | None, ...] = (None,)) -> None:
-        """Keep step ``step``'s QP, answer and Coulomb forces (one QP: no islands)."""
+               forces: tuple[ContactForces | None, ...] = (None,),
+               passes: tuple[tuple[tuple[StepQP, StepSolution], ...], ...] = ((),)) -> None:
+        """Keep step ``step``'s QP, answer, Coulomb forces and earlier passes (one QP)."""
         if len(qps) != 1:
             raise GradientError(f"step {step} solved {len(qps)} QPs; a gradient needs one "
                                 f"QP per step (islands off, sleep off)")
-        self.steps.append(StepTape(step, qps[0], solutions[0], forces[0]))
+        self.steps.append(StepTape(step, qps[0], solutions[0], forces[0], passes[0]))
 
 
 def check_supported(formulation: Formulation, friction_model: str | None, *,
@@ -89,11 +93,8 @@ def check_supported(formulation: Formulation, friction_model: str | None, *,
 
     if formulation.name not in SUPPORTED_FORMULATIONS:
         refuse(f"gradients are implemented for the {', '.join(SUPPORTED_FORMULATIONS)} "
-               f"formulation only, not '{formulation.name}' (its closest-approach passes "
-               f"and rods are not differentiated yet)")
-    if isinstance(formulation, RigidFormulation) and formulation.linearisation != "start":
-        refuse("gradients through rigid's closest-approach rows (linearisation "
-               "'closest-approach') are not differentiated yet: use linearisation 'start'")
+               f"formulation only (either linearisation), not '{formulation.name}' (its "
+               f"corner-velocity unknowns and rods are not differentiated yet)")
     model = (friction_model or (formulation.friction.friction_model
                                 if formulation.friction is not None else "ccp"))
     if str(model).strip().lower() not in SUPPORTED_FRICTION_MODELS:

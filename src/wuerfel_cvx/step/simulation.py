@@ -72,6 +72,9 @@ state was reached), building the QPs (islands, rows, the closest-approach passes
 Coulomb fixed point's further QPs), the solve calls (the solver's own time, its adapter,
 the KKT check and the polish), the update (advancing the bodies, the physical check,
 merging the islands) and the metrics and recording of the row."""
+STAGE_COLUMNS = tuple(f"{stage}_time_s" for stage in STAGES)
+"""The stages' metrics columns, made once: every row shares these key strings (new strings
+made per step would each be held by that step's row)."""
 
 
 class StageClock:
@@ -98,8 +101,9 @@ class StageClock:
 
     def columns(self) -> dict[str, float]:
         """The metrics columns ``<stage>_time_s`` and ``step_time_s``, their sum (s)."""
-        return {f"{stage}_time_s": seconds for stage, seconds in self.seconds.items()} | {
-            "step_time_s": sum(self.seconds.values())}
+        columns = dict(zip(STAGE_COLUMNS, self.seconds.values(), strict=True))
+        columns["step_time_s"] = sum(self.seconds.values())
+        return columns
 
 
 ASLEEP = "asleep"
@@ -179,13 +183,15 @@ class Simulation:
         most_passes, criteria = 0, []
         coulombs: list[CoulombStep | None] = []
         remembered: list[tuple[CoulombStep, IntArray | None]] = []
+        earliers: list[tuple[tuple[StepQP, StepSolution], ...]] = []
         for boxes in plan.groups:
             model, state, contacts = restrict(self.model, self.state, self.contacts, boxes)
             qp = self.formulation.build(model, state, contacts, self.dt)
-            qp, solution, primary, passes, coulomb = self._solve_passes(step, model, state, qp,
-                                                                        boxes, clock)
+            qp, solution, primary, passes, coulomb, earlier = self._solve_passes(
+                step, model, state, qp, boxes, clock)
             most_passes = max(most_passes, passes)
             coulombs.append(coulomb)
+            earliers.append(earlier)
             if coulomb is not None:
                 remembered.append((coulomb, boxes))
             moved = self.formulation.advance(model, state, solution.x, self.dt)
@@ -209,7 +215,8 @@ class Simulation:
         clock.lap("update")
         if self.tape is not None:
             self.tape.record(step, tuple(qps), tuple(solutions),
-                             tuple(None if c is None else c.forces for c in coulombs))
+                             tuple(None if c is None else c.forces for c in coulombs),
+                             tuple(earliers))
         self._advance_to(step, state, _solved_row(qps, combined, primary_status, most_passes)
                          | coulomb_row | combine_criteria(criteria), clock)
         return StepRecord(step, tuple(qps), tuple(solutions),
@@ -229,15 +236,18 @@ class Simulation:
     # ------------------------------------------------------------------ parts of a step
     def _solve_passes(self, step: int, model: Model, state: State, qp: StepQP,
                       boxes: IntArray | None, clock: StageClock,
-                      ) -> tuple[StepQP, StepSolution, str, int, CoulombStep | None]:
+                      ) -> tuple[StepQP, StepSolution, str, int, CoulombStep | None,
+                                 tuple[tuple[StepQP, StepSolution], ...]]:
         """Solve ``qp`` and the formulation's further passes.
 
         Returns the last QP, its solution carrying the passes' summed times and iterations
         and their solvers and paths (joined by ``+`` where a fallback solved a pass; its
         residuals and status are the last pass's, whose solution is taken), the first failed
-        status of the run's own solver over the passes, and the number of passes.  With
+        status of the run's own solver over the passes, the number of passes, the Coulomb
+        fixed point (below) and the earlier passes' QPs and answers (the Gauss-Newton passes
+        a gradient chains through; empty for one pass and with the fixed point).  With
         ``friction_model="coulomb"`` and contacts with friction, the passes are those of the
-        Coulomb fixed point (:mod:`wuerfel_cvx.friction.coulomb`), returned last (else ``None``),
+        Coulomb fixed point (:mod:`wuerfel_cvx.friction.coulomb`), returned (else ``None``),
         started from the last step's impulses (``boxes``: the island's boxes, ``None`` for
         all; :class:`~wuerfel_cvx.friction.coulomb.FrictionMemory`); its
         friction problems' times and iterations are in the sums, and a friction problem that
@@ -253,6 +263,7 @@ class Simulation:
             return solved
 
         coulomb = None
+        earlier: list[tuple[StepQP, StepSolution]] = []
         if qp.cones is not None and self._coulomb:
             coulomb = fixed_point(
                 self.formulation, model, state, qp, self.dt, solve, self.tol,
@@ -265,6 +276,7 @@ class Simulation:
             solved = [solve(qp)]
             while (refined := self.formulation.refine(model, state, qp, solved[-1][0].x,
                                                       self.dt, len(solved))) is not None:
+                earlier.append((qp, solved[-1][0]))
                 qp = refined
                 solved.append(solve(qp))
         clock.lap("build")  # the last refine found no further pass
@@ -273,7 +285,7 @@ class Simulation:
         answers = coulomb.answers if coulomb is not None else []
         primary = first_failed_status(solutions, [status for _, status in solved], last)
         if len(solved) == 1 and coulomb is None:  # one pass: its solution is the summary
-            return qp, last, primary, 1, None
+            return qp, last, primary, 1, None, ()
         polish, polish_reason = polish_of(solutions)
         return qp, dataclasses.replace(
             last, solver="+".join(dict.fromkeys(s.solver for s in solutions)),
@@ -287,7 +299,7 @@ class Simulation:
             + sum(a.iterations for a in answers),
             polish_time=sum(s.polish_time for s in solutions),
             polish=polish, polish_reason=polish_reason), primary, \
-            len(solved), coulomb
+            len(solved), coulomb, tuple(earlier)
 
     def _physical_check(self, qp: StepQP, solution: StepSolution, coulomb: CoulombStep | None,
                         model: Model, state: State, moved: State,

@@ -12,6 +12,9 @@ measurement and writes the Markdown (a few minutes on two cores):
   optional package diffcp; the row says so when it is missing);
 * the cost of a gradient: the backward pass's time over the recorded run's, on stack-10 and
   20-body piles, alternated repeats (min and median);
+* the same differences with rigid's closest-approach rows, and on landings that take two
+  Gauss-Newton passes; what the closest-approach time tau* contributes (its derivative and
+  the envelope theorem, measured);
 * why the ``velocity`` formulations are not covered: how many of their steps take more than
   one Gauss-Newton pass.
 """
@@ -53,11 +56,15 @@ Input = tuple[int, str, int]
 Loss = Callable[[np.ndarray], np.ndarray]
 
 
-def formulation(model: str, coulomb_tolerance: float | None = None) -> Formulation:
-    """``rigid`` with friction model ``model`` (and a fixed point tolerance, if given)."""
+def formulation(model: str, coulomb_tolerance: float | None = None,
+                linearisation: str = "start") -> Formulation:
+    """``rigid`` with friction model ``model``, rows linearised at ``linearisation``.
+
+    The fixed point's tolerance ``coulomb_tolerance`` where given.
+    """
     extra = {} if coulomb_tolerance is None else {"coulomb_tolerance": coulomb_tolerance}
     return dataclasses.replace(get_formulation("rigid"),  # type: ignore[type-var]
-                               friction_model=model, **extra)
+                               friction_model=model, linearisation=linearisation, **extra)
 
 
 def _perturbed(scene: Scene, body: int, name: str, component: int, step: float) -> Scene:
@@ -123,12 +130,14 @@ def fd_cases() -> list[tuple[str, Scene, Loss, list[Input], int]]:
 
 
 def fd_agreement(scene: Scene, loss: Loss, inputs: list[Input], steps: int, solver: str,
-                 model: str) -> tuple[float, str, int]:
+                 model: str, linearisation: str = "start", dt: float = DT,
+                 ) -> tuple[float, str, int]:
     """The worst relative disagreement over ``inputs``, its input, and the one-sided steps."""
-    form = formulation(model, FD_COULOMB_TOLERANCE if model == "coulomb" else None)
+    form = formulation(model, FD_COULOMB_TOLERANCE if model == "coulomb" else None,
+                       linearisation)
 
     def run(changed: Scene, gradients: bool = False) -> Trajectory:
-        return simulate(changed, dt=DT, steps=steps, solver=solver, formulation=form,
+        return simulate(changed, dt=dt, steps=steps, solver=solver, formulation=form,
                         gradients=gradients)
 
     trajectory = run(scene, True)
@@ -207,24 +216,29 @@ def cvxpy_row() -> list[str]:
 
 def cost_rows(repeats: int) -> list[list[str]]:
     """Backward time over the recorded run's time (dt 1/60, 200 steps), alternated repeats."""
-    cases = [("stack-10", "ccp"), ("rain-20", "ccp"), ("spinning-pile-20", "ccp"),
-             ("field-pyramid-5", "ccp"), ("field-pyramid-5", "coulomb")]
-    timings: dict[tuple[str, str], list[tuple[float, float]]] = {case: [] for case in cases}
+    closest = "closest-approach"
+    cases = [("stack-10", "ccp", "start"), ("rain-20", "ccp", "start"),
+             ("spinning-pile-20", "ccp", "start"), ("field-pyramid-5", "ccp", "start"),
+             ("field-pyramid-5", "coulomb", "start"), ("stack-10", "ccp", closest),
+             ("rain-20", "ccp", closest), ("spinning-pile-20", "ccp", closest)]
+    timings: dict[tuple[str, str, str], list[tuple[float, float]]] = {case: [] for case in cases}
     for _ in range(repeats):
-        for scene, model in cases:
+        for scene, model, linearisation in cases:
             started = time.perf_counter()
-            trajectory = simulate(scene, dt=1 / 60, steps=200, formulation=formulation(model),
+            trajectory = simulate(scene, dt=1 / 60, steps=200,
+                                  formulation=formulation(model, None, linearisation),
                                   gradients=True)
             ran = time.perf_counter() - started
             loss = np.zeros_like(trajectory.points)
             loss[-1, :, 1] = 1.0
             started = time.perf_counter()
             trajectory.gradient(loss, ("center", "velocity", "friction", "mass"))
-            timings[(scene, model)].append((ran, time.perf_counter() - started))
+            timings[(scene, model, linearisation)].append((ran, time.perf_counter() - started))
     rows = []
-    for (scene, model), pairs in timings.items():
+    for (scene, model, linearisation), pairs in timings.items():
         ratios = [back / run for run, back in pairs]
-        rows.append([scene, model, f"{statistics.median(run for run, _ in pairs):.2f}",
+        rows.append([scene, model, linearisation,
+                     f"{statistics.median(run for run, _ in pairs):.2f}",
                      f"{statistics.median(back for _, back in pairs):.2f}",
                      f"{min(ratios):.2f}", f"{statistics.median(ratios):.2f}",
                      "yes" if statistics.median(ratios) <= 2.0 else "no"])
@@ -252,6 +266,125 @@ def fd_rows() -> list[list[str]]:
                 rows.append([name, model, solver, f"{worst:.1e}", where, str(crossings),
                              "yes" if worst <= 1e-5 else "no"])
     return rows
+
+
+def spinning_rain() -> Scene:
+    """rain-4 with its squares spinning: their landings at dt 0.01 take two passes."""
+    scene = Scene.named("rain-4")
+    return dataclasses.replace(scene, squares=tuple(
+        dataclasses.replace(square, angular_velocity=spin)
+        for square, spin in zip(scene.squares, (1.5, -2.0, 1.0, -1.0), strict=True)))
+
+
+def _spinning_rain_loss(points: np.ndarray) -> np.ndarray:
+    gradient = np.zeros_like(points)
+    gradient[-1, :, 1] = 1.0
+    gradient[-1, :, 0] = 0.3
+    return gradient
+
+
+RAIN_INPUTS: list[Input] = [(body, name, component) for body in (0, 3)
+                            for name, component in (("center", 1), ("angle", 0),
+                                                    ("velocity", 1), ("angular_velocity", 0),
+                                                    ("mass", 0))]
+
+
+def closest_rows() -> list[list[str]]:
+    """:func:`fd_agreement` with closest-approach rows: the cases, then two-pass landings."""
+    rows = []
+    closest = "closest-approach"
+    cases = [(name, scene, loss, inputs, steps, DT) for name, scene, loss, inputs, steps
+             in fd_cases()]
+    for name, scene, loss, inputs, steps, dt in cases:
+        for model in MODELS:
+            for solver in SOLVERS:
+                passes = _multi_pass_steps(scene, steps, dt, model)
+                worst, where, crossings = fd_agreement(scene, loss, inputs, steps, solver,
+                                                       model, closest, dt)
+                rows.append([name, model, solver, passes, f"{worst:.1e}", where,
+                             str(crossings), "yes" if worst <= 1e-5 else "no"])
+    for solver in SOLVERS:
+        scene = spinning_rain()
+        passes = _multi_pass_steps(scene, 64, 0.01, "ccp")
+        worst, where, crossings = fd_agreement(scene, _spinning_rain_loss, RAIN_INPUTS, 64,
+                                               solver, "ccp", closest, 0.01)
+        rows.append(["spinning rain-4, dt 0.01 (64 steps)", "frictionless", solver, passes,
+                     f"{worst:.1e}", where, str(crossings), "yes" if worst <= 1e-5 else "no"])
+    return rows
+
+
+def _multi_pass_steps(scene: Scene, steps: int, dt: float, model: str) -> str:
+    """How many of a closest-approach run's steps were re-linearised (more than one pass).
+
+    From the tape: the earlier passes a step kept, or (``coulomb``) a last contact QP not
+    linearised about the step's target.  Not the metrics' ``passes``, which with
+    ``coulomb`` counts the fixed point's contact QPs.
+    """
+    from ...gradients.adjoint import unshifted_target
+    tape = simulate(scene, dt=dt, steps=steps, gradients=True,
+                    formulation=formulation(model, None, "closest-approach")).tape
+    assert tape is not None
+    count = 0
+    for record in tape.steps:
+        about = record.qp.linearised_about
+        target = (record.qp.target if record.forces is None
+                  else unshifted_target(record.qp, record.forces))
+        count += bool(record.passes) or (about is not None and not np.allclose(about, target,
+                                                                             rtol=0.0,
+                                                                             atol=1e-9))
+    return f"{count} of {steps}"
+
+
+def closest_time_rows() -> list[list[str]]:
+    """A corner spinning past an edge (tau* a parabola's vertex): derivatives, tau* held."""
+    from ...formulations.motion import BodyMotion
+    from ...formulations.velocity import approach_along
+    from ...gradients.rigid import COMPLEX_STEP, _ApproachInputs, _closest, _Held
+    from ...step.contacts import Contacts
+
+    box = np.array([[0.5, 0.0], [0.0, 0.5], [-0.5, 0.0], [0.0, -0.5]])
+    table = np.array([[1.0, 0.0], [-1.0, 0.0], [-1.0, -1.0], [1.0, -1.0]])
+    x = np.zeros(14)
+    x[3:6], x[11:14] = (0.0, 0.1, 0.1), (0.0, 2.0, -200.0)
+    contacts = Contacts(point=np.array([0]), edge_i=np.array([5]), edge_j=np.array([4]),
+                        point_body=np.array([0]), edge_body=np.array([1]),
+                        distance=np.array([0.1]))
+    inputs = _ApproachInputs(table[[1]], table[[0]], box[[0]], np.array([False]), DT, 1.0)
+
+    def forward(values: np.ndarray) -> tuple[float, float]:
+        motion = BodyMotion(center=np.array([values[3:5], [0.0, 0.0]]),
+                            angle=np.array([values[5], 0.0]),
+                            velocity=np.array([values[11:13], [0.0, 0.0]]),
+                            spin=np.array([values[13], 0.0]), reference=np.stack([box, table]),
+                            n_boxes=1, fitted=np.stack([box @ _rotation(values[5]).T, table]))
+        approach = approach_along(motion, contacts, np.zeros(0), DT, 1.0)
+        tau, psi = approach.closest, approach.margin
+        return float(tau[0]), float(psi[0])
+
+    tau, psi, _, choices = _closest(x[None, :].astype(complex), inputs, None, False)
+    held = _Held(at_rate=np.array([False]), **choices)
+    t, p = float(tau[0].real), float(psi[0].real)
+    rows = []
+    for column, name in ((5, "angle (rad)"), (13, "about's omega (rad/s)")):
+        stepped = x[None, :].astype(complex)
+        stepped[0, column] += 1j * COMPLEX_STEP
+        moving = [value[0].imag / COMPLEX_STEP for value in _closest(stepped, inputs, held,
+                                                                      False)[:2]]
+        fixed = _closest(stepped, inputs, held, True)[1][0].imag / COMPLEX_STEP
+        plus, minus = x.copy(), x.copy()
+        plus[column] += 1e-7
+        minus[column] -= 1e-7
+        differences = [(a - b) / 2e-7 for a, b in zip(forward(plus), forward(minus),
+                                                       strict=True)]
+        rows.append([name, f"{moving[0]:.4e}", f"{differences[0]:.4e}", f"{moving[1]:.5f}",
+                     f"{differences[1]:.5f}", f"{fixed:.5f}",
+                     f"{(moving[1] * t - p * moving[0]) / t**2:.3f}", f"{fixed / t:.3f}"])
+    return rows
+
+
+def _rotation(angle: float) -> np.ndarray:
+    """The rotation matrix of ``angle`` (rad)."""
+    return np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
 
 
 def _header(command: str) -> str:
@@ -284,8 +417,15 @@ def write_report(out: Path, repeats: int) -> Path:
              markdown_table(["step", "largest relative difference", "compared"], [cvxpy_row()],
                             "lrl"),
              _TEXT["cost"],
-             markdown_table(["scene", "model", "run (s)", "backward (s)", "ratio min",
-                             "ratio median", "<= 2x"], cost_rows(repeats), "llrrrrl"),
+             markdown_table(["scene", "model", "rows", "run (s)", "backward (s)", "ratio min",
+                             "ratio median", "<= 2x"], cost_rows(repeats), "lllrrrrl"),
+             _TEXT["closest"],
+             markdown_table(["case", "model", "solver", "steps with passes", "worst relative",
+                             "at", "one-sided steps", "<= 1e-5"], closest_rows(), "lllrlrrl"),
+             _TEXT["closest-time"],
+             markdown_table(["input", "dtau* (s)", "fd", "dpsi (m)", "fd", "dpsi, tau* held",
+                             "d(psi/tau*) (m/s)", "tau* held"], closest_time_rows(),
+                            "lrrrrrrr"),
              _TEXT["velocity"],
              markdown_table(["case", "steps with more than one pass", "most passes"],
                             velocity_rows(), "lrr")]
@@ -314,7 +454,8 @@ steps with a weakly active row or a contact at the stick-slip boundary (none her
 resting stack a velocity pushed into the sticking contacts is stopped in the first step
 (the derivative is 0), but the perturbed `coulomb` runs' first fixed point stops at its 50
 iterations without converging (staggered projections converge slowly through a stack of
-sticking contacts): the difference then carries the fixed point's own error (about 3e-7),
+sticking contacts): the difference then carries the fixed point's own error (its
+size depends on where each solver's unconverged iteration stops: the rows marked *no*),
 not the adjoint's.""",
     "cvxpy": """## cvxpy's derivative
 
@@ -326,21 +467,56 @@ beside them (`pip install diffcp`); without it the row says it was not run.""",
     "cost": """## Cost
 
 Time of `Trajectory.gradient` (centre, velocity, friction, mass) over the time of the run
-that recorded it (`simulate(..., gradients=True)`, dt 1/60, 200 steps, CLARABEL, `rigid`),
+that recorded it (`simulate(..., gradients=True)`, dt 1/60, 200 steps, CLARABEL, `rigid`
+with its rows linearised at the start or at closest approach),
 repeats alternated over the scenes; times are medians, the ratio's min and median over the
-repeats.  The target is a gradient at most 2x the run.""",
+repeats.  The target is a gradient at most 2x the run.  With closest-approach rows each pass's
+tight rows are differentiated by complex steps (14 local inputs, stacked into one
+evaluation; the sampled search for tau* is skipped where tau* is held, which is nearly
+everywhere).""",
+    "closest": """## Closest-approach rows
+
+`RigidFormulation(linearisation="closest-approach")`: velocity's two rows per contact (the
+gap's rate at the start, and its mean rate up to the closest-approach time tau* along the
+rigid motion of a linearisation point), in Gauss-Newton passes.  The backward pass
+differentiates each pass's rows with respect to the start coordinates, the friction
+coefficients and the linearisation point, through tau* as the forward pass computes it
+(complex steps through the same arithmetic, its discrete choices held:
+`wuerfel_cvx.gradients.rigid.approach_rows`), and chains through the passes exactly as they
+were taken: pass 1 about the target (u + dt g, omega), pass 2 about pass 1's answer, pass
+q >= 3 about the mean of pass q-1's answer and point.  It is the derivative of the
+computation the run made, not of the passes' fixed point (which the forward pass stops short
+of, within `gap_tolerance`).  A `coulomb` step whose fixed point re-linearised its rows
+(passes interleaved with friction problems) is refused with a `GradientError`.  Central
+differences as above; the last rows are rain-4 with its squares spinning (1.5, -2, 1, -1
+rad/s) at dt 0.01, frictionless, whose landings take two passes, the loss the final
+heights plus 0.3 times the final x of every corner, the inputs the height, angle, vertical
+velocity, spin and mass of squares 0 and 3.""",
+    "closest-time": """### What tau* contributes
+
+tau* is the sampled minimiser of psi(tau)/tau (16 samples), refined by the vertex of a
+parabola through the best sample and its neighbours when that beats the sample.  On the runs
+above it is a sample (in practice the first, dt/16: a corner near its lowest point has a
+convex gap, so the mean rate grows along the step, and the parabola through the first
+sample's extrapolated neighbour is flat): a sample does not move with the inputs, so
+tau*'s derivative is zero there, exactly.  Where the refinement wins (a gap that turns from
+concave to convex within the step), tau* moves.  The envelope theorem then holds for the
+mean rate psi/tau* (its derivative is the same with tau* held, up to the parabola's error),
+but not for the rows: psi itself, the closest-approach row's right side G v0 - psi/tau* and
+its matrix G(tau*) depend on tau* to first order.  Measured on a corner of a square spinning
+at -200 rad/s past a table's edge, its gap concave at the start (dt 1/240), against central
+differences (step 1e-7) of the formulation's own `approach_along`:""",
     "velocity": """## Why the `velocity` formulation is not covered
 
 `simulate(..., formulation="velocity", gradients=True)` raises a `GradientError` naming
-`rigid` as the formulation covered.  What a backward pass through `velocity` (the package
-default) needs and is not written: (1) its own row derivatives: its unknowns are corner
-velocities held together by rod equalities, its contact rows are built in corner space and
-include closest-approach rows, so `gradients/rigid.py`'s derivatives of the rigid rows do not
-apply and would need a counterpart, with the rods' rows and the advance of the corners;
-(2) the chain through its Gauss-Newton passes, where a step takes several: each pass
-re-linearises the closest-approach rows about the last pass's answer, so the answer depends
-on the earlier answers through the rows.  On the cases above the passes do not occur (one
-pass a step, dt 1/240), so (1) is the work that would open them:""",
+`rigid` as the formulation covered.  Rigid's closest-approach rows (above) are velocity's
+rows times the corner map, and the chain through the passes is written; what a backward
+pass through `velocity` (the package default) still needs: its unknowns are corner
+velocities held together by rod equalities (with their Baumgarte right sides, functions of
+the corners), its contact rows in corner space, and the advance of the corners by the rigid
+motion the corner velocities describe, so `gradients/rigid.py`'s rows (in three columns per
+body) would need a corner-space counterpart, with the rods' rows and the advance.  How often
+velocity's steps take more than one pass on the cases above (dt 1/240):""",
 }
 
 
