@@ -27,11 +27,11 @@ from ...scenes.geometry import FloatArray
 from ...scenes.scene import Scene
 from ...settings import Settings
 from ...simulate import ASLEEP, resolve_scene, simulate
+from ...simulate import simulate as untimed_simulate  # the warm-up's, apart from the runs'
 from ...solve.paths import StepSolution, solve_step_qp
 from ...solve.registry import SOLVERS
 from ...step.metrics import deepest_overlap, largest_corner_distance, total_energy
 from ...step.model import State
-from ...step.simulation import Simulation
 from ...trajectory import Trajectory
 from ...versions import package_version
 from ..peers import peer_version, simulate_peer
@@ -245,9 +245,8 @@ def _warm_up(point: GridPoint) -> None:
         return
     _warmed.add(settings)
     with contextlib.suppress(StepFailure):  # a failure shows in the timed run itself
-        simulation = Simulation(resolve_scene(WARM_UP_SCENE), settings=settings)
-        for _ in range(WARM_UP_STEPS):
-            simulation.step()
+        # simulate() tells a Ctrl-C a solver took from a failed step (Interrupted)
+        untimed_simulate(WARM_UP_SCENE, steps=WARM_UP_STEPS, settings=settings)
 
 
 def _configuration(point: GridPoint) -> dict[str, Any]:
