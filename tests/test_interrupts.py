@@ -139,7 +139,7 @@ class Command:
 def assert_stopped_cleanly(command: Command) -> tuple[str, str]:
     """Exit status 130, no traceback, no process left; stdout and stderr."""
     status, out, err = command.finish()
-    assert status == 130, err
+    assert status == 130, (status, out, err)
     assert "Traceback" not in err and "Exception ignored" not in err, err
     assert command.left_running() == [], "processes of the command left running"
     return out, err

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 import os
 
+import cvxpy as cp
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -195,8 +196,16 @@ def energy_identity_terms(scene: Scene, trajectory: Trajectory,
     state = State(trajectory.points[step - 1], trajectory.velocities[step - 1])
     qp = step_qp(scheme, model, state, DT)
     declared = declare(qp)
-    declared.problem.solve(solver="CLARABEL", tol_gap_abs=1e-12, tol_gap_rel=1e-12,
-                           tol_feas=1e-12)
+    # CLARABEL may stop short of 1e-12 on a degenerate QP (a resting contact's dependent
+    # rows); 1e-10 still puts the duals' work far inside the identity's 1e-9 J
+    for tolerance in (1e-12, 1e-10):
+        try:
+            declared.problem.solve(solver="CLARABEL", tol_gap_abs=tolerance,
+                                   tol_gap_rel=tolerance, tol_feas=tolerance)
+            break
+        except cp.error.SolverError:
+            if tolerance == 1e-10:
+                raise
     x = np.asarray(declared.variable.value)
     eq_dual = np.atleast_1d(declared.eq_constraint.dual_value)
     ineq_dual = np.atleast_1d(declared.ineq_constraint.dual_value)

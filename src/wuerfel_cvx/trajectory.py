@@ -203,21 +203,22 @@ class Trajectory:
 
 
 def _time_lines(solved: pd.DataFrame) -> list[str]:
-    """Where a step's time went: the mean of each stage per step (ms), and the solver's own.
+    """Where a step's time went: each stage's median time per step (ms), the solver's own.
 
-    Means, not medians, so that the stages add up to the whole step; a run recorded before
+    Medians, so that the first steps' one-off work (numba loading compiled code) does not
+    hide a typical step; they need not add up to the median step.  A run recorded before
     the stages were (no ``search_time_s``) shows its build and solve medians.
     """
     if "search_time_s" not in solved.columns:
         return [f"median build / solve {1e3 * solved['build_time_s'].median():.2f} ms / "
                 f"{1e3 * solved['solve_time_s'].median():.2f} ms per step"]
     stages = ("search", "build", "solve", "update", "record")
-    means = {stage: 1e3 * float(solved[f"{stage}_time_s"].mean()) for stage in stages}
-    return [f"mean step            {1e3 * float(solved['step_time_s'].mean()):.3f} ms = "
-            + " + ".join(f"{means[stage]:.3f} {stage}" for stage in stages),
-            f"solver's own         {1e3 * float(solved['solver_time_s'].mean()):.3f} ms "
-            f"(mean, within solve; polish and check "
-            f"{1e3 * float(solved['polish_time_s'].mean()):.3f} ms)"]
+    medians = {stage: 1e3 * float(solved[f"{stage}_time_s"].median()) for stage in stages}
+    return [f"median step          {1e3 * float(solved['step_time_s'].median()):.3f} ms: "
+            + ", ".join(f"{stage} {medians[stage]:.3f}" for stage in stages),
+            f"solver's own         {1e3 * float(solved['solver_time_s'].median()):.3f} ms "
+            f"(median, within solve; polish and check "
+            f"{1e3 * float(solved['polish_time_s'].median()):.3f} ms)"]
 
 
 def _bodies_text(squares: int, boxes: int) -> str:

@@ -7,8 +7,6 @@ the step and the solver's status, anything else (an unknown scene, a bad toleran
 
 from __future__ import annotations
 
-import contextlib
-import dataclasses
 import datetime as dt_module
 import hashlib
 import platform
@@ -25,13 +23,11 @@ from ...errors import StepFailure
 from ...formulations import StepQP
 from ...scenes.geometry import FloatArray
 from ...scenes.scene import Scene
-from ...settings import Settings
 from ...simulate import ASLEEP, resolve_scene, simulate
 from ...solve.paths import StepSolution, solve_step_qp
 from ...solve.registry import SOLVERS
 from ...step.metrics import deepest_overlap, largest_corner_distance, total_energy
 from ...step.model import State
-from ...step.simulation import Simulation
 from ...trajectory import Trajectory
 from ...versions import package_version
 from ..peers import peer_version, simulate_peer
@@ -157,7 +153,6 @@ def measure_point(point: GridPoint, reference: Reference | None,
     try:
         scene = resolve_scene(point.scene_input if scene is None else scene)  # loaded once
         base["n_squares"] = scene.n_boxes
-        _warm_up(point)
         started = time.perf_counter()
         trajectory, failure, disagreement = _simulate(point, scene)
         call_seconds = time.perf_counter() - started
@@ -223,31 +218,6 @@ def _simulate(point: GridPoint,
             raise
         return failure.trajectory, failure, worst[0] if compared[0] else None
     return trajectory, None, worst[0] if compared[0] else None
-
-
-WARM_UP_SCENE, WARM_UP_STEPS = "tilted-drop", 3
-"""What runs, untimed, before a process's first point of each configuration."""
-_warmed: set[Settings] = set()
-
-
-def _warm_up(point: GridPoint) -> None:
-    """Run ``point``'s settings on a small scene once per process, untimed.
-
-    The first run of a configuration in a process loads what later runs share (numba's
-    cached machine code, the solver's module, cvxpy's lazy imports); a user pays that once
-    a session, not once a call, so the call's time measured after it is what every further
-    call costs.  Peers are not warmed (their step is timed without such loads).
-    """
-    if point.engine != "wuerfel_cvx":
-        return
-    settings = dataclasses.replace(point.settings(), dt=0.01)
-    if settings in _warmed:
-        return
-    _warmed.add(settings)
-    with contextlib.suppress(StepFailure):  # a failure shows in the timed run itself
-        simulation = Simulation(resolve_scene(WARM_UP_SCENE), settings=settings)
-        for _ in range(WARM_UP_STEPS):
-            simulation.step()
 
 
 def _configuration(point: GridPoint) -> dict[str, Any]:
