@@ -32,6 +32,7 @@ from wuerfel_cvx import Scene, Square, simulate
 from wuerfel_cvx.errors import InputError
 from wuerfel_cvx.formulations import Formulation
 from wuerfel_cvx.gradients import GradientError
+from wuerfel_cvx.lab.bench.report_gradients import perturbed
 from wuerfel_cvx.scenes.library import FLOOR, launched_box_scene
 
 pytestmark = pytest.mark.integration
@@ -69,19 +70,6 @@ def top_x(points: np.ndarray) -> np.ndarray:
     return gradient
 
 
-def perturbed(scene: Scene, body: int, name: str, component: int, step: float) -> Scene:
-    """``scene`` with ``name`` of square ``body`` (its ``component``) moved by ``step``."""
-    square = scene.squares[body]
-    value = getattr(square, name)
-    if isinstance(value, tuple):
-        changed = list(value)
-        changed[component] += step
-        value = tuple(changed)
-    else:
-        value = value + step
-    squares = list(scene.squares)
-    squares[body] = dataclasses.replace(square, **{name: value})
-    return dataclasses.replace(scene, squares=tuple(squares))
 
 
 def run(scene: Scene, steps: int, solver: str, gradients: bool = False,  # type: ignore[no-untyped-def]

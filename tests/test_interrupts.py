@@ -259,7 +259,12 @@ def test_ctrl_c_in_a_sweep_keeps_its_rows_and_resume_runs_the_rest(
     command.wait_until(lambda: results.exists() and results.read_text().count("\n") >= 2,
                        "a first row")
     command.press_ctrl_c(presses)
-    _, err = assert_stopped_cleanly(command)
+    status, out, err = command.finish()
+    failed = ([] if status == 130 or not results.exists() else
+              schema.read_results(results).query("status != 'ok'")["error"].tolist())
+    assert status == 130, (status, out, err, failed)
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    assert command.left_running() == [], "processes of the command left running"
     assert err.strip().splitlines()[-1] == (
         "wuerfel-cvx: interrupted; the finished rows are in out/results.csv, and the same "
         "command runs the rest")

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import cvxpy as cp
 import numpy as np
 
+from ..__main__ import relayed_presses
 from ..errors import InputError, StepFailure
 from ..formulations.qp import StepQP
 from ..scenes.geometry import FloatArray
@@ -411,9 +412,14 @@ def solve_with_fallback(qp: StepQP, solvers: Sequence[str], tol: str | float, st
     """
     failures: list[StepFailure] = []
     for name in solvers:
+        presses = relayed_presses()
         try:
             solution = solve_step_qp(qp, name, tol, step=step, path=path, polishing=polishing)
         except StepFailure as failure:
+            if presses is not None and relayed_presses() != presses:
+                # a solver that checks for signals took the command line's Ctrl-C and
+                # gave up: the user stopped the step, the solver did not fail
+                raise KeyboardInterrupt from failure
             if failure.status == INVALID_DATA:  # the same data would fail every solver
                 raise
             failures.append(failure)

@@ -67,7 +67,8 @@ def formulation(model: str, coulomb_tolerance: float | None = None,
                                friction_model=model, linearisation=linearisation, **extra)
 
 
-def _perturbed(scene: Scene, body: int, name: str, component: int, step: float) -> Scene:
+def perturbed(scene: Scene, body: int, name: str, component: int, step: float) -> Scene:
+    """``scene`` with ``name`` of square ``body`` (its ``component``) moved by ``step``."""
     square = scene.squares[body]
     value = getattr(square, name)
     if isinstance(value, tuple):
@@ -114,7 +115,7 @@ ALL_INPUTS: list[Input] = [(0, "center", 0), (0, "center", 1), (0, "angle", 0),
 
 def fd_cases() -> list[tuple[str, Scene, Loss, list[Input], int]]:
     """The finite-difference cases: name, scene, loss gradient, inputs, steps."""
-    slide = _perturbed(launched_box_scene(3.0, 0.5), 0, "center", 1, 1e-3)
+    slide = perturbed(launched_box_scene(3.0, 0.5), 0, "center", 1, 1e-3)
     square = Square(center=(0.0, 0.9), angle=0.3, velocity=(0.4, -1.0), angular_velocity=1.0,
                     friction=0.4)
     drop = Scene(name="tilted-drop", squares=(square,),
@@ -149,7 +150,7 @@ def fd_agreement(scene: Scene, loss: Loss, inputs: list[Input], steps: int, solv
         adjoint = float(value[component] if np.ndim(value) else value)
         values = []
         for sign in (1.0, -1.0):
-            points = run(_perturbed(scene, body, name, component, sign * EPS)).points
+            points = run(perturbed(scene, body, name, component, sign * EPS)).points
             values.append(float(np.sum(loss(points) * points)))
         expected = (values[0] - values[1]) / (2.0 * EPS)
         error = abs(adjoint - expected) / max(abs(expected), FLOOR_SCALE)
@@ -185,7 +186,7 @@ def cvxpy_row() -> list[str]:
     import cvxpy as cp
 
     from ...gradients.adjoint import qp_adjoint
-    scene = _perturbed(launched_box_scene(3.0, 0.5), 0, "center", 1, 1e-3)
+    scene = perturbed(launched_box_scene(3.0, 0.5), 0, "center", 1, 1e-3)
     trajectory = simulate(scene, dt=DT, steps=12, formulation="rigid", gradients=True)
     assert trajectory.tape is not None
     record = next(r for r in reversed(trajectory.tape.steps)

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 from tqdm.auto import tqdm
 
+from ...__main__ import relayed_presses
 from ...errors import InputError
 from ...scenes.scene import Scene
 from ...solve.registry import SOLVERS, available_solvers
@@ -281,7 +282,13 @@ def _run_all(tasks: list[Task], jobs: int) -> Generator[tuple[Any, Any], None, N
     """
     if jobs == 1 or len(tasks) <= 1:
         for label, function, args in tasks:
-            yield label, function(*args)
+            presses = relayed_presses()
+            result = function(*args)
+            if presses is not None and relayed_presses() != presses:
+                # a Ctrl-C the task's solver took (and answered anyway, or failed on):
+                # the point was cut short, so it leaves no row
+                raise KeyboardInterrupt
+            yield label, result
         return
     pool = ProcessPoolExecutor(max_workers=jobs, initializer=ignore_ctrl_c)
     try:

@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from ...__main__ import relayed_presses
 from ...errors import StepFailure
 from ...formulations import VelocityFormulation
 from ...scenes.library import FLOOR
@@ -320,7 +321,10 @@ def run_property_sweep(n_scenes: int, seed: int, steps: int = 200, dt: float = 0
     failures = []
     for index in range(n_scenes):
         scene = random_scene(rng, name=f"generated-{seed}-{index}", friction=friction)
+        presses = relayed_presses()
         problems = check_scene(scene, steps=steps, dt=dt, friction_model=friction_model)
+        if presses is not None and relayed_presses() != presses:
+            raise KeyboardInterrupt  # a Ctrl-C a solver took: the sweep was stopped
         if problems:
             failures.append(PropertyFailure(index, scene.to_dict(), tuple(problems)))
     return PropertySweepResult(tried=n_scenes, failures=failures,
