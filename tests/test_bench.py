@@ -167,7 +167,7 @@ def test_failing_configurations_become_error_rows(tmp_path: Path) -> None:
     summary = run_sweep(suite, tmp_path, progress=False, echo=lambda _: None)
     frame = schema.read_results(summary.results).set_index("point_id")
     assert summary.ran == 4 and summary.failed == 3
-    assert frame.loc["resting-square|velocity|CLARABEL|default|dt=0.01|T=0.03", "status"] == "ok"
+    assert frame.loc["resting-square|rigid|CLARABEL|default|dt=0.01|T=0.03", "status"] == "ok"
     errors = frame[frame["status"] == "error"]
     assert len(errors) == 3
     assert errors["error"].str.contains("no-such-scene").any()

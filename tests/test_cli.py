@@ -413,8 +413,9 @@ def test_out_naming_a_folder_writes_the_scene_inside_it(
 
 
 @pytest.mark.parametrize(("flags", "note"), [
-    (["--table-mass", "10"], "note: --table-mass 10: the table corners are variables of that "
-                             "mass held still by equalities; the tables do not move"),
+    (["--table-mass", "10", "--formulation", "velocity"],
+     "note: --table-mass 10: the table corners are variables of that mass held still by "
+     "equalities; the tables do not move"),
     (["--friction-model", "coulomb"], "note: scene tilted-drop has no friction: "
                                       "--friction-model coulomb changes nothing"),
     ([], None),

@@ -102,13 +102,14 @@ def test_heavy_table_variant_holds_the_table_and_matches_the_fixed_one() -> None
     qp = step_qp(get_formulation("velocity"), heavy, State.initial(scene), 0.01)
     assert qp.n_variables == 2 * 4 * (scene.n_boxes + len(scene.tables))
     assert qp.n_equalities == 5 * scene.n_boxes + 2 * 4 * len(scene.tables)
-    fixed = simulate(scene, dt=0.01, steps=120, tol="high")
+    fixed = simulate(scene, dt=0.01, steps=120, tol="high", formulation="velocity")
     errors, polished = [], []
     for table_mass in (1e2, 1e6):
         held = simulate(scene, dt=0.01, steps=120, tol="high", table_mass=table_mass,
-                        polish=False)
+                        polish=False, formulation="velocity")
         errors.append(float(np.abs(held.points - fixed.points).max()))
-        held = simulate(scene, dt=0.01, steps=120, tol="high", table_mass=table_mass)
+        held = simulate(scene, dt=0.01, steps=120, tol="high", table_mass=table_mass,
+                        formulation="velocity")
         polished.append(float(np.abs(held.points - fixed.points).max()))
     # The held corners have zero velocity either way, so both variants have the same
     # exact minimiser; the heavy weights only worsen the conditioning (M / 0.25 kg), and

@@ -109,7 +109,7 @@ def test_the_default_friction_model_keeps_point_ids_and_reference_files() -> Non
     explicit = tiny_suite(friction_models=["ccp"])
     assert [p.point_id for p in plain.points] == [p.point_id for p in explicit.points]
     ids = {p.point_id for p in plain.points}
-    assert "tilted-drop|velocity|CLARABEL|default|dt=0.01|T=0.05" in ids
+    assert "tilted-drop|rigid|CLARABEL|default|dt=0.01|T=0.05" in ids
     assert not any("friction" in point_id for point_id in ids)
     for point in plain.points:
         key = point.reference_key
@@ -135,7 +135,7 @@ def test_friction_models_expand_our_points_and_not_the_peers() -> None:
         assert point.reference_key[-1] == point.friction_model
     for point in peers:  # compared with our default model
         assert point.reference_key is not None
-        assert point.reference_key[1:] == ("velocity", 0.01, 0.05, "ccp")
+        assert point.reference_key[1:] == ("rigid", 0.01, 0.05, "ccp")
     names = {runner.reference_file_name(p.reference_key) for p in ours if p.reference_key}
     assert len(names) == 2 * 2  # scenes x models: each model has its own reference
     assert len({p.point_id for p in suite.points}) == len(suite.points)
@@ -171,7 +171,8 @@ def test_the_runner_fills_the_friction_columns_from_the_metrics() -> None:
                       reference="none")
     row = runner.run_point(point, None)
     assert row["status"] == "ok"
-    metrics = simulate(SLOPE, dt=DT, steps=point.steps, solver="CLARABEL").metrics
+    metrics = simulate(SLOPE, dt=DT, steps=point.steps, solver="CLARABEL",
+                       formulation="velocity").metrics
     criteria = metrics[list(CRITERIA_COLUMNS)].astype(float)
     assert criteria.notna().all().all()  # the sliding contact has friction on every step
     assert row["friction_model"] == "ccp" and row["friction_steps"] == point.steps

@@ -60,9 +60,23 @@ def down_slope(points: np.ndarray) -> np.ndarray:
     return gradient
 
 
-def test_coulomb_ramp_slide_gradient_matches_finite_differences() -> None:
+@pytest.mark.parametrize("linearisation", ["start", "closest-approach"])
+def test_coulomb_ramp_slide_gradient_matches_finite_differences(linearisation: str) -> None:
+    """A slide down a ramp, flat on it, with both of ``rigid``'s linearisations.
+
+    Tilted off the ramp by the difference's step (1e-6 rad), a contact's rate row and its
+    closest-approach row differ by about that much and both bind: four nearly dependent rows
+    on three unknowns, whose multipliers' split is the solver's, so a contact's normal impulse
+    is determined only to about 1e-9 relative. The fixed point cannot then settle to 1e-10
+    (measured: 50 iterations at step 9, the normal impulses jittering by 1e-10 to 3e-9
+    relative) and the difference measures that jitter (6e-7 against an adjoint of 0), so with
+    the closest-approach rows the angle is left out; with the start rows it is checked.
+    """
     scene = perturbed(ramp_slide_scene(0.2, 0.3), 0, "velocity", 0, 0.5)
-    assert_matches_differences(scene, down_slope, ALL_INPUTS, 40, "CLARABEL", COULOMB)
+    inputs = [key for key in ALL_INPUTS
+              if linearisation == "start" or key[1] != "angle"]
+    formulation = dataclasses.replace(COULOMB, linearisation=linearisation)
+    assert_matches_differences(scene, down_slope, inputs, 40, "CLARABEL", formulation)
 
 
 def test_coulomb_tilted_drop_gradient_matches_finite_differences() -> None:
@@ -76,10 +90,11 @@ def test_coulomb_tilted_drop_gradient_matches_finite_differences() -> None:
 def test_coulomb_resting_stack_gradient_matches_finite_differences() -> None:
     """A rough 3-stack at rest: every contact sticks, the no-slip rows dependent.
 
-    A velocity pushed into the stick is stopped in the first step (the derivative is 0);
-    but the perturbed runs' first fixed point does not converge in its 50 iterations
-    (staggered projections converge slowly through a stack of sticking contacts) and leaves
-    up to 3e-7 m in the difference: the velocities are compared to 1e-6 absolute.
+    A velocity pushed into the stick is stopped in the first step (the derivative is 0).
+    The perturbed runs' contacts rest face to face on dependent rows, whose multipliers'
+    split (and with it the fixed point's normal impulses) is the solver's: their final
+    positions differ by about 2e-13 m where the stack does not move (measured: a difference
+    of 1e-7 against an adjoint of 2e-18), so the velocities are compared to 1e-6 absolute.
     """
     squares = tuple(Square(center=(0.0, 0.5 + k), friction=0.6) for k in range(3))
     scene = Scene(name="stack-3-rough", squares=squares,
@@ -88,9 +103,8 @@ def test_coulomb_resting_stack_gradient_matches_finite_differences() -> None:
                                               (2, "friction", 0), (1, "mass", 0),
                                               (2, "angular_velocity", 0)], 30, "CLARABEL",
                                COULOMB)
-    with pytest.warns(RuntimeWarning, match="did not converge"):
-        assert_matches_differences(scene, top_x, [(2, "velocity", 0), (1, "velocity", 0)], 30,
-                                   "CLARABEL", COULOMB, absolute=1e-6)
+    assert_matches_differences(scene, top_x, [(2, "velocity", 0), (1, "velocity", 0)], 30,
+                               "CLARABEL", COULOMB, absolute=1e-6)
 
 
 @pytest.mark.parametrize(("model", "relative"), [("coulomb", 0.01), ("ccp", 0.03)])

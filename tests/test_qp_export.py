@@ -30,7 +30,8 @@ from wuerfel_cvx.lab.qp_export.compare import (
 
 pytestmark = pytest.mark.integration
 
-TINY = {"name": "qp-tiny", "defaults": {"duration": 0.03, "dts": [0.01]},
+TINY = {"name": "qp-tiny", "defaults": {"duration": 0.03, "dts": [0.01],
+                                        "formulations": ["velocity"]},
         "grid": [{"scenes": ["stack-3"], "solvers": ["CLARABEL", "OSQP"]},
                  {"scenes": ["friction-slide"]}]}
 """Two runs of three steps: a resting stack (degenerate rows) and a box sliding with

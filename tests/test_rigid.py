@@ -40,7 +40,7 @@ def test_corner_map_reproduces_a_rigid_motion() -> None:
 def test_rigid_and_velocity_qps_give_the_same_corner_velocities() -> None:
     # With the rods exact, the velocity QP's feasible velocities are the rigid ones and
     # its objective equals the rigid one up to a constant: the minimisers coincide.
-    rigid = get_formulation("rigid")
+    rigid = get_formulation("rigid-baumgarte")
     compared = 0
     for entry in qp_bank():
         if entry.formulation != "velocity" or entry.model.table_mass is not None:
@@ -62,7 +62,7 @@ def test_rigid_and_velocity_qps_give_the_same_corner_velocities() -> None:
 @pytest.mark.parametrize("scene", ["tilted-drop", "stack-10", "pyramid-3", "overlap-recovery"])
 def test_rigid_and_velocity_trajectories_agree(scene: str) -> None:
     steps = 120
-    rigid = simulate(scene, steps=steps, formulation="rigid", tol="high")
+    rigid = simulate(scene, steps=steps, formulation="rigid-baumgarte", tol="high")
     velocity = simulate(scene, steps=steps, formulation="velocity-baumgarte", tol="high")
     # Per step the velocities agree within 2 AGREEMENT (above); positions integrate them.
     np.testing.assert_allclose(rigid.points, velocity.points, rtol=0,
@@ -148,7 +148,7 @@ def test_a_resting_scene_keeps_one_structure_in_rigid_coordinates() -> None:
     assert compiled.info["steps_reusing_a_compiled_structure"] == 28
 
 
-CLOSEST = RigidFormulation(linearisation="closest-approach")
+CLOSEST = get_formulation("rigid")  # the default: closest-approach rows
 
 
 @pytest.mark.parametrize("solver", ["CLARABEL", "OSQP", "PIQP"])
@@ -162,7 +162,7 @@ def test_rigid_closest_approach_rows_are_the_velocity_formulations_in_three_unkn
     """
     for scene in ("two-corner-landing", "tilted-drop"):
         ours = simulate(scene, dt=0.01, steps=100, solver=solver, formulation=CLOSEST)
-        theirs = simulate(scene, dt=0.01, steps=100, solver=solver)
+        theirs = simulate(scene, dt=0.01, steps=100, solver=solver, formulation="velocity")
         assert ours.metrics["verified"].all()
         np.testing.assert_allclose(ours.points, theirs.points, rtol=0.0, atol=1e-12)
 
@@ -175,8 +175,8 @@ def test_rigid_closest_approach_takes_passes_where_gaps_are_curved() -> None:
     """
     steps = 150
     closest = simulate("rain-20", dt=0.01, steps=steps, formulation=CLOSEST)
-    velocity = simulate("rain-20", dt=0.01, steps=steps)
-    start = simulate("rain-20", dt=0.01, steps=steps, formulation="rigid")
+    velocity = simulate("rain-20", dt=0.01, steps=steps, formulation="velocity")
+    start = simulate("rain-20", dt=0.01, steps=steps, formulation="rigid-baumgarte")
     assert closest.metrics["passes"].max() > 1
     assert closest.metrics["verified"].all()
     assert closest.metrics["penetration_m"].max() <= velocity.metrics["penetration_m"].max() + 1e-9

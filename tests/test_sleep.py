@@ -65,8 +65,9 @@ def test_simulate_with_islands_solves_one_qp_per_island_with_the_joint_answer(
                        observer=lambda step, qp, solution: seen.append(
                            (qp.n_variables, qp.n_inequalities)))
     joint = simulate(scene, steps=1, tol="high")
-    # Three QPs: the two 3-stacks (24 unknowns each) and the faller (8, no contacts).
-    assert [n for n, _ in seen] == [24, 24, 8] and seen[2][1] == 0
+    # Three QPs: the two 3-stacks (9 unknowns each: 3 per body) and the faller (3, no
+    # contacts).
+    assert [n for n, _ in seen] == [9, 9, 3] and seen[2][1] == 0
     row, joint_row = islands.metrics.iloc[0], joint.metrics.iloc[0]
     for column in ("n_variables", "n_equalities", "n_inequalities", "n_contacts"):
         assert row[column] == joint_row[column]
@@ -110,10 +111,10 @@ def test_a_square_dropped_on_a_sleeping_stack_wakes_it_and_lands_on_it() -> None
     awake = simulate(drop_on_stack(), steps=steps, tol="high")
     sizes = sleeping.metrics["n_variables"].to_numpy()
     # The stack sleeps after 0.5 s still: only the falling square is in the QP ...
-    alone = np.flatnonzero(sizes == 8)
+    alone = np.flatnonzero(sizes == 3)  # 3 unknowns per body
     assert alone.size > 20 and alone[0] == 50
     # ... until it reaches the stack, which wakes as one island with it (6 squares).
-    assert np.any(sizes[alone[-1] + 1:] == 48)
+    assert np.any(sizes[alone[-1] + 1:] == 18)
     # Sleeping changed nothing: the stack was at rest (to the sleep speed 1e-4 m/s).
     np.testing.assert_allclose(sleeping.points, awake.points, rtol=0, atol=1e-8)
     top = sleeping.points[-1, 20:24]

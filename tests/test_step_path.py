@@ -127,7 +127,8 @@ def test_restricted_contacts_are_those_of_the_subset_model() -> None:
 
 def test_a_trajectory_carries_its_scene_and_model_options(tmp_path: Path) -> None:
     scene = Scene.from_toml(EXAMPLES / "tilted-drop.toml")
-    trajectory = simulate(scene, dt=0.01, steps=3, table_mass=2.0, extra_rod=True)
+    trajectory = simulate(scene, dt=0.01, steps=3, formulation="velocity", table_mass=2.0,
+                          extra_rod=True)
     loaded = Trajectory.load(trajectory.save(tmp_path / "run"))
     assert loaded.scene == scene
     model = loaded.model()

@@ -46,7 +46,7 @@ def test_a_scene_file_is_found_beside_the_suite_from_any_folder(
     assert (by_name.scene_file, by_name.scene_input) == (None, "tilted-drop")
     key = by_file.reference_key
     assert key is not None and key[0] == str(scene_file.resolve())
-    assert reference_file_name(key).startswith("drop-velocity-")
+    assert reference_file_name(key).startswith("drop-rigid-")
     assert suite_file.is_file()
 
 

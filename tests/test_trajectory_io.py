@@ -86,13 +86,13 @@ def test_metrics_columns_and_one_row_per_step(traj: Trajectory) -> None:
     assert np.all(m["penetration_m"].to_numpy() >= 0.0)
 
 
-def test_qp_sizes_of_the_velocity_formulation(traj: Trajectory) -> None:
+def test_qp_sizes_of_the_default_formulation(traj: Trajectory) -> None:
     m = traj.metrics
     n = SCENE.n_boxes
-    # 4 corners x 2 velocity components per square; the fixed table has no unknowns
-    assert set(m["n_variables"]) == {8 * n}
-    # 5 rods per square
-    assert set(m["n_equalities"]) == {5 * n}
+    # rigid: a centre velocity and an angular velocity per square; the fixed table has no
+    # unknowns, and no rods hold anything
+    assert set(m["n_variables"]) == {3 * n}
+    assert set(m["n_equalities"]) == {0}
     # the lower square rests on the floor: its bottom corners are constrained from step 1
     assert np.all(m["n_inequalities"].to_numpy() >= 2)
     # two rows per contact: the gap's rate at the start and its closest approach; one

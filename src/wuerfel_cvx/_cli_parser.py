@@ -11,7 +11,7 @@ import re
 from typing import TYPE_CHECKING
 
 from .__main__ import PROG
-from .formulations import FORMULATIONS, FRICTION_MODELS
+from .formulations import DEFAULT_FORMULATION, FORMULATIONS, FRICTION_MODELS
 from .solve.registry import TOLERANCE_PRESETS, available_solvers
 
 DEFAULT_SOLVER = "CLARABEL"
@@ -58,8 +58,9 @@ def _add_simulate_parser(commands: Commands) -> None:
     run.add_argument("--solver", default=DEFAULT_SOLVER,
                      help=f"solver, case-insensitive (installed: "
                           f"{', '.join(available_solvers())}; default {DEFAULT_SOLVER})")
-    run.add_argument("--formulation", default="velocity",
-                     help=f"formulation ({', '.join(FORMULATIONS)}; default velocity)")
+    run.add_argument("--formulation", default=DEFAULT_FORMULATION,
+                     help=f"formulation ({', '.join(FORMULATIONS)}; default "
+                          f"{DEFAULT_FORMULATION})")
     run.add_argument("--friction-model", default=None,
                      help=f"friction model for scenes with friction ({', '.join(FRICTION_MODELS)}"
                           f"; default {FRICTION_MODELS[0]}); a scene without friction says so")

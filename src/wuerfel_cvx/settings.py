@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .errors import InputError
-from .formulations import FRICTION_MODELS, Formulation, get_formulation
+from .formulations import DEFAULT_FORMULATION, FRICTION_MODELS, Formulation, get_formulation
 from .gradients.tape import check_supported
 from .solve.cvxpy_forms import NATIVE
 from .solve.paths import SOLVE_PATHS
@@ -39,7 +39,7 @@ class Settings:
     solver: str = "CLARABEL"
     """Solver registry name, case-insensitive
     (:func:`~wuerfel_cvx.solve.registry.available_solvers`); stored upper case."""
-    formulation: str | Formulation = "velocity"
+    formulation: str | Formulation = DEFAULT_FORMULATION
     """A registry name (:data:`~wuerfel_cvx.formulations.FORMULATIONS`) or a formulation object."""
     tol: str | float = "default"
     """Solver tolerance: a preset (``low``, ``default``, ``high``) or a number in (0, 1)."""
@@ -88,8 +88,12 @@ class Settings:
         tolerance_value(self.tol)
         formulation = get_formulation(self.formulation)  # raises for an unknown name
         if self.table_mass is not None and not formulation.heavy_tables:
-            raise InputError(f"the '{formulation.name}' formulation has fixed tables only",
-                             field="table_mass")
+            raise InputError(f"the '{formulation.name}' formulation has fixed tables only; "
+                             "a heavy table needs formulation 'velocity' or 'seed' (corner "
+                             "masses held by rods)", field="table_mass")
+        if self.extra_rod and not formulation.rods:
+            raise InputError(f"the '{formulation.name}' formulation has no rods; the extra "
+                             "rod needs formulation 'velocity' or 'seed'", field="extra_rod")
         if self.solve_path not in SOLVE_PATHS:
             raise InputError(f"unknown solve path '{self.solve_path}' (one of "
                              f"{', '.join(SOLVE_PATHS)})", field="solve_path")

@@ -13,7 +13,7 @@ from typing import Any
 from tqdm.auto import tqdm
 
 from .errors import InputError, Interrupted, StepFailure
-from .formulations import Formulation, StepQP
+from .formulations import DEFAULT_FORMULATION, Formulation, StepQP
 from .scenes.scene import Scene
 from .settings import DT_RANGE, Settings
 from .solve.paths import StepSolution
@@ -48,7 +48,7 @@ def simulate(
     dt: float = 0.01,
     steps: int = 100,
     solver: str = "CLARABEL",
-    formulation: str | Formulation = "velocity",
+    formulation: str | Formulation = DEFAULT_FORMULATION,
     tol: str | float = "default",
     *,
     progress: bool = False,

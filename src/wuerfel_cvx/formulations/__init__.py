@@ -20,15 +20,27 @@ SEED_BAUMGARTE_RATE = 20.0
 at dt = 0.01 s (the discrete feedback is stable for alpha dt < 1)."""
 
 FORMULATIONS: dict[str, Callable[[], Formulation]] = {
+    "rigid": RigidFormulation,
+    "rigid-baumgarte": partial(RigidFormulation, linearisation="start",
+                               name="rigid-baumgarte"),
     "velocity": VelocityFormulation,
     "velocity-baumgarte": partial(VelocityFormulation, linearisation="start",
                                   name="velocity-baumgarte"),
     "seed": SeedFormulation,
-    "rigid": RigidFormulation,
     "seed-baumgarte": partial(SeedFormulation, name="seed-baumgarte",
                               baumgarte_rate=SEED_BAUMGARTE_RATE),
 }
-"""Registry of formulation names (the first is the default) and their factories."""
+"""Registry of formulation names (the first is the default) and their factories.
+
+``rigid`` is the default: ``velocity``'s physics (closest-approach rows, friction cones) in
+three unknowns per body instead of four corner masses held by rods, so the same QP where the
+rods hold, solved in a third of the solver's time (``reports/perf``).  ``velocity`` is the
+seed's model (corner masses and rods, heavy tables), one name away; the ``-baumgarte``
+variants linearise the contact rows at the step's start."""
+
+
+DEFAULT_FORMULATION = next(iter(FORMULATIONS))
+"""The default formulation's name: ``rigid`` (see :data:`FORMULATIONS`)."""
 
 
 def get_formulation(name: str | Formulation) -> Formulation:
@@ -86,6 +98,7 @@ def step_qp(formulation: Formulation, model: Model, state: State, dt: float) -> 
     return formulation.build(model, state, contacts, dt)
 
 
-__all__ = ["FORMULATIONS", "FRICTION_MODELS", "SEED_BAUMGARTE_RATE", "Formulation",
+__all__ = ["DEFAULT_FORMULATION", "FORMULATIONS", "FRICTION_MODELS", "SEED_BAUMGARTE_RATE",
+           "Formulation",
            "RigidFormulation", "SeedFormulation", "StepQP", "VelocityFormulation",
            "declare_qp", "get_formulation", "rigid_step", "step_qp", "with_friction_model"]

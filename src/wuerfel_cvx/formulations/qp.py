@@ -278,6 +278,11 @@ class Formulation(Protocol):
         """Whether it takes the seed's heavy tables (``table_mass``), else fixed ones only."""
         ...
 
+    @property
+    def rods(self) -> bool:
+        """Whether its bodies are corner masses held by rods (then ``extra_rod`` applies)."""
+        ...
+
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
         """Search margin (m) per body ``(n_bodies,)`` for the contacts :meth:`build` takes."""
         ...

@@ -47,12 +47,17 @@ class RigidFormulation(FrictionSettings):
     """Fraction of a penetration removed per step (1)."""
     contact_margin: float = 0.01
     """Distance (m) within which a point-edge pair is always constrained."""
-    linearisation: Literal["closest-approach", "start"] = "start"
+    linearisation: Literal["closest-approach", "start"] = "closest-approach"
     """Where contact gaps are linearised, as in ``velocity``
     (:attr:`~wuerfel_cvx.formulations.velocity.VelocityFormulation.linearisation`): at the
     step's start, or at each contact's closest approach along the step's rigid motion,
     re-linearised in Gauss-Newton passes."""
     name: str = "rigid"
+
+    @property
+    def velocity_equivalent(self) -> VelocityFormulation:
+        """The velocity formulation whose QP this one poses in three unknowns per body."""
+        return self._velocity
 
     @cached_property
     def _velocity(self) -> VelocityFormulation:
@@ -73,6 +78,11 @@ class RigidFormulation(FrictionSettings):
     @property
     def heavy_tables(self) -> bool:
         """False: three unknowns per body, so tables are fixed."""
+        return False
+
+    @property
+    def rods(self) -> bool:
+        """False: rigid bodies, no rods."""
         return False
 
     def build(self, model: Model, state: State, contacts: Contacts, dt: float) -> StepQP:

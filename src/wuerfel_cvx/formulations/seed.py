@@ -74,6 +74,11 @@ class SeedFormulation(SinglePass):
         return True
 
     @property
+    def rods(self) -> bool:
+        """True: the seed's squares are four corner masses held by rods."""
+        return True
+
+    @property
     def touching_distance(self) -> float:
         """Largest signed distance (m) at which a point's side constraint applies."""
         return TIE_TOLERANCE if self.baumgarte_rate else 0.0

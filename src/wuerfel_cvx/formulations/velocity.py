@@ -134,6 +134,11 @@ class VelocityFormulation(FrictionSettings):
         """True: a heavy table's corners are unknowns held by equalities."""
         return True
 
+    @property
+    def rods(self) -> bool:
+        """True: each body is four corner masses held by rods."""
+        return True
+
     def body_reach(self, model: Model, state: State, dt: float) -> FloatArray:
         """How far (m) each body may travel towards another within one step, plus margin.
 

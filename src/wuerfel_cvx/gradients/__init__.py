@@ -29,7 +29,7 @@ pass's ``about`` is carried to those (:mod:`~wuerfel_cvx.gradients.backward`).  
 step whose fixed point re-linearised its rows (passes interleaved with friction problems)
 is refused.  What is not covered, and why:
 
-* ``velocity`` (the default) and ``velocity-baumgarte``: their unknowns are corner velocities
+* ``velocity`` and ``velocity-baumgarte``: their unknowns are corner velocities
   held by rod equalities, and their rows are in corner space; the rows' derivatives here
   are in three columns per body.
 * ``seed`` formulations: acceleration-level, no friction; not covered.

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..errors import InputError, StepFailure
 from ..formulations import (
+    DEFAULT_FORMULATION,
     Formulation,
     StepQP,
     get_formulation,
@@ -138,7 +139,8 @@ class Simulation:
     """
 
     def __init__(self, scene: Scene, dt: float = 0.01, solver: str = "CLARABEL",
-                 formulation: str | Formulation = "velocity", tol: str | float = "default",
+                 formulation: str | Formulation = DEFAULT_FORMULATION,
+                 tol: str | float = "default",
                  *, settings: Settings | None = None, **options: Any):
         settings = settings_of(settings, dt=dt, solver=solver, formulation=formulation,
                                tol=tol, **options)

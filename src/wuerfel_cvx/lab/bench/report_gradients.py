@@ -512,7 +512,7 @@ differences (step 1e-7) of the formulation's own `approach_along`:""",
 `simulate(..., formulation="velocity", gradients=True)` raises a `GradientError` naming
 `rigid` as the formulation covered.  Rigid's closest-approach rows (above) are velocity's
 rows times the corner map, and the chain through the passes is written; what a backward
-pass through `velocity` (the package default) still needs: its unknowns are corner
+pass through `velocity` still needs: its unknowns are corner
 velocities held together by rod equalities (with their Baumgarte right sides, functions of
 the corners), its contact rows in corner space, and the advance of the corners by the rigid
 motion the corner velocities describe, so `gradients/rigid.py`'s rows (in three columns per

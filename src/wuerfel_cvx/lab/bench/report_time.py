@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ...formulations import DEFAULT_FORMULATION
 from . import plots
 from .markdown import (
     cell_text,
@@ -115,12 +116,11 @@ def speed_section(results: pd.DataFrame, images: dict[str, list[Path]],
                                  "scene, tolerance, dt and variant"))
     peers = plots.is_value(results["formulation"], "peer")
     if bool(peers.any()):
-        against = (plots.is_value(results["formulation"], "velocity")
+        against = (plots.is_value(results["formulation"], DEFAULT_FORMULATION)
                    & plots.is_value(results["tol"], "default")) | peers
         rows = results[against & plots.plain_variant(results)]
-        parts.append(_time_table(rows, _ENGINE_KEY,
-                                 "### Against the peer engines (velocity, tol default)",
-                                 "scene and dt"))
+        title = f"### Against the peer engines ({DEFAULT_FORMULATION}, tol default)"
+        parts.append(_time_table(rows, _ENGINE_KEY, title, "scene and dt"))
     per_point = point_time_table(results)
     if per_point:
         parts.append(per_point)

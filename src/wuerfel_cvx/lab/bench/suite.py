@@ -48,7 +48,7 @@ from pathlib import Path
 from typing import Any
 
 from ...errors import InputError
-from ...formulations import FRICTION_MODELS
+from ...formulations import DEFAULT_FORMULATION, FRICTION_MODELS
 from ...settings import Settings
 from ...solve.cvxpy_forms import NATIVE
 from ...solve.paths import SOLVE_PATHS
@@ -83,7 +83,7 @@ _LIST_KEYS = {"scenes": str, "formulations": str, "solvers": str, "tols": str,
 _SCALAR_KEYS = {"duration": float, "reference": str, "settle": float, "compare_every": int,
                 "time_limit": float}
 _DEFAULTS: dict[str, Any] = {
-    "formulations": ["velocity"], "solvers": ["CLARABEL"], "tols": ["default"],
+    "formulations": [DEFAULT_FORMULATION], "solvers": ["CLARABEL"], "tols": ["default"],
     "dts": [0.01], "table_masses": ["fixed"], "extra_rods": [False], "sleeps": [False],
     "islands": [False], "friction_models": [DEFAULT_FRICTION_MODEL], "peers": [],
     "solve_paths": [NATIVE], "polishing": [True],
@@ -192,12 +192,12 @@ class GridPoint:
         """What identifies this point's dt/8 reference run, or ``None`` if it needs none.
 
         Variants (heavy tables, a sixth rod) and peers are compared with the exact model:
-        fixed tables, five rods, and for peers the ``velocity`` formulation with the
+        fixed tables, five rods, and for peers the default formulation with the
         default friction model.  A point's reference uses the point's friction model.
         """
         if self.reference != "dt/8":
             return None
-        formulation = "velocity" if self.formulation == "peer" else self.formulation
+        formulation = DEFAULT_FORMULATION if self.formulation == "peer" else self.formulation
         return (self.scene_input, formulation, self.dt, self.duration,
                 self.friction_model or DEFAULT_FRICTION_MODEL)
 

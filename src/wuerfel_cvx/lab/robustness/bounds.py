@@ -109,7 +109,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...formulations import VelocityFormulation, get_formulation
+from ...formulations import (
+    DEFAULT_FORMULATION,
+    Formulation,
+    RigidFormulation,
+    VelocityFormulation,
+    get_formulation,
+)
 from ...formulations.rigid import body_velocities
 from ...scenes.scene import Scene, half_diagonal
 from ...step.metrics import deepest_penetration
@@ -153,10 +159,16 @@ class _RunData:
 
 
 def formulation_of(trajectory: Trajectory,
-                   formulation: VelocityFormulation | None) -> VelocityFormulation:
-    """``formulation``, or the velocity formulation the trajectory names."""
+                   formulation: Formulation | None) -> VelocityFormulation:
+    """``formulation``, or the velocity formulation the trajectory names.
+
+    A ``rigid`` formulation poses its velocity formulation's QP in three unknowns per body
+    (the same rows, the rods exact), so its bounds are that formulation's.
+    """
     scheme = formulation if formulation is not None else get_formulation(
-        str(trajectory.info.get("formulation", "velocity")))
+        str(trajectory.info.get("formulation", DEFAULT_FORMULATION)))
+    if isinstance(scheme, RigidFormulation):
+        scheme = scheme.velocity_equivalent
     if not isinstance(scheme, VelocityFormulation):
         raise ValueError(f"the bounds are derived for the velocity formulations, not "
                          f"'{scheme.name}'")
@@ -164,7 +176,7 @@ def formulation_of(trajectory: Trajectory,
 
 
 def run_bounds(trajectory: Trajectory, scene: Scene,
-               formulation: VelocityFormulation | None = None) -> RunBounds:
+               formulation: Formulation | None = None) -> RunBounds:
     """The penetration and energy-rise bounds of each step of ``trajectory`` (of ``scene``).
 
     ``formulation``: the one the run used, by default the one its ``info`` names.

@@ -101,10 +101,11 @@ KNOWN_LIMITS = (
     "unit square at 1e6 m/s over a table, a 1000 m square spinning at 1000 rad/s); such "
     "step QPs are now solved in scaled units (wuerfel_cvx.solve.scaling), see "
     "docs/false-infeasible.md.",
-    "A step of the default velocity formulation that reaches its limit of 8 Gauss-Newton "
-    "passes without its gaps within gap_tolerance of their ramps keeps its last solution; "
-    "its penetration can then exceed the bound, and the property check reports it in the "
-    "table of generated scenes above (docs/closest-approach.md).",
+    "A step on the closest-approach rows (rigid, the default, and velocity) that reaches "
+    "its limit of 8 Gauss-Newton passes without its gaps within gap_tolerance of their "
+    "ramps keeps its last solution; its penetration can then exceed the bound, and the "
+    "property check reports it in the table of generated scenes above "
+    "(docs/closest-approach.md).",
     "A fallback is not tried on NaN data ('invalid_data'): the same data fails every solver.",
     "Found by the property checks and fixed by the per-pair contact rule: where corners of "
     "two squares overlap by 1e-9 to 4e-7 m, the per-corner edge rule paired them with faces "
