@@ -418,7 +418,8 @@ def test_a_results_csv_with_a_wrong_header_still_lists_the_columns(tmp_path: Pat
         writer.writerows(rows)
     # the fixture is of schema version 3, so the version-4 to -6 columns are missing too
     with pytest.raises(InputError,
-                       match=r"missing \['islands', 'solve_path', 'polish', 'polished_fraction', "
+                       match=r"missing \['islands', 'solve_path', 'polish', "
+                             r"'reuse_active_sets', 'polished_fraction', 'reused_fraction', "
                              r"'polish_rejected_steps', 'polish_rejections', "
                              r"'max_push_at_distance', 'max_push_gap_product', "
                              r"'call_wall_time_per_step', "

@@ -43,6 +43,7 @@ from .report_quality import (
     scaling_section,
     success_section,
 )
+from .report_reuse import reuse_section
 from .report_time import (
     POINT_TABLE_LIMIT,
     common_points,
@@ -160,6 +161,7 @@ def render_report(results: pd.DataFrame, suite: str, images: dict[str, list[Path
         friction_section(results, images, out_dir),
         polish_section(results, out_dir),
         scaling_section(results, images, out_dir),
+        reuse_section(results),
         failures_section(results),
         "## Appendix: columns of results.csv\n\n" + schema.describe(),
     ]

@@ -228,6 +228,7 @@ def _configuration(point: GridPoint) -> dict[str, Any]:
         "table_mass": point.table_mass, "extra_rod": point.extra_rod, "sleep": point.sleep,
         "islands": point.islands, "friction_model": point.friction_model,
         "solve_path": point.solve_path, "polish": point.polish,
+        "reuse_active_sets": point.reuse_active_sets,
         "solver_version": _solver_version(point.solver), **machine(),
         "finished_at": dt_module.datetime.now(dt_module.UTC).isoformat(timespec="seconds"),
         "reference_kind": point.reference_label,
@@ -276,6 +277,7 @@ def _polish_summary(trajectory: Trajectory) -> dict[str, Any]:
     reasons = rejected.str.extract(r"\((.*)\)", expand=False).fillna("").value_counts()
     return summary | {
         "polished_fraction": float(outcomes.isin(["polished", "reused"]).mean()),
+        "reused_fraction": float(outcomes.eq("reused").mean()),
         "polish_rejected_steps": len(rejected),
         "polish_rejections": ", ".join(f"{reason}: {count}" for reason, count in reasons.items())
         or None}
@@ -317,12 +319,14 @@ def _timing(trajectory: Trajectory, point: GridPoint) -> dict[str, Any]:
     step = metrics["step_time_s"].to_numpy(dtype=float)
     solver = metrics["solver_time_s"].to_numpy(dtype=float)
     simulated = len(metrics) * point.dt
+    ran = solver > 0  # a reused step's solver time is 0: no solver ran, no ratio
+    ratio = np.divide(step, solver, out=np.full_like(step, np.nan), where=ran)
     return {
         "wall_time_per_step_median": float(np.median(step)),
         "wall_time_per_step_p90": float(np.percentile(step, 90)),
         "solver_time_per_step_median": _nan_median(solver),
         "modelling_time_per_step_median": _nan_median(step - solver),
-        "step_over_solver_median": _nan_median(step / solver),
+        "step_over_solver_median": _nan_median(ratio),
         "wall_time_per_simulated_second": float(step.sum() / simulated),
         "total_wall_time": float(step.sum()),
         "n_variables": _int_max(metrics["n_variables"]),

@@ -24,7 +24,7 @@ import pandas as pd
 from ...errors import InputError
 from ...formulations import FORMULATIONS
 
-SCHEMA_VERSION = 9
+SCHEMA_VERSION = 10
 
 PROVENANCE_FILE = "provenance.json"
 """Beside a results CSV: the physics fingerprint its rows were measured on and the code
@@ -69,6 +69,7 @@ ADDED_COLUMNS: dict[int, dict[str, Any]] = {
     8: {"polish": None, "polished_fraction": None, "polish_rejected_steps": None,
         "polish_rejections": None, "max_push_at_distance": None, "max_push_gap_product": None},
     9: dict.fromkeys(STAGE_TIME_COLUMNS),
+    10: {"reuse_active_sets": False, "reused_fraction": None},
 }
 """Per schema version, the columns it added and their value in the rows of older files:
 a constant, ``None`` (not measured then: missing), or a function of the older frame giving
@@ -79,7 +80,8 @@ criteria and fixed-point columns are missing and its ``friction_model`` is that 
 structures on a direct path that no longer exists: left empty) and did not time the whole
 ``simulate`` call; version 7 did not polish (``polish`` false) nor measure pushes at a
 distance row by row (``polish`` left empty: the plots take such rows as plain, not as the
-unpolished variant of a newer run); version 8 did not split a step's time into stages."""
+unpolished variant of a newer run); version 8 did not split a step's time into stages;
+version 9 did not reuse active sets (its runs solved every QP)."""
 
 ColumnType = Literal["str", "int", "float", "bool"]
 
@@ -119,6 +121,8 @@ COLUMNS: tuple[Column, ...] = (
     _c("islands", "bool", "", "one QP per island instead of one joint QP per step"),
     _c("solve_path", "str", "", "how the QPs reached the solver: native, compiled or declared"),
     _c("polish", "bool", "", "answers polished on their active set (wuerfel_cvx.solve.kkt)"),
+    _c("reuse_active_sets", "bool", "",
+       "a QP is first tried on its structure's last active set (the solver skipped if it holds)"),
     _c("n_squares", "int", "1", "number of squares"),
     # environment
     _c("package_version", "str", "", "wuerfel_cvx version"),
@@ -138,6 +142,9 @@ COLUMNS: tuple[Column, ...] = (
     _c("polished_fraction", "float", "1",
        "fraction of the steps that solved a QP whose answers were all polished or found on "
        "the last answer's active set (exact either way); empty without polishing"),
+    _c("reused_fraction", "float", "1",
+       "fraction of the steps that solved a QP whose answers were all found on the last "
+       "answer's active set, without the solver; empty without polishing"),
     _c("polish_rejected_steps", "int", "1", "steps with a polish rejected"),
     _c("polish_rejections", "str", "",
        "why polishes were rejected: 'reason: steps', ...; empty when none was"),
@@ -174,7 +181,8 @@ COLUMNS: tuple[Column, ...] = (
        "median of step wall time minus solver time (building, cvxpy, checks, update)"),
     _c("step_over_solver_median", "float", "1",
        "median over steps of (whole step time / solver's own time): the modelling layer's "
-       "cost as a multiple of the solver; 1 would be free modelling"),
+       "cost as a multiple of the solver; 1 would be free modelling (over the steps whose "
+       "solver ran: not a reused one)"),
     _c("wall_time_per_simulated_second", "float", "1",
        "total step wall time divided by the simulated time (s per s)"),
     _c("total_wall_time", "float", "s", "sum of step wall times"),

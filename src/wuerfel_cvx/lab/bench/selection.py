@@ -95,13 +95,14 @@ def plain_variant(results: pd.DataFrame) -> pd.Series:
     """Mask of rows without a variant.
 
     Fixed tables, five rods, no sleep, one joint QP, the default friction model (or none),
-    the default solve path (or none recorded) and polished answers (or a peer's).
+    the default solve path (or none recorded), polished answers (or a peer's), every QP
+    given to its solver (no active set reused).
     """
     return (results["table_mass"].isna() & ~results["extra_rod"].fillna(False).astype(bool)
             & ~results["sleep"].fillna(False).astype(bool)
             & ~results["islands"].fillna(False).astype(bool)
             & ~_other_friction_model(results) & ~_other_solve_path(results)
-            & ~_unpolished(results))
+            & ~_unpolished(results) & ~_reusing(results))
 
 
 def _unpolished(results: pd.DataFrame) -> pd.Series:
@@ -111,6 +112,13 @@ def _unpolished(results: pd.DataFrame) -> pd.Series:
     flags = results["polish"].astype("boolean")
     return (flags.notna() & ~flags.fillna(True) & results["engine"].eq("wuerfel_cvx")
             ).fillna(False).astype(bool)
+
+
+def _reusing(results: pd.DataFrame) -> pd.Series:
+    """Mask of rows run with ``reuse_active_sets`` (a missing column or cell: no)."""
+    if "reuse_active_sets" not in results.columns:
+        return pd.Series(False, index=results.index)
+    return results["reuse_active_sets"].astype("boolean").fillna(False).astype(bool)
 
 
 def _other_solve_path(results: pd.DataFrame) -> pd.Series:
@@ -136,12 +144,14 @@ def variant_labels(results: pd.DataFrame) -> pd.Series:
     paths = results["solve_path"].astype("string").fillna("").where(_other_solve_path(results),
                                                                     "")
     unpolished = _unpolished(results)
+    reusing = _reusing(results)
     labels = [" ".join(part for part in (
         f"table {mass:.0e} kg" if pd.notna(mass) else "", "extra rod" if rod else "",
         "sleep" if sleep else "", "islands" if island else "", model if odd else "",
-        path, "unpolished" if raw else "") if part)
-        for mass, rod, sleep, island, model, odd, path, raw in zip(
-            masses, rods, sleeps, islands, models, other, paths, unpolished, strict=True)]
+        path, "unpolished" if raw else "", "reuse" if reuse else "") if part)
+        for mass, rod, sleep, island, model, odd, path, raw, reuse in zip(
+            masses, rods, sleeps, islands, models, other, paths, unpolished, reusing,
+            strict=True)]
     return pd.Series(labels, index=results.index, dtype=object)
 
 

@@ -20,6 +20,7 @@ Cartesian product of its lists::
     friction_models = ["ccp"]           # "ccp" and/or "coulomb" (scenes with friction)
     solve_paths = ["native"]            # "native", "compiled", "declared" (wuerfel_cvx.solve.paths)
     polishing = [true]                  # false: answers as the solvers gave them (no polish)
+    reuse_active_sets = [false]         # true: a resting pile skips the solver (reused)
     peers = []                          # peer engines; names unknown here are left out
     reference = "dt/8"                  # "dt/8", "rest", "settled" or "none"
     settle = 0.0                        # with "settled": time (s) given to settle first
@@ -79,14 +80,15 @@ REFERENCE_TOL = "high"
 _LIST_KEYS = {"scenes": str, "formulations": str, "solvers": str, "tols": str,
               "dts": float, "table_masses": (str, float), "extra_rods": bool,
               "sleeps": bool, "islands": bool, "friction_models": str, "peers": str,
-              "solve_paths": str, "polishing": bool}
+              "solve_paths": str, "polishing": bool,
+              "reuse_active_sets": bool}
 _SCALAR_KEYS = {"duration": float, "reference": str, "settle": float, "compare_every": int,
                 "time_limit": float}
 _DEFAULTS: dict[str, Any] = {
     "formulations": [DEFAULT_FORMULATION], "solvers": ["CLARABEL"], "tols": ["default"],
     "dts": [0.01], "table_masses": ["fixed"], "extra_rods": [False], "sleeps": [False],
     "islands": [False], "friction_models": [DEFAULT_FRICTION_MODEL], "peers": [],
-    "solve_paths": [NATIVE], "polishing": [True],
+    "solve_paths": [NATIVE], "polishing": [True], "reuse_active_sets": [False],
     "reference": "dt/8", "settle": 0.0,
     "compare_every": 1, "time_limit": 600.0,
 }
@@ -128,6 +130,9 @@ class GridPoint:
     polish: bool = True
     """``simulate(..., polish=...)``: answers polished on their active set; ``True`` for a
     peer."""
+    reuse_active_sets: bool = False
+    """``simulate(..., reuse_active_sets=...)``: each QP tried first on its structure's last
+    active set, the solver skipped where it holds; ``False`` for a peer."""
     scene_file: str | None = None
     """The scene's TOML file, absolute, when ``scene`` names one: found relative to the suite
     file as the suite was read.  ``scene`` stays as the suite wrote it, in the point's id."""
@@ -142,7 +147,7 @@ class GridPoint:
                         friction_model=self.friction_model or DEFAULT_FRICTION_MODEL,
                         table_mass=self.table_mass, extra_rod=self.extra_rod,
                         sleep=SleepSettings() if self.sleep else None, islands=self.islands,
-                        polish=self.polish)
+                        polish=self.polish, reuse_active_sets=self.reuse_active_sets)
 
     @property
     def scene_input(self) -> str:
@@ -178,6 +183,8 @@ class GridPoint:
             parts.append(f"path={self.solve_path}")
         if not self.polish:
             parts.append("unpolished")
+        if self.reuse_active_sets:
+            parts.append("reuse")
         return "|".join(parts)
 
     @property
@@ -361,20 +368,21 @@ def _expand(suite: str, s: dict[str, Any], source: str, where: str,
                              source=source, field=f"{where}.solve_paths")
     points: dict[str, GridPoint] = {}  # a peer's point once, whatever our settings
     for (scene, formulation, solver, tol, dt, mass, rod, sleep, islands, model,
-         path, polish) in itertools.product(s["scenes"], s["formulations"], s["solvers"],
-                                            s["tols"], s["dts"], masses, s["extra_rods"],
-                                            s["sleeps"], s["islands"], models,
-                                            s["solve_paths"], s["polishing"]):
+         path, polish, reuse) in itertools.product(
+             s["scenes"], s["formulations"], s["solvers"], s["tols"], s["dts"], masses,
+             s["extra_rods"], s["sleeps"], s["islands"], models, s["solve_paths"],
+             s["polishing"], s["reuse_active_sets"]):
         solver = solver.upper()
         friction_model: str | None = model
         if solver in PEER_ENGINES:
-            formulation, tol, mass, rod, sleep, islands, friction_model, path, polish = (
-                "peer", "native", None, False, False, False, None, NATIVE, True)
+            formulation, tol, mass, rod, sleep, islands, friction_model, path, polish, reuse = (
+                "peer", "native", None, False, False, False, None, NATIVE, True, False)
         point = GridPoint(suite, scene, formulation, solver, str(tol), float(dt),
                           float(duration), mass, bool(rod), bool(sleep), s["reference"],
                           s["compare_every"], float(s["time_limit"]), islands=bool(islands),
                           friction_model=friction_model, solve_path=path,
-                          polish=bool(polish), scene_file=files[scene],
+                          polish=bool(polish), reuse_active_sets=bool(reuse),
+                          scene_file=files[scene],
                           settle=float(s["settle"]))
         points.setdefault(point.point_id, point)
     return list(points.values())
