@@ -22,12 +22,16 @@ from pathlib import Path
 import pytest
 
 from wuerfel_cvx import Scene, simulate
+from wuerfel_cvx.formulations import FORMULATIONS
 from wuerfel_cvx.lab.robustness.determinism import (
+    FORMULATION_RUN,
+    FORMULATION_SOLVER,
     GOLDEN_DECIMALS,
     GOLDEN_RUN,
     GOLDEN_SOLVERS,
     exact_digest,
     fingerprint_of,
+    formulation_digest,
     golden_fingerprint,
     largest_difference,
     physics_fingerprint,
@@ -96,6 +100,21 @@ def test_golden_digest_of_the_reference_run(solver: str) -> None:
         "tests/golden/trajectory_hashes.toml (see its header)")
 
 
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_golden_digest_of_every_formulation(formulation: str) -> None:
+    """Every formulation's run of FORMULATION_RUN is pinned too.
+
+    So a changed meaning of a name that is not the default's (``rigid``'s rows, say)
+    changes the physics fingerprint.
+    """
+    golden = tomllib.loads(GOLDEN_FILE.read_text())
+    if pinned_versions(FORMULATION_SOLVER) != golden["solvers"][FORMULATION_SOLVER]["versions"]:
+        pytest.skip(f"golden digests recorded with other versions of {FORMULATION_SOLVER}'s")
+    assert formulation_digest(formulation) == golden["formulations"][formulation]["sha256"], (
+        f"{formulation}'s run of {FORMULATION_RUN.scene} changed by more than 1e-9 m; if "
+        "that is intended, regenerate tests/golden/trajectory_hashes.toml (see its header)")
+
+
 @pytest.mark.parametrize("solver", GOLDEN_SOLVERS)
 def test_round_off_differences_stay_far_below_the_golden_rounding(solver: str) -> None:
     """Justifies rounding to 1e-9 m: a few-ulp change of the start moves the run by far less.
@@ -132,6 +151,9 @@ def test_the_physics_fingerprint_is_the_golden_files() -> None:
             pytest.skip(f"golden digests recorded with other versions of {solver}'s packages")
     expected = golden_fingerprint(GOLDEN_FILE.read_text())
     assert physics_fingerprint() == expected
-    digests = {solver: entry["sha256"] for solver, entry in golden["solvers"].items()}
+    digests = ({solver: entry["sha256"] for solver, entry in golden["solvers"].items()}
+               | {f"formulation:{name}": entry["sha256"]
+                  for name, entry in golden["formulations"].items()})
     assert fingerprint_of(digests) == expected
     assert fingerprint_of({**digests, "OSQP": "0" * 64}) != expected
+    assert fingerprint_of({**digests, "formulation:rigid-baumgarte": "0" * 64}) != expected

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -48,3 +51,29 @@ def test_the_jobs_name_existing_suites() -> None:
         if job.commands[0][:2] == ("wuerfel-cvx", "bench"):
             assert job.name in names
     assert regenerate.main(["--list"]) == 0
+
+
+def test_ctrl_c_stops_the_driver_with_130_and_no_traceback(tmp_path: Path) -> None:
+    """A Ctrl-C at the terminal reaches the driver and its command (one process group)."""
+    started = tmp_path / "started"
+    child = ("import signal, sys, time\n"
+             "signal.signal(signal.SIGINT, lambda *_: sys.exit(130))\n"
+             f"open({str(started)!r}, 'w')\n"
+             "time.sleep(60)\n")
+    driver = ("import sys\n"
+              "from wuerfel_cvx.lab import regenerate\n"
+              f"regenerate.JOBS = (regenerate.Job('slow', (({sys.executable!r}, '-c', "
+              f"{child!r}),), budget_minutes=5.0),)\n"
+              "sys.exit(regenerate.main([]))\n")
+    process = subprocess.Popen([sys.executable, "-c", driver], stderr=subprocess.PIPE,
+                               text=True, start_new_session=True)
+    deadline = time.monotonic() + 60.0
+    while not started.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert started.exists(), "the job's command did not start"
+    os.killpg(process.pid, signal.SIGINT)  # as the terminal does
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130, err
+    assert "Traceback" not in err, err
+    assert err.strip().splitlines()[-1] == (
+        "regenerate: interrupted; finished rows are kept, the same command resumes")

@@ -56,6 +56,15 @@ JOBS = (
     suite_job("friction", 600, jobs=2),
     Job("robustness", (("wuerfel-cvx", "robustness", "--scenes", "200", "--fuzz", "2000",
                         "--report"),), 30),
+    Job("gradients", ((sys.executable, "-m", "wuerfel_cvx.lab.bench.report_gradients",
+                       "--out", "reports/gradients", "--repeats", "3"),), 20),
+    Job("qpbenchmark", (
+        ("wuerfel-cvx", "export-qps", "--suite", "qpbenchmark", "--out", "reports/qpbenchmark",
+         "--every", "10", "--ours"),
+        ("sh", "-c", "cd reports/qpbenchmark && rm -f wuerfel_step_qps.csv && qpbenchmark "
+         "wuerfel_step_qps.py --results-path wuerfel_step_qps.csv run --author wuerfel_cvx"),
+        (sys.executable, "-m", "wuerfel_cvx.lab.qp_export.compare", "reports/qpbenchmark",
+         "--out", "reports/qpbenchmark")), 60, needs="qpbenchmark"),
 )
 """Every regenerated report, cheapest first (the Coulomb card house makes ``friction`` the
 longest by far)."""
@@ -88,10 +97,16 @@ def _run_until(command: Sequence[str], deadline: float) -> int:
     except subprocess.TimeoutExpired:
         process.send_signal(signal.SIGINT)
         return process.wait()
+    except KeyboardInterrupt:  # the terminal's Ctrl-C reached the command as well
+        process.wait()  # which keeps its finished rows and stops
+        raise
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the jobs asked for; 0 when every one finished, 1 otherwise (see stderr)."""
+    """Run the jobs asked for: 0 when every one finished, 1 otherwise (see stderr).
+
+    130 on Ctrl-C (the running command gets it too, and keeps its finished rows).
+    """
     parser = argparse.ArgumentParser(prog="python -m wuerfel_cvx.lab.regenerate",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--only", nargs="+", choices=[job.name for job in JOBS],
@@ -109,7 +124,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     if args.budget_scale <= 0:
         parser.error("--budget-scale must be positive")
-    finished = [run_job(job, args.budget_scale) for job in chosen]
+    try:
+        finished = [run_job(job, args.budget_scale) for job in chosen]
+    except KeyboardInterrupt:
+        print("regenerate: interrupted; finished rows are kept, the same command resumes",
+              file=sys.stderr)
+        return INTERRUPTED
     return 0 if all(finished) else 1
 
 
