@@ -125,6 +125,15 @@ def report_fingerprint(readme: str) -> str | None:
     return None
 
 
+def current_provenance_line() -> str:
+    """The fingerprint line of a report made now, by this code (not from a sweep's rows)."""
+    from ...versions import code_version
+    from ..robustness.determinism import physics_fingerprint
+
+    return _provenance_line({"physics_fingerprint": physics_fingerprint(),
+                             "code_versions": [code_version()]})
+
+
 def _provenance_line(provenance: dict[str, Any] | None) -> str:
     if provenance is None:
         return (f"{FINGERPRINT_LINE} not recorded (these rows were measured before sweeps "

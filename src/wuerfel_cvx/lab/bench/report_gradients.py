@@ -38,6 +38,7 @@ from ...scenes.library import FLOOR, launched_box_scene
 from ...trajectory import Trajectory
 from ...versions import package_version
 from .markdown import markdown_table
+from .report import current_provenance_line
 
 G = 9.81
 DT = 1 / 240
@@ -399,7 +400,7 @@ def _header(command: str) -> str:
         f"- **Python:** {platform.python_version()}",
         f"- **wuerfel_cvx:** {package_version('wuerfel_cvx')}, "
         f"**cvxpy:** {package_version('cvxpy')}",
-        f"- **Solvers:** {solvers}", "",
+        f"- **Solvers:** {solvers}", current_provenance_line(), "",
         "Every number below is measured by one script; to regenerate:", "",
         "```sh", command, "```", ""])
 

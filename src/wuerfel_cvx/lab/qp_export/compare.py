@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ..bench.report import current_provenance_line
 from ..bench.shgeom import DEFAULT_TIME_SHIFT, shifted_geometric_mean
 from .export import MANIFEST_FILE, TEST_SET_FILE
 from .ours import OURS_FILE
@@ -183,7 +184,7 @@ def write_comparison(set_dir: Path, out: Path) -> Path:
         f"Written by `python -m wuerfel_cvx.lab.qp_export.compare` from {len(manifest)} QPs "
         f"({MANIFEST_FILE}), qpbenchmark's results ({RESULTS_FILE}, {len(results)} rows) and "
         f"ours ({OURS_FILE}, {len(ours)} rows).  Rates in %.",
-        "", "## The QPs", "", _markdown(size_table(manifest)), "",
+        "", current_provenance_line(), "", "## The QPs", "", _markdown(size_table(manifest)), "",
         "## qpbenchmark: success rate", "", _markdown(qpb["success"], ".1f"), "",
         "## qpbenchmark: correct rate", "", _markdown(qpb["correct"], ".1f"), "",
         "## qpbenchmark: shifted geometric mean runtime (relative to the fastest; shift 10 s,"

@@ -194,6 +194,7 @@ def render(run: RobustnessRun) -> str:
 
 
 def _stamp(run: RobustnessRun) -> list[str]:
+    from ..bench.report import current_provenance_line
     from ..bench.runner import machine
 
     packages = ("wuerfel_cvx", "cvxpy", "clarabel", "osqp", "piqp", "numpy", "scipy")
@@ -206,6 +207,7 @@ def _stamp(run: RobustnessRun) -> list[str]:
         f"- **Python:** {platform.python_version()} ({platform.system()})",
         f"- **Versions:** {versions}",
         f"- **Total time:** {run.seconds:.0f} s",
+        current_provenance_line(),
     ]
 
 
