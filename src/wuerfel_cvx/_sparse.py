@@ -201,6 +201,24 @@ def permuted_upper(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
 
 
 @compiled
+def largest_coupling(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, n: int,
+                     scale: FloatArray) -> FloatArray:
+    """Per column ``j >= n`` of a symmetric CSC matrix, ``max |M_ij| scale_i`` over ``i < n``.
+
+    Of a reduced KKT matrix (unknowns first): each row's largest entry against the scaled
+    unknowns (0 for an empty row), read down its column.
+    """
+    size = indptr.shape[0] - 1
+    largest = np.zeros(size)
+    for column in range(n, size):
+        for k in range(indptr[column], indptr[column + 1]):
+            row = indices[k]
+            if row < n:
+                largest[column] = max(largest[column], abs(data[k]) * scale[row])
+    return largest
+
+
+@compiled
 def ldl_factor(upper_ptr: np.ndarray, upper_rows: np.ndarray, upper_data: FloatArray
                ) -> tuple[np.ndarray, np.ndarray, FloatArray, FloatArray, bool]:
     """``L D L'`` of a symmetric matrix given by its upper triangle (CSC), without pivoting.

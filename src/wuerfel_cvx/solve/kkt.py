@@ -22,16 +22,25 @@ with friction cones).
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
-from .._sparse import canonical_csc, kkt_matrix, ldl_factor, permuted_upper, refined
+from .._sparse import (
+    canonical_csc,
+    kkt_matrix,
+    largest_coupling,
+    ldl_factor,
+    permuted_upper,
+    refined,
+)
 from ..formulations.qp import StepQP
 from ..scenes.geometry import FloatArray
 from . import residual_kernel
+from .ordering import DISSECTION_MIN_UNKNOWNS, fill_reducing_order
 
 __all__ = ["POLISH_OUTCOMES", "ActiveSet", "Polish", "Residuals", "guess_active_set",
            "kkt_residuals", "polish", "reduced_kkt", "solve_reduced"]
@@ -400,14 +409,26 @@ def _refined_solution(matrix: sp.csc_matrix, n: int, rhs: FloatArray,
     corners of 1e6 kg beside 0.25 kg corners); powers of two change no bit of the data.
     ``None`` if the regularised matrix does not factor.
     """
+    remembered = _remembered(matrix, n)
+    if remembered is not None and remembered.factor is not None:
+        point = remembered.refined(matrix, rhs, start)
+        if point is not None:
+            return point
     scale = _equilibration(matrix, n)
-    column = np.repeat(np.arange(matrix.shape[1]), np.diff(matrix.indptr))
-    scaled = sp.csc_matrix((matrix.data * scale[matrix.indices] * scale[column],
-                            matrix.indices, matrix.indptr), shape=matrix.shape)
-    factor = _regularised_factor(scaled, n)
+    scaled = _scaled(matrix, scale)
+    factor = _regularised_factor(scaled, n, None if remembered is None else remembered.order)
     if factor is None:
         return None
+    if remembered is not None:
+        remembered.scale, remembered.factor = scale, factor
     return scale * factor.refined(scaled, scale * rhs, start / scale)
+
+
+def _scaled(matrix: sp.csc_matrix, scale: FloatArray) -> sp.csc_matrix:
+    """``S matrix S`` for the diagonal scales ``S`` (the same pattern)."""
+    column = np.repeat(np.arange(matrix.shape[1]), np.diff(matrix.indptr))
+    return sp.csc_matrix((matrix.data * scale[matrix.indices] * scale[column],
+                          matrix.indices, matrix.indptr), shape=matrix.shape)
 
 
 def _equilibration(matrix: sp.csc_matrix, n: int) -> FloatArray:
@@ -422,10 +443,7 @@ def _equilibration(matrix: sp.csc_matrix, n: int) -> FloatArray:
     scale = np.ones(size)
     on_diagonal = (matrix.indices == column) & (column < n) & (matrix.data > 0.0)
     scale[column[on_diagonal]] = _power_of_two(1.0 / np.sqrt(matrix.data[on_diagonal]))
-    coupling = (matrix.indices >= n) & (column < n)
-    largest = np.zeros(size)
-    np.maximum.at(largest, matrix.indices[coupling],
-                  np.abs(matrix.data[coupling]) * scale[column[coupling]])
+    largest = largest_coupling(matrix.data, matrix.indices, matrix.indptr, n, scale)
     rows = np.flatnonzero(largest > 0.0)
     scale[rows] = _power_of_two(1.0 / largest[rows])
     return scale
@@ -455,7 +473,85 @@ class _Factor:
                        REFINEMENTS)
 
 
-def _regularised_factor(matrix: sp.csc_matrix, n: int) -> _Factor | None:
+def _elimination_order(size: int, n: int, order: np.ndarray | None) -> np.ndarray:
+    """The position of each index of a reduced KKT matrix in its factored order.
+
+    The rows first, in their order; then the ``n`` unknowns, in ``order`` (the old index of
+    each position, :func:`~wuerfel_cvx.solve.ordering.fill_reducing_order`) if given.
+    """
+    new_of_old = np.empty(size, dtype=np.int64)
+    new_of_old[n:] = np.arange(size - n)
+    new_of_old[np.arange(n) if order is None else order] = np.arange(size - n, size)
+    return new_of_old
+
+
+@dataclass
+class _LargeSystem:
+    """What a large pile's reduced KKT system leaves for the next one of its pattern.
+
+    A pile at rest keeps its active set, and so its reduced KKT matrix's pattern, from step
+    to step, and its numbers change little: the unknowns' fill-reducing order is found once,
+    and the last factor (of the system scaled by ``scale``) refines the next system as it
+    refined its own, until it no longer reaches :data:`STALE_FACTOR_TOLERANCE`.
+    """
+
+    order: np.ndarray
+    scale: FloatArray | None = None
+    factor: _Factor | None = None
+
+    def refined(self, matrix: sp.csc_matrix, rhs: FloatArray,
+                start: FloatArray) -> FloatArray | None:
+        """``matrix @ point = rhs`` refined on the last factor from ``start``.
+
+        ``None`` if the residual does not reach :data:`STALE_FACTOR_TOLERANCE` (relative to
+        the system's largest terms).
+        """
+        assert self.scale is not None and self.factor is not None
+        scaled, scaled_rhs = _scaled(matrix, self.scale), self.scale * rhs
+        point = self.factor.refined(scaled, scaled_rhs, start / self.scale)
+        size = max(_largest(scaled_rhs), _largest(scaled.data) * _largest(point))
+        if not _largest(scaled @ point - scaled_rhs) <= STALE_FACTOR_TOLERANCE * size:
+            return None
+        return self.scale * point
+
+
+STALE_FACTOR_TOLERANCE = 1e-14
+"""Largest residual (relative to the system's largest terms) at which a large system refined
+on the last factor of its pattern is solved; above it, the system is factored afresh (a
+fresh factor's refinement ends at round-off, 1e-16 to 1e-15)."""
+
+LARGE_SYSTEMS_KEPT = 4
+"""How many large patterns :func:`_remembered` keeps (the least recently used goes)."""
+_LARGE_SYSTEMS: dict[bytes, _LargeSystem] = {}
+
+
+def _remembered(matrix: sp.csc_matrix, n: int) -> _LargeSystem | None:
+    """What is known of ``matrix``'s pattern (made now if new); ``None`` for a small system.
+
+    Small: fewer than :data:`~wuerfel_cvx.solve.ordering.DISSECTION_MIN_UNKNOWNS` unknowns,
+    factored afresh in their own order each time.
+    """
+    if n < DISSECTION_MIN_UNKNOWNS:
+        return None
+    key = hashlib.blake2b(matrix.indptr.tobytes() + matrix.indices.tobytes()
+                          + n.to_bytes(8, "little"), digest_size=16).digest()
+    known = _LARGE_SYSTEMS.pop(key, None)
+    if known is None:
+        coupling = matrix[n:, :n]
+        known = _LargeSystem(fill_reducing_order(
+            sp.csr_array(matrix[:n, :n] + coupling.T @ coupling)))
+    _LARGE_SYSTEMS[key] = known  # the most recently used last
+    while len(_LARGE_SYSTEMS) > LARGE_SYSTEMS_KEPT:
+        _LARGE_SYSTEMS.pop(next(iter(_LARGE_SYSTEMS)))
+    return known
+
+
+def _largest(values: FloatArray) -> float:
+    return float(np.max(np.abs(values))) if np.size(values) else 0.0
+
+
+def _regularised_factor(matrix: sp.csc_matrix, n: int,
+                        order: np.ndarray | None = None) -> _Factor | None:
     """The factor of ``matrix + diag(delta_x I_n, -delta_y I)`` (:data:`REGULARISATION`).
 
     ``matrix`` is :func:`reduced_kkt`'s, every diagonal entry stored.  Factored ``L D L'``
@@ -463,6 +559,7 @@ def _regularised_factor(matrix: sp.csc_matrix, n: int) -> _Factor | None:
     makes possible (the matrix is quasi-definite), with the rows eliminated first: their
     pivots are ``-delta_y`` exactly, ``L`` has no entries beyond the rows' own, and what
     remains is the unknowns' block ``P + delta_x I + A' A / delta_y``, positive definite.
+    ``order``: the unknowns' order (:func:`_elimination_order`), theirs if ``None``.
     ``None`` if a pivot is zero or not finite.
     """
     size = matrix.shape[0]
@@ -472,7 +569,7 @@ def _regularised_factor(matrix: sp.csc_matrix, n: int) -> _Factor | None:
     hessian_scale = hessian_scale or 1.0
     coupling = (column < n) & (matrix.indices >= n)
     row_scale = float(np.max(np.abs(matrix.data[coupling]))) if coupling.any() else 1.0
-    new_of_old = np.concatenate([np.arange(size - n, size), np.arange(size - n)])
+    new_of_old = _elimination_order(size, n, order)
     shift = np.full(size, -REGULARISATION * row_scale**2 / hessian_scale)
     shift[size - n:] = REGULARISATION * hessian_scale
     l_ptr, l_rows, l_data, inverse_pivot, factored = ldl_factor(
