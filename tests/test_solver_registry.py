@@ -8,8 +8,10 @@ from importlib.metadata import version
 
 import pytest
 
-from wuerfel_cvx import versions
+from wuerfel_cvx import simulate, versions
+from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.lab.bench import plots
+from wuerfel_cvx.solve import registry
 from wuerfel_cvx.solve.registry import SOLVERS, Timing, available_solvers
 
 pytestmark = pytest.mark.unit
@@ -51,3 +53,19 @@ def test_timing_rules() -> None:
     assert math.isnan(timing.solver_time(0.0))  # "no time" is unknown, not free
     assert math.isnan(timing.solver_time(math.nan))
     assert Timing(capped_by_native_wall=False).solver_time(2e-3, 1e-3) == 2e-3
+
+
+def test_a_highs_solve_past_its_time_limit_is_a_failed_step(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """HiGHS's own time limit (HIGHS_TIME_LIMIT) ends a solve that would not end.
+
+    Its QP solver cycled for 15 minutes on one step of rain-10 (registry.HIGHS_TIME_LIMIT);
+    here the limit is made too short for any solve, and the step fails with HiGHS's status
+    and its number, as a hung solve now does after 60 s.
+    """
+    if "HIGHS" not in available_solvers():
+        pytest.skip("HiGHS is not installed")
+    monkeypatch.setattr(registry, "HIGHS_TIME_LIMIT", 0.0)
+    with pytest.raises(StepFailure) as failure:
+        simulate("tilted-drop", dt=0.01, steps=3, solver="HIGHS")
+    assert failure.value.status == "user_limit" and failure.value.step == 1  # the first

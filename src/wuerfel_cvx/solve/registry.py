@@ -107,6 +107,13 @@ class SolverSpec:
         return package_version(self.package)
 
 
+HIGHS_TIME_LIMIT = 60.0
+"""Wall seconds HiGHS may spend on one QP.  Its QP solver can cycle without end: rain-10 at
+dt 0.02 s, tol ``low``, unpolished, step 95 (highspy 1.16) ran 15 minutes at full load inside
+one solve, where a grid point's own time limit (checked between steps) cannot stop it.  With
+this limit the step fails with HiGHS's status ``user_limit``, reported with its step."""
+
+
 @cache
 def _quiet_highs() -> dict[str, Any]:
     """No options; HiGHS's banner swallowed, once per process, before any solve.
@@ -184,7 +191,8 @@ SOLVERS: dict[str, SolverSpec] = {
         # model; 1e-12 is the floor of that option's range, so only round-off is dropped.
         SolverSpec("HIGHS", "HIGHS", lambda eps: _quiet_highs() | {
             "primal_feasibility_tolerance": eps, "dual_feasibility_tolerance": eps,
-            "small_matrix_value": 1e-12, "output_flag": False}, "active-set (QP)",
+            "small_matrix_value": 1e-12, "output_flag": False,
+            "time_limit": HIGHS_TIME_LIMIT}, "active-set (QP)",
             "highspy", ("#e377c2", "X")),
     )
 }
