@@ -14,6 +14,7 @@ import dataclasses
 import marshal
 import math
 import pickle
+import random
 import subprocess
 import sys
 import time
@@ -31,6 +32,7 @@ from wuerfel_cvx.errors import InputError
 from wuerfel_cvx.lab.robustness.faults import SQUEEZED_SCENE
 from wuerfel_cvx.lab.robustness.fuzz import (
     _cross_check,
+    _swap_size_kind,
     check_input,
     generate_inputs,
     rejection_kind,
@@ -412,3 +414,14 @@ def test_seed_files_are_valid_scenes(tmp_path: Path) -> None:
         path = tmp_path / f"{name}.toml"
         path.write_bytes(data)
         assert Scene.from_toml(path) == Scene.named(name)
+
+
+def test_the_reports_fuzz_inputs_are_all_generated() -> None:
+    """The robustness report's 2000 inputs (seed 0) are generated.
+
+    An earlier edit had made a group an int, and the size-kind swap iterated it (TypeError:
+    the report's run crashed).
+    """
+    inputs = list(generate_inputs(2000, 0))
+    assert len(inputs) == 2000
+    assert _swap_size_kind(random.Random(0), {"squares": 3, "boxes": "x"})  # falls back

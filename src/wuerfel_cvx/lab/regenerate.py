@@ -20,6 +20,10 @@ import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
+
+from .bench.report import report_fingerprint
+from .robustness.determinism import physics_fingerprint
 
 INTERRUPTED = 130
 """Exit status of a command stopped by Ctrl-C (the budget's end)."""
@@ -35,27 +39,40 @@ class Job:
     """Wall-time budget (min) on the 2-core machine of the README, for all its commands."""
     needs: str = ""
     """A console command the job needs (an extra's), or '' for the core install."""
+    report: str = ""
+    """The report file the job writes, relative to the repository ('' : its suite's
+    ``reports/<name>/README.md``)."""
+
+    @property
+    def report_path(self) -> str:
+        """The report file the job writes (its header states the physics fingerprint)."""
+        return self.report or f"reports/{self.name}/README.md"
 
 
-def suite_job(suite: str, budget_minutes: float, jobs: int = 1) -> Job:
-    """A benchmark suite's job: its sweep (resumable) then its report."""
+def suite_job(suite: str, budget_minutes: float, jobs: int = 1,
+              headline: str | None = None) -> Job:
+    """A benchmark suite's job: its sweep (resumable) then its report.
+
+    ``headline``: the scene of the report's large speed-against-accuracy plot (default: the
+    scene with the most points).
+    """
     out = f"bench-results/{suite}"
+    report = ("wuerfel-cvx", "report", f"{out}/results.csv", "--root", "reports",
+              *(("--headline", headline) if headline else ()))
     return Job(suite, (("wuerfel-cvx", "bench", "--suite", suite, "--out", out,
-                        "--jobs", str(jobs), "--no-progress"),
-                       ("wuerfel-cvx", "report", f"{out}/results.csv", "--root", "reports")),
-               budget_minutes)
+                        "--jobs", str(jobs), "--no-progress"), report), budget_minutes)
 
 
 JOBS = (
     suite_job("perf", 15),  # one process: its times are the report's point
     suite_job("scaling", 20),
-    suite_job("standard", 30, jobs=2),
+    suite_job("standard", 30, jobs=2, headline="stack-10"),  # the README's picture
     suite_job("hard", 20, jobs=2),
     suite_job("polish", 20, jobs=2),
     suite_job("islands", 10),
     suite_job("friction", 600, jobs=2),
     Job("robustness", (("wuerfel-cvx", "robustness", "--scenes", "200", "--fuzz", "2000",
-                        "--report"),), 30),
+                        "--report"),), 30, report="reports/robustness.md"),
     Job("gradients", ((sys.executable, "-m", "wuerfel_cvx.lab.bench.report_gradients",
                        "--out", "reports/gradients", "--repeats", "3"),), 20),
     Job("qpbenchmark", (
@@ -64,10 +81,30 @@ JOBS = (
         ("sh", "-c", "cd reports/qpbenchmark && rm -f wuerfel_step_qps.csv && qpbenchmark "
          "wuerfel_step_qps.py --results-path wuerfel_step_qps.csv run --author wuerfel_cvx"),
         (sys.executable, "-m", "wuerfel_cvx.lab.qp_export.compare", "reports/qpbenchmark",
-         "--out", "reports/qpbenchmark")), 60, needs="qpbenchmark"),
+         "--out", "reports/qpbenchmark")), 60, needs="qpbenchmark",
+        report="reports/qpbenchmark/comparison.md"),
 )
 """Every regenerated report, cheapest first (the Coulomb card house makes ``friction`` the
 longest by far)."""
+
+
+HEADLINE_REPORTS = ("standard", "perf", "scaling")
+"""The jobs whose reports the README's headline picture and speed tables come from: they
+must be on today's physics (``tests/test_readme_reports.py``)."""
+
+
+def report_table(root: Path, current: str) -> str:
+    """Markdown: every job's report, its physics fingerprint and whether it is ``current``."""
+    lines = ["| report | physics fingerprint | on today's physics |", "|---|---|---|"]
+    for job in JOBS:
+        path = root / job.report_path
+        found = report_fingerprint(path.read_text(encoding="utf-8")) if path.exists() else None
+        state = ("yes" if found == current else
+                 "no: not regenerated since the physics changed" if found else
+                 "no: made before reports stated their physics")
+        lines.append(f"| [`{job.name}`]({job.report_path}) | "
+                     f"{f'`{found}`' if found else '–'} | {state} |")
+    return "\n".join(lines)
 
 
 def run_job(job: Job, scale: float = 1.0) -> bool:
@@ -114,7 +151,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--budget-scale", type=float, default=1.0,
                         help="multiply every job's budget (default 1)")
     parser.add_argument("--list", action="store_true", help="list the jobs and exit")
+    parser.add_argument("--table", action="store_true",
+                        help="print the README's table of the reports' physics and exit")
     args = parser.parse_args(argv)
+    if args.table:
+        print(report_table(Path.cwd(), physics_fingerprint()))
+        return 0
     chosen = [job for job in JOBS if args.only is None or job.name in args.only]
     if args.list:
         for job in chosen:

@@ -368,7 +368,7 @@ def _many_squares(rng: random.Random, data: dict[str, Any]) -> str:
 def _swap_size_kind(rng: random.Random, data: dict[str, Any]) -> str:
     """A square's ``size`` written as a box's pair, or a box's pair as a scalar."""
     entries = [(group, i, entry) for group in ("squares", "boxes")
-               for i, entry in enumerate(data.get(group) or [])
+               for i, entry in enumerate(_listed(data.get(group)))
                if isinstance(entry, dict) and "size" in entry]
     if not entries:
         return _set_value(rng, data)
@@ -376,6 +376,11 @@ def _swap_size_kind(rng: random.Random, data: dict[str, Any]) -> str:
     size = entry["size"]
     entry["size"] = size[0] if isinstance(size, list) and size else [size, size]
     return f"swap the kind of {group}[{index}].size"
+
+
+def _listed(value: object) -> list[Any]:
+    """``value`` if it is a list (an earlier edit may have made a group anything), else []."""
+    return value if isinstance(value, list) else []
 
 
 def _empty_groups(rng: random.Random, data: dict[str, Any]) -> str:
