@@ -201,21 +201,78 @@ def permuted_upper(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
 
 
 @compiled
-def largest_coupling(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, n: int,
-                     scale: FloatArray) -> FloatArray:
-    """Per column ``j >= n`` of a symmetric CSC matrix, ``max |M_ij| scale_i`` over ``i < n``.
+def inverse_root_diagonal(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+                          n: int) -> FloatArray:
+    """Per index ``j`` of a symmetric CSC matrix: ``1 / sqrt(M_jj)`` where ``j < n``, ``M_jj > 0``.
 
-    Of a reduced KKT matrix (unknowns first): each row's largest entry against the scaled
-    unknowns (0 for an empty row), read down its column.
+    1.0 elsewhere.
+    """
+    out = np.ones(indptr.shape[0] - 1)
+    for column in range(n):
+        for k in range(indptr[column], indptr[column + 1]):
+            if indices[k] == column and data[k] > 0.0:
+                out[column] = 1.0 / math.sqrt(data[k])
+    return out
+
+
+@compiled
+def inverse_largest_coupling(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+                             n: int, scale: FloatArray) -> FloatArray:
+    """Per column ``j >= n`` of a symmetric CSC matrix, ``1 / max |M_ij| scale_i`` over ``i < n``.
+
+    Of a reduced KKT matrix (unknowns first): the inverse of each row's largest entry against
+    the scaled unknowns, read down its column; 1.0 where that is not positive (an empty row).
     """
     size = indptr.shape[0] - 1
-    largest = np.zeros(size)
+    out = np.ones(size - n)
     for column in range(n, size):
+        largest = 0.0
         for k in range(indptr[column], indptr[column + 1]):
             row = indices[k]
             if row < n:
-                largest[column] = max(largest[column], abs(data[k]) * scale[row])
-    return largest
+                largest = max(largest, abs(data[k]) * scale[row])
+        if largest > 0.0:
+            out[column - n] = 1.0 / largest
+    return out
+
+
+@compiled
+def scaled_entries(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+                   scale: FloatArray) -> FloatArray:
+    """The entries of ``S M S`` for CSC ``M`` and diagonal ``S``: ``(M_ij s_i) s_j``."""
+    out = np.empty(data.shape[0])
+    for column in range(indptr.shape[0] - 1):
+        for k in range(indptr[column], indptr[column + 1]):
+            out[k] = data[k] * scale[indices[k]] * scale[column]
+    return out
+
+
+@compiled
+def _largest_of(largest: float, value: float) -> float:
+    """``largest`` updated with ``|value|`` as ``np.max(np.abs(...))`` does: NaN sticks."""
+    magnitude = abs(value)
+    if largest != largest or magnitude != magnitude:
+        return math.nan
+    return magnitude if magnitude > largest else largest
+
+
+@compiled
+def block_sizes(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+                n: int) -> tuple[float, float]:
+    """The largest unknown's diagonal and the largest coupling of a reduced KKT matrix.
+
+    Of a CSC matrix, unknowns first, every diagonal entry stored: the largest ``|M_jj|``,
+    ``j < n`` (1.0 if none), and the largest ``|M_ij|``, ``i >= n > j`` (1.0 if none); NaN
+    if one of them is NaN.
+    """
+    diagonal, coupling, coupled = -1.0, -1.0, False
+    for column in range(n):
+        for k in range(indptr[column], indptr[column + 1]):
+            if indices[k] == column:
+                diagonal = _largest_of(diagonal, data[k])
+            elif indices[k] >= n:
+                coupling, coupled = _largest_of(coupling, data[k]), True
+    return (diagonal if n else 1.0), (coupling if coupled else 1.0)
 
 
 @compiled

@@ -30,12 +30,15 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._sparse import (
+    block_sizes,
     canonical_csc,
+    inverse_largest_coupling,
+    inverse_root_diagonal,
     kkt_matrix,
-    largest_coupling,
     ldl_factor,
     permuted_upper,
     refined,
+    scaled_entries,
 )
 from ..formulations.qp import StepQP
 from ..scenes.geometry import FloatArray
@@ -103,12 +106,38 @@ def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
     A QP without a coupling cost, linear cost and upper bounds (the common one) is checked by
     the compiled loop of :mod:`wuerfel_cvx.solve.residual_kernel`, others by the general NumPy code.
     """
+    return _checked(qp, x, eq_dual, ineq_dual)[0]
+
+
+@dataclass(frozen=True)
+class _Scales:
+    """The primal and dual scales of an answer, as :func:`kkt_residuals` measures them."""
+
+    primal: float
+    dual: float
+
+
+def _checked(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
+             ineq_dual: FloatArray) -> tuple[Residuals, _Scales]:
+    """:func:`kkt_residuals` of ``(x, y, z)`` and the scales they are relative to.
+
+    The common QP's in one compiled pass (its residuals are relative to these very scales).
+    """
     if qp.cost_factor is None and qp.ineq_upper is None and qp.linear is None:
         eq, ineq = qp.eq_matrix, qp.ineq_matrix
-        return Residuals(*residual_kernel.residuals(
+        primal, dual, complementarity, primal_scale, dual_scale = residual_kernel.residuals(
             qp.weights, qp.target, x, eq.data, eq.indices, eq.indptr, qp.eq_rhs,
             np.asarray(eq_dual, dtype=np.float64), ineq.data, ineq.indices, ineq.indptr,
-            qp.ineq_rhs, np.asarray(ineq_dual, dtype=np.float64)))
+            qp.ineq_rhs, np.asarray(ineq_dual, dtype=np.float64))
+        return (Residuals(primal, dual, complementarity),
+                _Scales(primal=primal_scale, dual=dual_scale))
+    return (_general_residuals(qp, x, eq_dual, ineq_dual),
+            _scales(qp, x, eq_dual, ineq_dual))
+
+
+def _general_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
+                       ineq_dual: FloatArray) -> Residuals:
+    """:func:`kkt_residuals` by NumPy, for any QP (a coupling cost, upper bounds)."""
     objective_grad = qp.objective_gradient(x)
     eq_term = _transposed_product(qp.eq_matrix, eq_dual)
     ineq_term = _transposed_product(qp.ineq_matrix, ineq_dual)
@@ -185,14 +214,6 @@ class Polish:
     """The active set of the polished point."""
 
 
-@dataclass(frozen=True)
-class _Scales:
-    """The primal and dual scales of an answer, as :func:`kkt_residuals` measures them."""
-
-    primal: float
-    dual: float
-
-
 def _scales(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray) -> _Scales:
     lhs = qp.ineq_matrix @ x
     bounds = [_inf(qp.eq_rhs), _inf(qp.ineq_rhs), _inf(qp.eq_matrix @ x), _inf(lhs)]
@@ -262,9 +283,8 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     whose multiplier clearly exceeds their slack), and if that too fails, :data:`REJECTED`
     with the first attempt's reason.
     """
-    if residuals is None:
-        residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
-    scales = _scales(qp, x, eq_dual, ineq_dual)
+    checked, scales = _checked(qp, x, eq_dual, ineq_dual)
+    residuals = checked if residuals is None else residuals
     active = guess_active_set(qp, x, ineq_dual, scales)
     first = _polished_on(qp, active, (x, eq_dual, ineq_dual), scales, residuals)
     if first.outcome == POLISHED or first.reason == "singular":
@@ -426,9 +446,8 @@ def _refined_solution(matrix: sp.csc_matrix, n: int, rhs: FloatArray,
 
 def _scaled(matrix: sp.csc_matrix, scale: FloatArray) -> sp.csc_matrix:
     """``S matrix S`` for the diagonal scales ``S`` (the same pattern)."""
-    column = np.repeat(np.arange(matrix.shape[1]), np.diff(matrix.indptr))
-    return sp.csc_matrix((matrix.data * scale[matrix.indices] * scale[column],
-                          matrix.indices, matrix.indptr), shape=matrix.shape)
+    return canonical_csc(scaled_entries(matrix.data, matrix.indices, matrix.indptr, scale),
+                         matrix.indices, matrix.indptr, matrix.shape)
 
 
 def _equilibration(matrix: sp.csc_matrix, n: int) -> FloatArray:
@@ -438,14 +457,9 @@ def _equilibration(matrix: sp.csc_matrix, n: int) -> FloatArray:
     diagonal is not positive), a row's the power of two nearest the inverse of its largest
     entry against the scaled unknowns (1 for an empty row).
     """
-    size = matrix.shape[0]
-    column = np.repeat(np.arange(size), np.diff(matrix.indptr))
-    scale = np.ones(size)
-    on_diagonal = (matrix.indices == column) & (column < n) & (matrix.data > 0.0)
-    scale[column[on_diagonal]] = _power_of_two(1.0 / np.sqrt(matrix.data[on_diagonal]))
-    largest = largest_coupling(matrix.data, matrix.indices, matrix.indptr, n, scale)
-    rows = np.flatnonzero(largest > 0.0)
-    scale[rows] = _power_of_two(1.0 / largest[rows])
+    data, indices, indptr = matrix.data, matrix.indices, matrix.indptr
+    scale = _power_of_two(inverse_root_diagonal(data, indices, indptr, n))  # 1 stays 1
+    scale[n:] = _power_of_two(inverse_largest_coupling(data, indices, indptr, n, scale))
     return scale
 
 
@@ -563,12 +577,8 @@ def _regularised_factor(matrix: sp.csc_matrix, n: int,
     ``None`` if a pivot is zero or not finite.
     """
     size = matrix.shape[0]
-    column = np.repeat(np.arange(size), np.diff(matrix.indptr))
-    diagonal = np.flatnonzero(matrix.indices == column)
-    hessian_scale = float(np.max(np.abs(matrix.data[diagonal[:n]]))) if n else 1.0
+    hessian_scale, row_scale = block_sizes(matrix.data, matrix.indices, matrix.indptr, n)
     hessian_scale = hessian_scale or 1.0
-    coupling = (column < n) & (matrix.indices >= n)
-    row_scale = float(np.max(np.abs(matrix.data[coupling]))) if coupling.any() else 1.0
     new_of_old = _elimination_order(size, n, order)
     shift = np.full(size, -REGULARISATION * row_scale**2 / hessian_scale)
     shift[size - n:] = REGULARISATION * hessian_scale

@@ -85,11 +85,13 @@ def residuals(weights: FloatArray, target: FloatArray, x: FloatArray,
               eq_data: FloatArray, eq_indices: np.ndarray, eq_indptr: np.ndarray,
               eq_rhs: FloatArray, eq_dual: FloatArray,
               ineq_data: FloatArray, ineq_indices: np.ndarray, ineq_indptr: np.ndarray,
-              ineq_rhs: FloatArray, ineq_dual: FloatArray) -> tuple[float, float, float]:
-    """Relative primal, dual and complementarity residuals at ``(x, y, z)``.
+              ineq_rhs: FloatArray, ineq_dual: FloatArray
+              ) -> tuple[float, float, float, float, float]:
+    """Relative primal, dual and complementarity residuals at ``(x, y, z)``, and two scales.
 
     Of ``min sum w (x - t)^2`` s.t. ``E x = e``, ``G x >= h``, as
-    :func:`wuerfel_cvx.solve.paths.kkt_residuals` defines them (dimensionless).
+    :func:`wuerfel_cvx.solve.kkt.kkt_residuals` defines them (dimensionless), followed by
+    the primal and dual scales they are relative to (the polish's, ``_scales``).
     """
     n = x.shape[0]
     gradient = np.empty(n)
@@ -115,7 +117,7 @@ def residuals(weights: FloatArray, target: FloatArray, x: FloatArray,
     if slack.shape[0]:
         complementarity = (_largest(ineq_dual * slack)
                            / (1.0 + _largest(ineq_dual) * primal_scale))
-    return primal, dual, complementarity
+    return primal, dual, complementarity, primal_scale, dual_scale
 
 
 @compiled
