@@ -236,19 +236,24 @@ def guess_active_set(qp: StepQP, x: FloatArray, ineq_dual: FloatArray,
     violated row counts as tight.
     """
     scales = _scales(qp, x, np.zeros(qp.n_equalities), ineq_dual) if scales is None else scales
-    lhs = qp.ineq_matrix @ x
-    weight = ineq_dual / (margin * scales.dual)
-    lower_tight = weight > (lhs - qp.ineq_rhs) / scales.primal
-    upper_tight = np.zeros_like(lower_tight)
-    rows = qp.upper_rows
-    if rows.size:
-        assert qp.ineq_upper is not None
-        upper_tight[rows] = -weight[rows] > (qp.ineq_upper[rows] - lhs[rows]) / scales.primal
-        both = lower_tight & upper_tight  # a row with h = u: the multiplier's sign decides
-        lower_tight[both] = ineq_dual[both] >= 0.0
-        upper_tight[both] = ~lower_tight[both]
-    return ActiveSet(lower=np.flatnonzero(lower_tight).astype(np.int64),
-                     upper=np.flatnonzero(upper_tight).astype(np.int64))
+    lower, upper = residual_kernel.guessed_rows(
+        ineq_dual, margin * scales.dual, _ineq_lhs(qp, x), qp.ineq_rhs, _upper_bounds(qp),
+        scales.primal)
+    return ActiveSet(lower=lower, upper=upper)
+
+
+def _ineq_lhs(qp: StepQP, x: FloatArray) -> FloatArray:
+    """``G x`` (scipy's product, bit for bit, without its per-call overhead)."""
+    rows = qp.ineq_matrix
+    return residual_kernel.csr_product(rows.data, rows.indices, rows.indptr, x)
+
+
+_NO_BOUNDS = np.zeros(0)
+
+
+def _upper_bounds(qp: StepQP) -> FloatArray:
+    """``u``, infinite for rows without an upper bound; empty if no row has one."""
+    return _NO_BOUNDS if qp.ineq_upper is None else qp.ineq_upper
 
 
 def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray,
@@ -331,26 +336,10 @@ def _repaired(qp: StepQP, active: ActiveSet, x: FloatArray, z: FloatArray,
     Frees tight rows whose multiplier has the wrong sign and tightens rows whose bound is
     violated, both beyond :data:`ROUND_OFF` of the scales.
     """
-    lhs = qp.ineq_matrix @ x
-    lower = np.zeros(qp.n_inequalities, dtype=bool)
-    upper = np.zeros(qp.n_inequalities, dtype=bool)
-    lower[active.lower], upper[active.upper] = True, True
-    dual_tol, primal_tol = ROUND_OFF * scales.dual, ROUND_OFF * scales.primal
-    wrong_lower = lower & (z < -dual_tol)
-    wrong_upper = upper & (z > dual_tol)
-    violated_lower = ~lower & ((lhs - qp.ineq_rhs) < -primal_tol)
-    violated_upper = np.zeros_like(upper)
-    rows = qp.upper_rows
-    if rows.size:
-        assert qp.ineq_upper is not None
-        violated_upper[rows] = ~upper[rows] & ((qp.ineq_upper[rows] - lhs[rows]) < -primal_tol)
-    if not (wrong_lower.any() or wrong_upper.any() or violated_lower.any()
-            or violated_upper.any()):
-        return None
-    lower = (lower & ~wrong_lower) | violated_lower
-    upper = (upper & ~wrong_upper) | violated_upper
-    return ActiveSet(lower=np.flatnonzero(lower).astype(np.int64),
-                     upper=np.flatnonzero(upper).astype(np.int64))
+    changed, lower, upper = residual_kernel.repaired_rows(
+        active.lower, active.upper, z, _ineq_lhs(qp, x), qp.ineq_rhs, _upper_bounds(qp),
+        ROUND_OFF * scales.dual, ROUND_OFF * scales.primal)
+    return ActiveSet(lower=lower, upper=upper) if changed else None
 
 
 def reduced_kkt(qp: StepQP, active: ActiveSet) -> tuple[sp.csc_matrix, FloatArray]:
