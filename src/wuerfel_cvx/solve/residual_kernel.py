@@ -24,7 +24,7 @@ import numpy as np
 from .._numba import compiled
 from ..scenes.geometry import FloatArray
 
-__all__ = ["csr_product", "data_summary", "residuals"]
+__all__ = ["csr_product", "data_summary", "guessed_rows", "repaired_rows", "residuals"]
 
 
 @compiled
