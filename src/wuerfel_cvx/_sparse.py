@@ -349,6 +349,32 @@ def ldl_factor(upper_ptr: np.ndarray, upper_rows: np.ndarray, upper_data: FloatA
 
 
 @compiled
+def regularised_ldl(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, n: int,
+                    order: np.ndarray, row_shift: float, unknown_shift: float
+                    ) -> tuple[np.ndarray, np.ndarray, FloatArray, FloatArray, np.ndarray, bool]:
+    """``L D L'`` of ``Q (M + diag(shift)) Q'`` for a reduced KKT matrix ``M`` (CSC).
+
+    ``Q`` puts the rows first, in their order, then the ``n`` unknowns in ``order`` (the old
+    index of each position; empty: their own); ``shift`` is ``row_shift`` on the rows and
+    ``unknown_shift`` on the unknowns.  :func:`ldl_factor`'s results, with ``Q`` as the new
+    position of each old index (``new_of_old``) before the flag.
+    """
+    size = indptr.shape[0] - 1
+    new_of_old = np.empty(size, dtype=np.int64)
+    for old in range(n, size):
+        new_of_old[old] = old - n
+    for position in range(n):
+        new_of_old[order[position] if order.shape[0] else position] = size - n + position
+    shift = np.empty(size)
+    shift[:size - n] = row_shift
+    shift[size - n:] = unknown_shift
+    upper_ptr, upper_rows, upper_data = permuted_upper(data, indices, indptr, new_of_old, shift)
+    l_ptr, l_rows, l_data, inverse_pivot, factored = ldl_factor(upper_ptr, upper_rows,
+                                                                upper_data)
+    return l_ptr, l_rows, l_data, inverse_pivot, new_of_old, factored
+
+
+@compiled
 def ldl_solve(l_ptr: np.ndarray, l_rows: np.ndarray, l_data: FloatArray,
               inverse_pivot: FloatArray, new_of_old: np.ndarray, rhs: FloatArray) -> FloatArray:
     """The solution of ``M x = rhs`` from the ``L D L'`` of ``Q M Q'`` (:func:`ldl_factor`)."""

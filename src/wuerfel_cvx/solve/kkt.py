@@ -35,9 +35,8 @@ from .._sparse import (
     inverse_largest_coupling,
     inverse_root_diagonal,
     kkt_matrix,
-    ldl_factor,
-    permuted_upper,
     refined,
+    regularised_ldl,
     scaled_entries,
 )
 from ..formulations.qp import StepQP
@@ -476,18 +475,6 @@ class _Factor:
                        REFINEMENTS)
 
 
-def _elimination_order(size: int, n: int, order: np.ndarray | None) -> np.ndarray:
-    """The position of each index of a reduced KKT matrix in its factored order.
-
-    The rows first, in their order; then the ``n`` unknowns, in ``order`` (the old index of
-    each position, :func:`~wuerfel_cvx.solve.ordering.fill_reducing_order`) if given.
-    """
-    new_of_old = np.empty(size, dtype=np.int64)
-    new_of_old[n:] = np.arange(size - n)
-    new_of_old[np.arange(n) if order is None else order] = np.arange(size - n, size)
-    return new_of_old
-
-
 @dataclass
 class _LargeSystem:
     """What a large pile's reduced KKT system leaves for the next one of its pattern.
@@ -562,18 +549,19 @@ def _regularised_factor(matrix: sp.csc_matrix, n: int,
     makes possible (the matrix is quasi-definite), with the rows eliminated first: their
     pivots are ``-delta_y`` exactly, ``L`` has no entries beyond the rows' own, and what
     remains is the unknowns' block ``P + delta_x I + A' A / delta_y``, positive definite.
-    ``order``: the unknowns' order (:func:`_elimination_order`), theirs if ``None``.
+    ``order``: the unknowns' order (the old index of each position,
+    :func:`~wuerfel_cvx.solve.ordering.fill_reducing_order`), theirs if ``None``.
     ``None`` if a pivot is zero or not finite.
     """
-    size = matrix.shape[0]
     hessian_scale, row_scale = block_sizes(matrix.data, matrix.indices, matrix.indptr, n)
     hessian_scale = hessian_scale or 1.0
-    new_of_old = _elimination_order(size, n, order)
-    shift = np.full(size, -REGULARISATION * row_scale**2 / hessian_scale)
-    shift[size - n:] = REGULARISATION * hessian_scale
-    l_ptr, l_rows, l_data, inverse_pivot, factored = ldl_factor(
-        *permuted_upper(matrix.data, matrix.indices, matrix.indptr, new_of_old, shift))
-    return _Factor(l_ptr, l_rows, l_data, inverse_pivot, new_of_old) if factored else None
+    *factor, factored = regularised_ldl(
+        matrix.data, matrix.indices, matrix.indptr, n, _OWN_ORDER if order is None else order,
+        -REGULARISATION * row_scale**2 / hessian_scale, REGULARISATION * hessian_scale)
+    return _Factor(*factor) if factored else None
+
+
+_OWN_ORDER = np.zeros(0, dtype=np.int64)
 
 
 def reuse_active_set(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,
