@@ -25,6 +25,7 @@ from __future__ import annotations
 import hashlib
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -94,8 +95,10 @@ class Residuals:
 
     def worst(self) -> float:
         """The largest of the three; ``inf`` if any is NaN (``max`` would skip it)."""
-        values = (self.primal, self.dual, self.complementarity)
-        return math.inf if any(math.isnan(v) for v in values) else max(values)
+        primal, dual, complementarity = self.primal, self.dual, self.complementarity
+        if math.isnan(primal) or math.isnan(dual) or math.isnan(complementarity):
+            return math.inf
+        return max(primal, dual, complementarity)
 
 
 def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
@@ -192,6 +195,11 @@ class ActiveSet:
     def size(self) -> int:
         """Number of tight rows."""
         return int(self.lower.size + self.upper.size)
+
+    @cached_property
+    def rows(self) -> np.ndarray:
+        """The tight rows, those on their lower bounds first: the reduced KKT system's order."""
+        return np.concatenate([self.lower, self.upper])
 
 
 @dataclass(frozen=True)
@@ -366,7 +374,7 @@ def reduced_kkt(qp: StepQP, active: ActiveSet) -> tuple[sp.csc_matrix, FloatArra
     eq, ineq = qp.eq_matrix, qp.ineq_matrix
     indptr, indices, data = kkt_matrix(
         h_ptr, h_rows, np.asarray(h_data, dtype=np.float64), eq.data, eq.indices, eq.indptr,
-        ineq.data, ineq.indices, ineq.indptr, np.concatenate([active.lower, active.upper]))
+        ineq.data, ineq.indices, ineq.indptr, active.rows)
     size = indptr.size - 1
     matrix = canonical_csc(data, indices, indptr, (size, size))
     bounds = [qp.eq_rhs, qp.ineq_rhs[active.lower]]
@@ -398,7 +406,7 @@ def _solve_on(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,
     """
     n, n_eq = qp.n_variables, qp.n_equalities
     matrix, rhs = reduced_kkt(qp, active)
-    tight = np.concatenate([active.lower, active.upper])
+    tight = active.rows
     best = _refined_solution(matrix, n, rhs, np.concatenate([x, eq_dual, -ineq_dual[tight]]))
     if best is None or not np.isfinite(best).all():
         return None
