@@ -460,8 +460,13 @@ def _equilibration(matrix: sp.csc_matrix, n: int) -> FloatArray:
 
 
 def _power_of_two(values: FloatArray) -> FloatArray:
-    """The powers of two nearest ``values`` (positive) on a log scale."""
-    return np.asarray(np.exp2(np.round(np.log2(values))), dtype=np.float64)
+    """The powers of two nearest ``values`` (positive) on a log scale, written over them.
+
+    ``np.rint`` is what ``np.round`` calls for no decimals, without its Python wrapper.
+    """
+    np.log2(values, out=values)
+    np.rint(values, out=values)
+    return np.exp2(values, out=values)
 
 
 @dataclass(frozen=True)
