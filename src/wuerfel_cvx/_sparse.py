@@ -378,8 +378,18 @@ def regularised_ldl(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, n
 def ldl_solve(l_ptr: np.ndarray, l_rows: np.ndarray, l_data: FloatArray,
               inverse_pivot: FloatArray, new_of_old: np.ndarray, rhs: FloatArray) -> FloatArray:
     """The solution of ``M x = rhs`` from the ``L D L'`` of ``Q M Q'`` (:func:`ldl_factor`)."""
+    out = np.empty(rhs.shape[0])
+    _ldl_solve_into(l_ptr, l_rows, l_data, inverse_pivot, new_of_old, rhs,
+                    np.empty(rhs.shape[0]), out)
+    return out
+
+
+@compiled
+def _ldl_solve_into(l_ptr: np.ndarray, l_rows: np.ndarray, l_data: FloatArray,
+                    inverse_pivot: FloatArray, new_of_old: np.ndarray, rhs: FloatArray,
+                    work: FloatArray, out: FloatArray) -> None:
+    """:func:`ldl_solve` written into ``out``, with ``work`` (both of ``rhs``'s size)."""
     size = rhs.shape[0]
-    work = np.empty(size)
     for i in range(size):
         work[new_of_old[i]] = rhs[i]
     for i in range(size):
@@ -393,10 +403,8 @@ def ldl_solve(l_ptr: np.ndarray, l_rows: np.ndarray, l_data: FloatArray,
         for p in range(l_ptr[i], l_ptr[i + 1]):
             total -= l_data[p] * work[l_rows[p]]
         work[i] = total
-    out = np.empty(size)
     for i in range(size):
         out[i] = work[new_of_old[i]]
-    return out
 
 
 @compiled
@@ -458,12 +466,15 @@ def refined(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, l_ptr: np
     entry stops falling (or is zero, or NaN) and returns the point with the smallest.
     """
     size = rhs.shape[0]
-    best = point
+    points = np.empty((2, size))  # the best point so far and the next, in turn
+    points[0, :] = point
+    residual, work, correction = np.empty(size), np.empty(size), np.empty(size)
+    best, current = 0, 0
     best_norm = math.inf
     for _ in range(sweeps):
-        residual = rhs.copy()
+        residual[:] = rhs
         for column in range(size):
-            value = point[column]
+            value = points[current, column]
             for k in range(indptr[column], indptr[column + 1]):
                 residual[indices[k]] -= data[k] * value
         norm = 0.0
@@ -475,8 +486,12 @@ def refined(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, l_ptr: np
             norm = max(norm, magnitude)
         if not norm < best_norm:
             break
-        best, best_norm = point, norm
+        best, best_norm = current, norm
         if norm == 0.0:
             break
-        point = point + ldl_solve(l_ptr, l_rows, l_data, inverse_pivot, new_of_old, residual)
-    return best
+        _ldl_solve_into(l_ptr, l_rows, l_data, inverse_pivot, new_of_old, residual, work,
+                        correction)
+        current = 1 - best
+        for i in range(size):
+            points[current, i] = points[best, i] + correction[i]
+    return points[best]
