@@ -494,4 +494,5 @@ def refined(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, l_ptr: np
         current = 1 - best
         for i in range(size):
             points[current, i] = points[best, i] + correction[i]
-    return points[best]
+    solution: FloatArray = points[best]
+    return solution
