@@ -26,6 +26,7 @@ import hashlib
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -111,8 +112,7 @@ def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
     return _checked(qp, x, eq_dual, ineq_dual)[0]
 
 
-@dataclass(frozen=True)
-class _Scales:
+class _Scales(NamedTuple):
     """The primal and dual scales of an answer, as :func:`kkt_residuals` measures them."""
 
     primal: float
