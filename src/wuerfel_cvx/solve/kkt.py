@@ -244,7 +244,8 @@ def guess_active_set(qp: StepQP, x: FloatArray, ineq_dual: FloatArray,
     """
     scales = _scales(qp, x, np.zeros(qp.n_equalities), ineq_dual) if scales is None else scales
     lower, upper = residual_kernel.guessed_rows(
-        ineq_dual, margin * scales.dual, _ineq_lhs(qp, x), qp.ineq_rhs, _upper_bounds(qp),
+        np.asarray(ineq_dual, dtype=np.float64), margin * scales.dual,
+        _ineq_lhs(qp, np.asarray(x, dtype=np.float64)), qp.ineq_rhs, _upper_bounds(qp),
         scales.primal)
     return ActiveSet(lower=lower, upper=upper)
 
