@@ -497,3 +497,124 @@ def general_route(qp: StepQP) -> StepQP:
     compiled loop.
     """
     return dataclasses.replace(qp, ineq_upper=np.full(qp.n_inequalities, np.inf))
+
+
+# --------------------------------------------------------------------------------------
+# Polish (wuerfel_cvx.solve.kkt; compiled in _sparse.py and solve/residual_kernel.py)
+# --------------------------------------------------------------------------------------
+
+
+def guess_active_set(qp: StepQP, x: FloatArray, ineq_dual: FloatArray, primal_scale: float,
+                     dual_scale: float, margin: float) -> tuple[IntArray, IntArray]:
+    """The rows tight on their lower and on their upper bounds, by ``guess_active_set``'s rule."""
+    lhs = qp.ineq_matrix @ x
+    weight = ineq_dual / (margin * dual_scale)
+    lower_tight = weight > (lhs - qp.ineq_rhs) / primal_scale
+    upper_tight = np.zeros_like(lower_tight)
+    rows = qp.upper_rows
+    if rows.size:
+        assert qp.ineq_upper is not None
+        upper_tight[rows] = -weight[rows] > (qp.ineq_upper[rows] - lhs[rows]) / primal_scale
+        both = lower_tight & upper_tight
+        lower_tight[both] = ineq_dual[both] >= 0.0
+        upper_tight[both] = ~lower_tight[both]
+    return (np.flatnonzero(lower_tight).astype(np.int64),
+            np.flatnonzero(upper_tight).astype(np.int64))
+
+
+def repaired(qp: StepQP, tight_lower: IntArray, tight_upper: IntArray, x: FloatArray,
+             z: FloatArray, dual_tolerance: float, primal_tolerance: float
+             ) -> tuple[IntArray, IntArray] | None:
+    """An active set corrected for the point ``(x, z)`` solved on it (``kkt._repaired``)."""
+    lhs = qp.ineq_matrix @ x
+    lower = np.zeros(qp.n_inequalities, dtype=bool)
+    upper = np.zeros(qp.n_inequalities, dtype=bool)
+    lower[tight_lower], upper[tight_upper] = True, True
+    wrong_lower = lower & (z < -dual_tolerance)
+    wrong_upper = upper & (z > dual_tolerance)
+    violated_lower = ~lower & ((lhs - qp.ineq_rhs) < -primal_tolerance)
+    violated_upper = np.zeros_like(upper)
+    rows = qp.upper_rows
+    if rows.size:
+        assert qp.ineq_upper is not None
+        violated_upper[rows] = ~upper[rows] & ((qp.ineq_upper[rows] - lhs[rows])
+                                               < -primal_tolerance)
+    if not (wrong_lower.any() or wrong_upper.any() or violated_lower.any()
+            or violated_upper.any()):
+        return None
+    lower = (lower & ~wrong_lower) | violated_lower
+    upper = (upper & ~wrong_upper) | violated_upper
+    return np.flatnonzero(lower).astype(np.int64), np.flatnonzero(upper).astype(np.int64)
+
+
+def _power_of_two(values: FloatArray) -> FloatArray:
+    return np.asarray(np.exp2(np.round(np.log2(values))), dtype=np.float64)
+
+
+def equilibration(matrix: sp.csc_matrix, n: int) -> FloatArray:
+    """The power-of-two scales of a reduced KKT matrix (``kkt._equilibration``)."""
+    size = matrix.shape[0]
+    column = np.repeat(np.arange(size), np.diff(matrix.indptr))
+    scale = np.ones(size)
+    on_diagonal = (matrix.indices == column) & (column < n) & (matrix.data > 0.0)
+    scale[column[on_diagonal]] = _power_of_two(1.0 / np.sqrt(matrix.data[on_diagonal]))
+    coupling = (column >= n) & (matrix.indices < n)
+    largest = np.zeros(size)
+    np.maximum.at(largest, column[coupling],
+                  np.abs(matrix.data[coupling]) * scale[matrix.indices[coupling]])
+    rows = np.flatnonzero(largest > 0.0)
+    scale[rows] = _power_of_two(1.0 / largest[rows])
+    return scale
+
+
+def scaled(matrix: sp.csc_matrix, scale: FloatArray) -> FloatArray:
+    """The entries of ``S matrix S`` (``kkt._scaled``)."""
+    column = np.repeat(np.arange(matrix.shape[1]), np.diff(matrix.indptr))
+    return np.asarray(matrix.data * scale[matrix.indices] * scale[column], dtype=np.float64)
+
+
+def regularisation(matrix: sp.csc_matrix, n: int, regularisation: float
+                   ) -> tuple[IntArray, FloatArray]:
+    """The elimination order and the shifts of ``kkt._regularised_factor`` (own order).
+
+    The new position of each index, and the shifts in the new order.
+    """
+    size = matrix.shape[0]
+    column = np.repeat(np.arange(size), np.diff(matrix.indptr))
+    diagonal = np.flatnonzero(matrix.indices == column)
+    hessian_scale = float(np.max(np.abs(matrix.data[diagonal[:n]]))) if n else 1.0
+    hessian_scale = hessian_scale or 1.0
+    coupling = (column < n) & (matrix.indices >= n)
+    row_scale = float(np.max(np.abs(matrix.data[coupling]))) if coupling.any() else 1.0
+    new_of_old = np.empty(size, dtype=np.int64)
+    new_of_old[n:] = np.arange(size - n)
+    new_of_old[np.arange(n)] = np.arange(size - n, size)
+    shift = np.full(size, -regularisation * row_scale**2 / hessian_scale)
+    shift[size - n:] = regularisation * hessian_scale
+    return new_of_old, shift
+
+
+def refined(matrix: sp.csc_matrix, factor: tuple[IntArray, IntArray, FloatArray, FloatArray],
+            new_of_old: IntArray, rhs: FloatArray, point: FloatArray, sweeps: int,
+            ldl_solve: object) -> FloatArray:
+    """``_sparse.refined`` as it was, a new array per sweep (plain Python loops)."""
+    size = rhs.shape[0]
+    best, best_norm = point, np.inf
+    for _ in range(sweeps):
+        residual = rhs.copy()
+        for column in range(size):
+            for k in range(matrix.indptr[column], matrix.indptr[column + 1]):
+                residual[matrix.indices[k]] -= matrix.data[k] * point[column]
+        norm = 0.0
+        for value in np.abs(residual):
+            if value != value:
+                norm = np.nan
+                break
+            norm = max(norm, float(value))
+        if not norm < best_norm:
+            break
+        best, best_norm = point, norm
+        if norm == 0.0:
+            break
+        point = point + ldl_solve(*factor, new_of_old, residual)  # type: ignore[operator]
+    return best

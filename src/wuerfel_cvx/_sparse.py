@@ -201,21 +201,78 @@ def permuted_upper(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
 
 
 @compiled
-def largest_coupling(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, n: int,
-                     scale: FloatArray) -> FloatArray:
-    """Per column ``j >= n`` of a symmetric CSC matrix, ``max |M_ij| scale_i`` over ``i < n``.
+def inverse_root_diagonal(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+                          n: int) -> FloatArray:
+    """Per index ``j`` of a symmetric CSC matrix: ``1 / sqrt(M_jj)`` where ``j < n``, ``M_jj > 0``.
 
-    Of a reduced KKT matrix (unknowns first): each row's largest entry against the scaled
-    unknowns (0 for an empty row), read down its column.
+    1.0 elsewhere.
+    """
+    out = np.ones(indptr.shape[0] - 1)
+    for column in range(n):
+        for k in range(indptr[column], indptr[column + 1]):
+            if indices[k] == column and data[k] > 0.0:
+                out[column] = 1.0 / math.sqrt(data[k])
+    return out
+
+
+@compiled
+def inverse_largest_coupling(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+                             n: int, scale: FloatArray) -> FloatArray:
+    """Per column ``j >= n`` of a symmetric CSC matrix, ``1 / max |M_ij| scale_i`` over ``i < n``.
+
+    Of a reduced KKT matrix (unknowns first): the inverse of each row's largest entry against
+    the scaled unknowns, read down its column; 1.0 where that is not positive (an empty row).
     """
     size = indptr.shape[0] - 1
-    largest = np.zeros(size)
+    out = np.ones(size - n)
     for column in range(n, size):
+        largest = 0.0
         for k in range(indptr[column], indptr[column + 1]):
             row = indices[k]
             if row < n:
-                largest[column] = max(largest[column], abs(data[k]) * scale[row])
-    return largest
+                largest = max(largest, abs(data[k]) * scale[row])
+        if largest > 0.0:
+            out[column - n] = 1.0 / largest
+    return out
+
+
+@compiled
+def scaled_entries(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+                   scale: FloatArray) -> FloatArray:
+    """The entries of ``S M S`` for CSC ``M`` and diagonal ``S``: ``(M_ij s_i) s_j``."""
+    out = np.empty(data.shape[0])
+    for column in range(indptr.shape[0] - 1):
+        for k in range(indptr[column], indptr[column + 1]):
+            out[k] = data[k] * scale[indices[k]] * scale[column]
+    return out
+
+
+@compiled
+def _largest_of(largest: float, value: float) -> float:
+    """``largest`` updated with ``|value|`` as ``np.max(np.abs(...))`` does: NaN sticks."""
+    magnitude = abs(value)
+    if largest != largest or magnitude != magnitude:
+        return math.nan
+    return magnitude if magnitude > largest else largest
+
+
+@compiled
+def block_sizes(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+                n: int) -> tuple[float, float]:
+    """The largest unknown's diagonal and the largest coupling of a reduced KKT matrix.
+
+    Of a CSC matrix, unknowns first, every diagonal entry stored: the largest ``|M_jj|``,
+    ``j < n`` (1.0 if none), and the largest ``|M_ij|``, ``i >= n > j`` (1.0 if none); NaN
+    if one of them is NaN.
+    """
+    diagonal, coupling, coupled = -1.0, -1.0, False
+    for column in range(n):
+        for k in range(indptr[column], indptr[column + 1]):
+            if indices[k] == column:
+                diagonal = _largest_of(diagonal, data[k])
+            elif indices[k] >= n:
+                coupling, coupled = _largest_of(coupling, data[k]), True
+    return (diagonal if n else 1.0), (coupling if coupled else 1.0)
 
 
 @compiled
@@ -292,11 +349,47 @@ def ldl_factor(upper_ptr: np.ndarray, upper_rows: np.ndarray, upper_data: FloatA
 
 
 @compiled
+def regularised_ldl(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, n: int,
+                    order: np.ndarray, row_shift: float, unknown_shift: float
+                    ) -> tuple[np.ndarray, np.ndarray, FloatArray, FloatArray, np.ndarray, bool]:
+    """``L D L'`` of ``Q (M + diag(shift)) Q'`` for a reduced KKT matrix ``M`` (CSC).
+
+    ``Q`` puts the rows first, in their order, then the ``n`` unknowns in ``order`` (the old
+    index of each position; empty: their own); ``shift`` is ``row_shift`` on the rows and
+    ``unknown_shift`` on the unknowns.  :func:`ldl_factor`'s results, with ``Q`` as the new
+    position of each old index (``new_of_old``) before the flag.
+    """
+    size = indptr.shape[0] - 1
+    new_of_old = np.empty(size, dtype=np.int64)
+    for old in range(n, size):
+        new_of_old[old] = old - n
+    for position in range(n):
+        new_of_old[order[position] if order.shape[0] else position] = size - n + position
+    shift = np.empty(size)
+    shift[:size - n] = row_shift
+    shift[size - n:] = unknown_shift
+    upper_ptr, upper_rows, upper_data = permuted_upper(data, indices, indptr, new_of_old, shift)
+    l_ptr, l_rows, l_data, inverse_pivot, factored = ldl_factor(upper_ptr, upper_rows,
+                                                                upper_data)
+    return l_ptr, l_rows, l_data, inverse_pivot, new_of_old, factored
+
+
+@compiled
 def ldl_solve(l_ptr: np.ndarray, l_rows: np.ndarray, l_data: FloatArray,
               inverse_pivot: FloatArray, new_of_old: np.ndarray, rhs: FloatArray) -> FloatArray:
     """The solution of ``M x = rhs`` from the ``L D L'`` of ``Q M Q'`` (:func:`ldl_factor`)."""
+    out = np.empty(rhs.shape[0])
+    _ldl_solve_into(l_ptr, l_rows, l_data, inverse_pivot, new_of_old, rhs,
+                    np.empty(rhs.shape[0]), out)
+    return out
+
+
+@compiled
+def _ldl_solve_into(l_ptr: np.ndarray, l_rows: np.ndarray, l_data: FloatArray,
+                    inverse_pivot: FloatArray, new_of_old: np.ndarray, rhs: FloatArray,
+                    work: FloatArray, out: FloatArray) -> None:
+    """:func:`ldl_solve` written into ``out``, with ``work`` (both of ``rhs``'s size)."""
     size = rhs.shape[0]
-    work = np.empty(size)
     for i in range(size):
         work[new_of_old[i]] = rhs[i]
     for i in range(size):
@@ -310,10 +403,8 @@ def ldl_solve(l_ptr: np.ndarray, l_rows: np.ndarray, l_data: FloatArray,
         for p in range(l_ptr[i], l_ptr[i + 1]):
             total -= l_data[p] * work[l_rows[p]]
         work[i] = total
-    out = np.empty(size)
     for i in range(size):
         out[i] = work[new_of_old[i]]
-    return out
 
 
 @compiled
@@ -375,12 +466,15 @@ def refined(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, l_ptr: np
     entry stops falling (or is zero, or NaN) and returns the point with the smallest.
     """
     size = rhs.shape[0]
-    best = point
+    points = np.empty((2, size))  # the best point so far and the next, in turn
+    points[0, :] = point
+    residual, work, correction = np.empty(size), np.empty(size), np.empty(size)
+    best, current = 0, 0
     best_norm = math.inf
     for _ in range(sweeps):
-        residual = rhs.copy()
+        residual[:] = rhs
         for column in range(size):
-            value = point[column]
+            value = points[current, column]
             for k in range(indptr[column], indptr[column + 1]):
                 residual[indices[k]] -= data[k] * value
         norm = 0.0
@@ -392,8 +486,13 @@ def refined(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, l_ptr: np
             norm = max(norm, magnitude)
         if not norm < best_norm:
             break
-        best, best_norm = point, norm
+        best, best_norm = current, norm
         if norm == 0.0:
             break
-        point = point + ldl_solve(l_ptr, l_rows, l_data, inverse_pivot, new_of_old, residual)
-    return best
+        _ldl_solve_into(l_ptr, l_rows, l_data, inverse_pivot, new_of_old, residual, work,
+                        correction)
+        current = 1 - best
+        for i in range(size):
+            points[current, i] = points[best, i] + correction[i]
+    solution: FloatArray = points[best]
+    return solution

@@ -25,17 +25,21 @@ from __future__ import annotations
 import hashlib
 import math
 from dataclasses import dataclass
+from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 
 from .._sparse import (
+    block_sizes,
     canonical_csc,
+    inverse_largest_coupling,
+    inverse_root_diagonal,
     kkt_matrix,
-    largest_coupling,
-    ldl_factor,
-    permuted_upper,
     refined,
+    regularised_ldl,
+    scaled_entries,
 )
 from ..formulations.qp import StepQP
 from ..scenes.geometry import FloatArray
@@ -92,8 +96,10 @@ class Residuals:
 
     def worst(self) -> float:
         """The largest of the three; ``inf`` if any is NaN (``max`` would skip it)."""
-        values = (self.primal, self.dual, self.complementarity)
-        return math.inf if any(math.isnan(v) for v in values) else max(values)
+        primal, dual, complementarity = self.primal, self.dual, self.complementarity
+        if math.isnan(primal) or math.isnan(dual) or math.isnan(complementarity):
+            return math.inf
+        return max(primal, dual, complementarity)
 
 
 def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
@@ -103,12 +109,37 @@ def kkt_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
     A QP without a coupling cost, linear cost and upper bounds (the common one) is checked by
     the compiled loop of :mod:`wuerfel_cvx.solve.residual_kernel`, others by the general NumPy code.
     """
+    return _checked(qp, x, eq_dual, ineq_dual)[0]
+
+
+class _Scales(NamedTuple):
+    """The primal and dual scales of an answer, as :func:`kkt_residuals` measures them."""
+
+    primal: float
+    dual: float
+
+
+def _checked(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
+             ineq_dual: FloatArray) -> tuple[Residuals, _Scales]:
+    """:func:`kkt_residuals` of ``(x, y, z)`` and the scales they are relative to.
+
+    The common QP's in one compiled pass (its residuals are relative to these very scales).
+    """
     if qp.cost_factor is None and qp.ineq_upper is None and qp.linear is None:
         eq, ineq = qp.eq_matrix, qp.ineq_matrix
-        return Residuals(*residual_kernel.residuals(
+        primal, dual, complementarity, primal_scale, dual_scale = residual_kernel.residuals(
             qp.weights, qp.target, x, eq.data, eq.indices, eq.indptr, qp.eq_rhs,
             np.asarray(eq_dual, dtype=np.float64), ineq.data, ineq.indices, ineq.indptr,
-            qp.ineq_rhs, np.asarray(ineq_dual, dtype=np.float64)))
+            qp.ineq_rhs, np.asarray(ineq_dual, dtype=np.float64))
+        return (Residuals(primal, dual, complementarity),
+                _Scales(primal=primal_scale, dual=dual_scale))
+    return (_general_residuals(qp, x, eq_dual, ineq_dual),
+            _scales(qp, x, eq_dual, ineq_dual))
+
+
+def _general_residuals(qp: StepQP, x: FloatArray, eq_dual: FloatArray,
+                       ineq_dual: FloatArray) -> Residuals:
+    """:func:`kkt_residuals` by NumPy, for any QP (a coupling cost, upper bounds)."""
     objective_grad = qp.objective_gradient(x)
     eq_term = _transposed_product(qp.eq_matrix, eq_dual)
     ineq_term = _transposed_product(qp.ineq_matrix, ineq_dual)
@@ -165,6 +196,11 @@ class ActiveSet:
         """Number of tight rows."""
         return int(self.lower.size + self.upper.size)
 
+    @cached_property
+    def rows(self) -> np.ndarray:
+        """The tight rows, those on their lower bounds first: the reduced KKT system's order."""
+        return np.concatenate([self.lower, self.upper])
+
 
 @dataclass(frozen=True)
 class Polish:
@@ -183,14 +219,6 @@ class Polish:
     """The polished point's residuals (:func:`kkt_residuals`)."""
     active: ActiveSet
     """The active set of the polished point."""
-
-
-@dataclass(frozen=True)
-class _Scales:
-    """The primal and dual scales of an answer, as :func:`kkt_residuals` measures them."""
-
-    primal: float
-    dual: float
 
 
 def _scales(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray) -> _Scales:
@@ -215,19 +243,25 @@ def guess_active_set(qp: StepQP, x: FloatArray, ineq_dual: FloatArray,
     violated row counts as tight.
     """
     scales = _scales(qp, x, np.zeros(qp.n_equalities), ineq_dual) if scales is None else scales
-    lhs = qp.ineq_matrix @ x
-    weight = ineq_dual / (margin * scales.dual)
-    lower_tight = weight > (lhs - qp.ineq_rhs) / scales.primal
-    upper_tight = np.zeros_like(lower_tight)
-    rows = qp.upper_rows
-    if rows.size:
-        assert qp.ineq_upper is not None
-        upper_tight[rows] = -weight[rows] > (qp.ineq_upper[rows] - lhs[rows]) / scales.primal
-        both = lower_tight & upper_tight  # a row with h = u: the multiplier's sign decides
-        lower_tight[both] = ineq_dual[both] >= 0.0
-        upper_tight[both] = ~lower_tight[both]
-    return ActiveSet(lower=np.flatnonzero(lower_tight).astype(np.int64),
-                     upper=np.flatnonzero(upper_tight).astype(np.int64))
+    lower, upper = residual_kernel.guessed_rows(
+        np.asarray(ineq_dual, dtype=np.float64), margin * scales.dual,
+        _ineq_lhs(qp, np.asarray(x, dtype=np.float64)), qp.ineq_rhs, _upper_bounds(qp),
+        scales.primal)
+    return ActiveSet(lower=lower, upper=upper)
+
+
+def _ineq_lhs(qp: StepQP, x: FloatArray) -> FloatArray:
+    """``G x`` (scipy's product, bit for bit, without its per-call overhead)."""
+    rows = qp.ineq_matrix
+    return residual_kernel.csr_product(rows.data, rows.indices, rows.indptr, x)
+
+
+_NO_BOUNDS = np.zeros(0)
+
+
+def _upper_bounds(qp: StepQP) -> FloatArray:
+    """``u``, infinite for rows without an upper bound; empty if no row has one."""
+    return _NO_BOUNDS if qp.ineq_upper is None else qp.ineq_upper
 
 
 def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray,
@@ -262,9 +296,8 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     whose multiplier clearly exceeds their slack), and if that too fails, :data:`REJECTED`
     with the first attempt's reason.
     """
-    if residuals is None:
-        residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
-    scales = _scales(qp, x, eq_dual, ineq_dual)
+    checked, scales = _checked(qp, x, eq_dual, ineq_dual)
+    residuals = checked if residuals is None else residuals
     active = guess_active_set(qp, x, ineq_dual, scales)
     first = _polished_on(qp, active, (x, eq_dual, ineq_dual), scales, residuals)
     if first.outcome == POLISHED or first.reason == "singular":
@@ -311,26 +344,10 @@ def _repaired(qp: StepQP, active: ActiveSet, x: FloatArray, z: FloatArray,
     Frees tight rows whose multiplier has the wrong sign and tightens rows whose bound is
     violated, both beyond :data:`ROUND_OFF` of the scales.
     """
-    lhs = qp.ineq_matrix @ x
-    lower = np.zeros(qp.n_inequalities, dtype=bool)
-    upper = np.zeros(qp.n_inequalities, dtype=bool)
-    lower[active.lower], upper[active.upper] = True, True
-    dual_tol, primal_tol = ROUND_OFF * scales.dual, ROUND_OFF * scales.primal
-    wrong_lower = lower & (z < -dual_tol)
-    wrong_upper = upper & (z > dual_tol)
-    violated_lower = ~lower & ((lhs - qp.ineq_rhs) < -primal_tol)
-    violated_upper = np.zeros_like(upper)
-    rows = qp.upper_rows
-    if rows.size:
-        assert qp.ineq_upper is not None
-        violated_upper[rows] = ~upper[rows] & ((qp.ineq_upper[rows] - lhs[rows]) < -primal_tol)
-    if not (wrong_lower.any() or wrong_upper.any() or violated_lower.any()
-            or violated_upper.any()):
-        return None
-    lower = (lower & ~wrong_lower) | violated_lower
-    upper = (upper & ~wrong_upper) | violated_upper
-    return ActiveSet(lower=np.flatnonzero(lower).astype(np.int64),
-                     upper=np.flatnonzero(upper).astype(np.int64))
+    changed, lower, upper = residual_kernel.repaired_rows(
+        active.lower, active.upper, z, _ineq_lhs(qp, x), qp.ineq_rhs, _upper_bounds(qp),
+        ROUND_OFF * scales.dual, ROUND_OFF * scales.primal)
+    return ActiveSet(lower=lower, upper=upper) if changed else None
 
 
 def reduced_kkt(qp: StepQP, active: ActiveSet) -> tuple[sp.csc_matrix, FloatArray]:
@@ -358,7 +375,7 @@ def reduced_kkt(qp: StepQP, active: ActiveSet) -> tuple[sp.csc_matrix, FloatArra
     eq, ineq = qp.eq_matrix, qp.ineq_matrix
     indptr, indices, data = kkt_matrix(
         h_ptr, h_rows, np.asarray(h_data, dtype=np.float64), eq.data, eq.indices, eq.indptr,
-        ineq.data, ineq.indices, ineq.indptr, np.concatenate([active.lower, active.upper]))
+        ineq.data, ineq.indices, ineq.indptr, active.rows)
     size = indptr.size - 1
     matrix = canonical_csc(data, indices, indptr, (size, size))
     bounds = [qp.eq_rhs, qp.ineq_rhs[active.lower]]
@@ -390,7 +407,7 @@ def _solve_on(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,
     """
     n, n_eq = qp.n_variables, qp.n_equalities
     matrix, rhs = reduced_kkt(qp, active)
-    tight = np.concatenate([active.lower, active.upper])
+    tight = active.rows
     best = _refined_solution(matrix, n, rhs, np.concatenate([x, eq_dual, -ineq_dual[tight]]))
     if best is None or not np.isfinite(best).all():
         return None
@@ -426,9 +443,8 @@ def _refined_solution(matrix: sp.csc_matrix, n: int, rhs: FloatArray,
 
 def _scaled(matrix: sp.csc_matrix, scale: FloatArray) -> sp.csc_matrix:
     """``S matrix S`` for the diagonal scales ``S`` (the same pattern)."""
-    column = np.repeat(np.arange(matrix.shape[1]), np.diff(matrix.indptr))
-    return sp.csc_matrix((matrix.data * scale[matrix.indices] * scale[column],
-                          matrix.indices, matrix.indptr), shape=matrix.shape)
+    return canonical_csc(scaled_entries(matrix.data, matrix.indices, matrix.indptr, scale),
+                         matrix.indices, matrix.indptr, matrix.shape)
 
 
 def _equilibration(matrix: sp.csc_matrix, n: int) -> FloatArray:
@@ -438,20 +454,20 @@ def _equilibration(matrix: sp.csc_matrix, n: int) -> FloatArray:
     diagonal is not positive), a row's the power of two nearest the inverse of its largest
     entry against the scaled unknowns (1 for an empty row).
     """
-    size = matrix.shape[0]
-    column = np.repeat(np.arange(size), np.diff(matrix.indptr))
-    scale = np.ones(size)
-    on_diagonal = (matrix.indices == column) & (column < n) & (matrix.data > 0.0)
-    scale[column[on_diagonal]] = _power_of_two(1.0 / np.sqrt(matrix.data[on_diagonal]))
-    largest = largest_coupling(matrix.data, matrix.indices, matrix.indptr, n, scale)
-    rows = np.flatnonzero(largest > 0.0)
-    scale[rows] = _power_of_two(1.0 / largest[rows])
+    data, indices, indptr = matrix.data, matrix.indices, matrix.indptr
+    scale = _power_of_two(inverse_root_diagonal(data, indices, indptr, n))  # 1 stays 1
+    scale[n:] = _power_of_two(inverse_largest_coupling(data, indices, indptr, n, scale))
     return scale
 
 
 def _power_of_two(values: FloatArray) -> FloatArray:
-    """The powers of two nearest ``values`` (positive) on a log scale."""
-    return np.asarray(np.exp2(np.round(np.log2(values))), dtype=np.float64)
+    """The powers of two nearest ``values`` (positive) on a log scale, written over them.
+
+    ``np.rint`` is what ``np.round`` calls for no decimals, without its Python wrapper.
+    """
+    np.log2(values, out=values)
+    np.rint(values, out=values)
+    return np.exp2(values, out=values)
 
 
 @dataclass(frozen=True)
@@ -471,18 +487,6 @@ class _Factor:
                        self.l_data, self.inverse_pivot, self.new_of_old,
                        np.asarray(rhs, dtype=np.float64), np.asarray(start, dtype=np.float64),
                        REFINEMENTS)
-
-
-def _elimination_order(size: int, n: int, order: np.ndarray | None) -> np.ndarray:
-    """The position of each index of a reduced KKT matrix in its factored order.
-
-    The rows first, in their order; then the ``n`` unknowns, in ``order`` (the old index of
-    each position, :func:`~wuerfel_cvx.solve.ordering.fill_reducing_order`) if given.
-    """
-    new_of_old = np.empty(size, dtype=np.int64)
-    new_of_old[n:] = np.arange(size - n)
-    new_of_old[np.arange(n) if order is None else order] = np.arange(size - n, size)
-    return new_of_old
 
 
 @dataclass
@@ -559,22 +563,19 @@ def _regularised_factor(matrix: sp.csc_matrix, n: int,
     makes possible (the matrix is quasi-definite), with the rows eliminated first: their
     pivots are ``-delta_y`` exactly, ``L`` has no entries beyond the rows' own, and what
     remains is the unknowns' block ``P + delta_x I + A' A / delta_y``, positive definite.
-    ``order``: the unknowns' order (:func:`_elimination_order`), theirs if ``None``.
+    ``order``: the unknowns' order (the old index of each position,
+    :func:`~wuerfel_cvx.solve.ordering.fill_reducing_order`), theirs if ``None``.
     ``None`` if a pivot is zero or not finite.
     """
-    size = matrix.shape[0]
-    column = np.repeat(np.arange(size), np.diff(matrix.indptr))
-    diagonal = np.flatnonzero(matrix.indices == column)
-    hessian_scale = float(np.max(np.abs(matrix.data[diagonal[:n]]))) if n else 1.0
+    hessian_scale, row_scale = block_sizes(matrix.data, matrix.indices, matrix.indptr, n)
     hessian_scale = hessian_scale or 1.0
-    coupling = (column < n) & (matrix.indices >= n)
-    row_scale = float(np.max(np.abs(matrix.data[coupling]))) if coupling.any() else 1.0
-    new_of_old = _elimination_order(size, n, order)
-    shift = np.full(size, -REGULARISATION * row_scale**2 / hessian_scale)
-    shift[size - n:] = REGULARISATION * hessian_scale
-    l_ptr, l_rows, l_data, inverse_pivot, factored = ldl_factor(
-        *permuted_upper(matrix.data, matrix.indices, matrix.indptr, new_of_old, shift))
-    return _Factor(l_ptr, l_rows, l_data, inverse_pivot, new_of_old) if factored else None
+    *factor, factored = regularised_ldl(
+        matrix.data, matrix.indices, matrix.indptr, n, _OWN_ORDER if order is None else order,
+        -REGULARISATION * row_scale**2 / hessian_scale, REGULARISATION * hessian_scale)
+    return _Factor(*factor) if factored else None
+
+
+_OWN_ORDER = np.zeros(0, dtype=np.int64)
 
 
 def reuse_active_set(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,

@@ -1,6 +1,6 @@
-"""The KKT check's residuals as one compiled loop (numba).
+"""The KKT check's residuals, and the polish's active-set rules, as compiled loops (numba).
 
-:func:`wuerfel_cvx.solve.paths.kkt_residuals` recomputes every step's primal, dual and
+:func:`wuerfel_cvx.solve.kkt.kkt_residuals` recomputes every step's primal, dual and
 complementarity residuals in some forty NumPy operations.  :func:`residuals` here computes
 them for the common QP, one without a coupling cost and without upper bounds, in one pass
 over the CSR arrays, with the NumPy path's arithmetic in its order: the objective's
@@ -11,6 +11,8 @@ product), the largest magnitudes propagating NaN (as ``np.max``) and combined as
 (``tests/test_kernels.py``); other QPs take the general NumPy check.
 :func:`data_summary` checks the same QPs' numbers before the solve (finite, and the
 magnitudes their scaling is chosen by) in one pass.
+:func:`guessed_rows` and :func:`repaired_rows` are the polish's guess of an answer's active
+set and its repair (:mod:`wuerfel_cvx.solve.kkt`), comparisons only, for any QP.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 from .._numba import compiled
 from ..scenes.geometry import FloatArray
 
-__all__ = ["csr_product", "data_summary", "residuals"]
+__all__ = ["csr_product", "data_summary", "guessed_rows", "repaired_rows", "residuals"]
 
 
 @compiled
@@ -85,11 +87,13 @@ def residuals(weights: FloatArray, target: FloatArray, x: FloatArray,
               eq_data: FloatArray, eq_indices: np.ndarray, eq_indptr: np.ndarray,
               eq_rhs: FloatArray, eq_dual: FloatArray,
               ineq_data: FloatArray, ineq_indices: np.ndarray, ineq_indptr: np.ndarray,
-              ineq_rhs: FloatArray, ineq_dual: FloatArray) -> tuple[float, float, float]:
-    """Relative primal, dual and complementarity residuals at ``(x, y, z)``.
+              ineq_rhs: FloatArray, ineq_dual: FloatArray
+              ) -> tuple[float, float, float, float, float]:
+    """Relative primal, dual and complementarity residuals at ``(x, y, z)``, and two scales.
 
     Of ``min sum w (x - t)^2`` s.t. ``E x = e``, ``G x >= h``, as
-    :func:`wuerfel_cvx.solve.paths.kkt_residuals` defines them (dimensionless).
+    :func:`wuerfel_cvx.solve.kkt.kkt_residuals` defines them (dimensionless), followed by
+    the primal and dual scales they are relative to (the polish's, ``_scales``).
     """
     n = x.shape[0]
     gradient = np.empty(n)
@@ -115,7 +119,7 @@ def residuals(weights: FloatArray, target: FloatArray, x: FloatArray,
     if slack.shape[0]:
         complementarity = (_largest(ineq_dual * slack)
                            / (1.0 + _largest(ineq_dual) * primal_scale))
-    return primal, dual, complementarity
+    return primal, dual, complementarity, primal_scale, dual_scale
 
 
 @compiled
@@ -150,3 +154,63 @@ def data_summary(weights: FloatArray, target: FloatArray, eq_data: FloatArray,
     for k in range(1, weights.shape[0]):
         largest = max(largest, weights[k])
     return finite, magnitude, largest
+
+
+@compiled
+def guessed_rows(ineq_dual: FloatArray, dual_divisor: float, lhs: FloatArray,
+                 lower_bound: FloatArray, upper_bound: FloatArray,
+                 primal_scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """The rows an answer rests on (:func:`~wuerfel_cvx.solve.kkt.guess_active_set`'s rule).
+
+    Row ``r`` is tight on its lower bound when ``z_r / dual_divisor > (lhs_r - h_r) /
+    primal_scale``, on its upper bound (a finite ``u_r``; ``upper_bound`` empty for none)
+    when ``-z_r / dual_divisor > (u_r - lhs_r) / primal_scale``; if both, the sign of
+    ``z_r`` decides.  The rows tight on their lower bounds and those on their upper (int64).
+    """
+    m = lhs.shape[0]
+    lower = np.zeros(m, dtype=np.bool_)
+    upper = np.zeros(m, dtype=np.bool_)
+    bounded = upper_bound.shape[0] > 0
+    for r in range(m):
+        weight = ineq_dual[r] / dual_divisor
+        lower[r] = weight > (lhs[r] - lower_bound[r]) / primal_scale
+        if bounded and math.isfinite(upper_bound[r]):
+            upper[r] = -weight > (upper_bound[r] - lhs[r]) / primal_scale
+            if lower[r] and upper[r]:  # a row with h = u
+                lower[r] = ineq_dual[r] >= 0.0
+                upper[r] = not lower[r]
+    return np.flatnonzero(lower).astype(np.int64), np.flatnonzero(upper).astype(np.int64)
+
+
+@compiled
+def repaired_rows(tight_lower: np.ndarray, tight_upper: np.ndarray, ineq_dual: FloatArray,
+                  lhs: FloatArray, lower_bound: FloatArray, upper_bound: FloatArray,
+                  dual_tolerance: float, primal_tolerance: float
+                  ) -> tuple[bool, np.ndarray, np.ndarray]:
+    """An active set corrected for the point solved on it (``kkt._repaired``).
+
+    Frees tight rows whose multiplier ``z`` has the wrong sign beyond ``dual_tolerance``
+    (``z < -tol`` on a lower bound, ``z > tol`` on an upper) and tightens free rows whose
+    bound (``upper_bound`` empty for none, else finite entries) ``lhs`` violates beyond
+    ``primal_tolerance``.  Whether any row changed, and the corrected rows (int64).
+    """
+    m = lhs.shape[0]
+    lower = np.zeros(m, dtype=np.bool_)
+    upper = np.zeros(m, dtype=np.bool_)
+    for r in tight_lower:
+        lower[r] = True
+    for r in tight_upper:
+        upper[r] = True
+    bounded = upper_bound.shape[0] > 0
+    changed = False
+    for r in range(m):
+        wrong_lower = lower[r] and ineq_dual[r] < -dual_tolerance
+        wrong_upper = upper[r] and ineq_dual[r] > dual_tolerance
+        violated_lower = not lower[r] and (lhs[r] - lower_bound[r]) < -primal_tolerance
+        violated_upper = (bounded and math.isfinite(upper_bound[r]) and not upper[r]
+                          and (upper_bound[r] - lhs[r]) < -primal_tolerance)
+        if wrong_lower or wrong_upper or violated_lower or violated_upper:
+            changed = True
+            lower[r] = (lower[r] and not wrong_lower) or violated_lower
+            upper[r] = (upper[r] and not wrong_upper) or violated_upper
+    return changed, np.flatnonzero(lower).astype(np.int64), np.flatnonzero(upper).astype(np.int64)

@@ -1,0 +1,127 @@
+"""The polish's compiled loops give the NumPy code they replaced bit for bit.
+
+The polish (:mod:`wuerfel_cvx.solve.kkt`) guesses an answer's active set, repairs it,
+equilibrates, scales and factors the reduced KKT system and refines its solution in
+compiled loops (``_sparse.py``, ``solve/residual_kernel.py``); the NumPy code they replaced
+is kept in ``tests/reference_kernels.py``.  Compared on the step QPs of short runs (at the
+solvers' answers and perturbed ones, also as the general route with ``+inf`` upper
+bounds) and on random QPs with finite upper bounds, rows with ``h = u`` among them.  The
+golden digests (``tests/test_determinism.py``) pin whole runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import reference_kernels as reference
+from wuerfel_cvx import _sparse, simulate
+from wuerfel_cvx.formulations.qp import StepQP, declare_qp
+from wuerfel_cvx.solve import kkt
+from wuerfel_cvx.step.contacts import Contacts
+
+pytestmark = pytest.mark.integration
+
+CASES = [("stack-5", "rigid", 30), ("pyramid-4", "rigid", 30),
+         ("rain-10", "velocity-baumgarte", 30), ("two-corner-landing", "seed", 30)]
+
+
+def _answers(scene: str, formulation: str, steps: int) -> list[tuple[StepQP, np.ndarray,
+                                                                     np.ndarray]]:
+    """The QPs of a short run with their (polished) answers ``x``, ``z``."""
+    seen: list[tuple[StepQP, np.ndarray, np.ndarray]] = []
+    simulate(scene, dt=0.01, steps=steps, solver="CLARABEL", formulation=formulation,
+             observer=lambda step, qp, solution: seen.append(
+                 (qp, solution.x, solution.ineq_dual)))
+    return seen
+
+
+def _random_qp(rng: np.random.Generator) -> StepQP:
+    """Six unknowns, ten rows: some one-sided, some with a finite upper bound, some ``h = u``."""
+    n, m = 6, 10
+    rows = sp.random_array((m, n), density=0.5, random_state=rng) + sp.eye_array(m, n)
+    lower = rng.normal(size=m)
+    upper = lower + np.where(rng.random(m) < 0.4, np.inf, rng.uniform(0.0, 1.0, m))
+    upper[:2] = lower[:2]  # two rows held at h = u
+    return declare_qp(rng.uniform(0.5, 2.0, n), rng.normal(size=n), sp.csr_array((0, n)),
+                      np.zeros(0), sp.csr_array(rows), lower, Contacts.empty(),
+                      ineq_upper=upper)
+
+
+def _assert_same_rules(qp: StepQP, x: np.ndarray, z: np.ndarray) -> None:
+    """The guess (both margins) and its repair at ``(x, z)`` are the references'."""
+    _, scales = kkt._checked(qp, x, np.zeros(qp.n_equalities), z)
+    for margin in (1.0, kkt.CLEAR_MARGIN):
+        active = kkt.guess_active_set(qp, x, z, scales, margin)
+        lower, upper = reference.guess_active_set(qp, x, z, scales.primal, scales.dual, margin)
+        assert np.array_equal(active.lower, lower) and np.array_equal(active.upper, upper)
+        ours = kkt._repaired(qp, active, x, -z, scales)  # the wrong signs: rows to free
+        theirs = reference.repaired(qp, lower, upper, x, -z, kkt.ROUND_OFF * scales.dual,
+                                    kkt.ROUND_OFF * scales.primal)
+        assert (ours is None) == (theirs is None)
+        if ours is not None and theirs is not None:
+            assert np.array_equal(ours.lower, theirs[0])
+            assert np.array_equal(ours.upper, theirs[1])
+
+
+def _assert_same_system(qp: StepQP, active: kkt.ActiveSet, start: np.ndarray) -> None:
+    """Equilibration, scaling, factor and refinement of the reduced system: the references'."""
+    matrix, rhs = kkt.reduced_kkt(qp, active)
+    n = qp.n_variables
+    scale = kkt._equilibration(matrix, n)
+    assert np.array_equal(scale, reference.equilibration(matrix, n))
+    scaled = kkt._scaled(matrix, scale)
+    assert np.array_equal(scaled.data, reference.scaled(matrix, scale))
+    factor = kkt._regularised_factor(scaled, n)
+    new_of_old, shift = reference.regularisation(scaled, n, kkt.REGULARISATION)
+    *expected, factored = _sparse.ldl_factor(*_sparse.permuted_upper(
+        scaled.data, scaled.indices, scaled.indptr, new_of_old, shift))
+    assert (factor is not None) == factored
+    if factor is None:
+        return
+    assert np.array_equal(factor.new_of_old, new_of_old)
+    for ours, theirs in zip((factor.l_ptr, factor.l_rows, factor.l_data, factor.inverse_pivot),
+                            expected, strict=True):
+        assert np.array_equal(ours, theirs)
+    scaled_rhs, scaled_start = scale * rhs, start / scale
+    l_ptr, l_rows, l_data, inverse_pivot = expected
+    assert np.array_equal(
+        factor.refined(scaled, scaled_rhs, scaled_start),
+        reference.refined(scaled, (l_ptr, l_rows, l_data, inverse_pivot), new_of_old,
+                          scaled_rhs, scaled_start, kkt.REFINEMENTS, _sparse.ldl_solve))
+
+
+@pytest.mark.parametrize(("scene", "formulation", "steps"), CASES)
+def test_the_polish_kernels_are_the_references_on_step_qps(scene: str, formulation: str,
+                                                           steps: int) -> None:
+    rng = np.random.default_rng(7)
+    for qp, x, z in _answers(scene, formulation, steps)[::3]:
+        noisy_x = x + rng.normal(scale=1e-6, size=x.shape)
+        noisy_z = z + rng.normal(scale=1e-3, size=z.shape)
+        for route in (qp, reference.general_route(qp)):
+            _assert_same_rules(route, x, z)
+            _assert_same_rules(route, noisy_x, noisy_z)
+        _, scales = kkt._checked(qp, x, np.zeros(qp.n_equalities), z)
+        active = kkt.guess_active_set(qp, x, z, scales)
+        _assert_same_system(qp, active, np.concatenate(
+            [noisy_x, np.zeros(qp.n_equalities), -noisy_z[active.rows]]))
+
+
+def test_the_checks_scales_are_the_general_codes() -> None:
+    """The compiled check's scales (common QPs) equal ``_scales``'s NumPy ones."""
+    for qp, x, z in _answers("stack-5", "rigid", 30):
+        y = np.zeros(qp.n_equalities)
+        assert kkt._checked(qp, x, y, z)[1] == kkt._scales(reference.general_route(qp), x, y, z)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_active_set_rules_are_the_references_with_upper_bounds(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    qp = _random_qp(rng)
+    x = rng.normal(size=qp.n_variables)
+    z = rng.normal(size=qp.n_inequalities) * (rng.random(qp.n_inequalities) < 0.7)
+    _assert_same_rules(qp, x, z)
+    _assert_same_rules(dataclasses.replace(qp, ineq_upper=None), x, z)
