@@ -1,4 +1,4 @@
-"""The polish's fill-reducing order of a large pile's unknowns (wuerfel_cvx.solve.ordering)."""
+"""The polish's fill-reducing order of a large pile's unknowns (wuerfel_cvx._sparse)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,8 @@ import pytest
 import scipy.sparse as sp
 
 from wuerfel_cvx import Scene
-from wuerfel_cvx._sparse import ldl_factor
+from wuerfel_cvx._sparse import DISSECTION_MIN_UNKNOWNS, fill_reducing_order, ldl_factor
 from wuerfel_cvx.solve import kkt
-from wuerfel_cvx.solve.ordering import DISSECTION_MIN_UNKNOWNS, fill_reducing_order
 from wuerfel_cvx.step.simulation import Simulation
 
 pytestmark = pytest.mark.unit

@@ -32,8 +32,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._sparse import (
+    DISSECTION_MIN_UNKNOWNS,
     block_sizes,
     canonical_csc,
+    fill_reducing_order,
     inverse_largest_coupling,
     inverse_root_diagonal,
     kkt_matrix,
@@ -44,7 +46,6 @@ from .._sparse import (
 from ..formulations.qp import StepQP
 from ..scenes.geometry import FloatArray
 from . import residual_kernel
-from .ordering import DISSECTION_MIN_UNKNOWNS, fill_reducing_order
 
 __all__ = ["POLISH_OUTCOMES", "ActiveSet", "Polish", "Residuals", "guess_active_set",
            "kkt_residuals", "polish", "reduced_kkt", "solve_reduced"]
@@ -532,7 +533,7 @@ _LARGE_SYSTEMS: dict[bytes, _LargeSystem] = {}
 def _remembered(matrix: sp.csc_matrix, n: int) -> _LargeSystem | None:
     """What is known of ``matrix``'s pattern (made now if new); ``None`` for a small system.
 
-    Small: fewer than :data:`~wuerfel_cvx.solve.ordering.DISSECTION_MIN_UNKNOWNS` unknowns,
+    Small: fewer than :data:`~wuerfel_cvx._sparse.DISSECTION_MIN_UNKNOWNS` unknowns,
     factored afresh in their own order each time.
     """
     if n < DISSECTION_MIN_UNKNOWNS:
@@ -564,7 +565,7 @@ def _regularised_factor(matrix: sp.csc_matrix, n: int,
     pivots are ``-delta_y`` exactly, ``L`` has no entries beyond the rows' own, and what
     remains is the unknowns' block ``P + delta_x I + A' A / delta_y``, positive definite.
     ``order``: the unknowns' order (the old index of each position,
-    :func:`~wuerfel_cvx.solve.ordering.fill_reducing_order`), theirs if ``None``.
+    :func:`~wuerfel_cvx._sparse.fill_reducing_order`), theirs if ``None``.
     ``None`` if a pivot is zero or not finite.
     """
     hessian_scale, row_scale = block_sizes(matrix.data, matrix.indices, matrix.indptr, n)
