@@ -189,11 +189,17 @@ SOLVERS: dict[str, SolverSpec] = {
                    timing=Timing(note="its setup_time plus solve_time (dense form built before)")),
         # HiGHS drops matrix entries below small_matrix_value (default 1e-9) from the
         # model; 1e-12 is the floor of that option's range, so only round-off is dropped.
+        # Its QP solver adds qp_regularization_value (default 1e-7) to the Hessian's
+        # diagonal and so answers another QP: x off by about 1e-7 |x| / w, duals missing
+        # stationarity by as much (docs/solver-failures.md). The step QP's own Hessian
+        # is positive definite; the friction problem's zero-weight slacks have a linear
+        # cost and bounded rows. Native on every path (adapters/highs.py): cvxpy's form
+        # turns the targets into right-hand sides, which HiGHS's QP start rounds away.
         SolverSpec("HIGHS", "HIGHS", lambda eps: _quiet_highs() | {
             "primal_feasibility_tolerance": eps, "dual_feasibility_tolerance": eps,
-            "small_matrix_value": 1e-12, "output_flag": False,
-            "time_limit": HIGHS_TIME_LIMIT}, "active-set (QP)",
-            "highspy", ("#e377c2", "X")),
+            "small_matrix_value": 1e-12, "qp_regularization_value": 0.0,
+            "output_flag": False, "time_limit": HIGHS_TIME_LIMIT}, "active-set (QP)",
+            "highspy", ("#e377c2", "X"), adapter="highs", native_only=True),
     )
 }
 """Every solver the package knows; :func:`available_solvers` lists those installed."""
