@@ -5,7 +5,10 @@ The QPs are saved in ``tests/fixtures/solver-failures/`` (see ``make_fixtures.py
 and CLARABEL solves it, verified.  Then the fixes: HiGHS, handed the step QP itself without
 its Hessian regularisation, solves the QP on which it failed through cvxpy; the QP on which
 it still fails is reported as a failed step.  A test pins the cause in HiGHS itself on a
-two-unknown model, so that a HiGHS that no longer has it is noticed.
+two-unknown model, so that a HiGHS that no longer has it is noticed.  PROXQP, whose test of
+a certificate of primal infeasibility has a sign wrong and is now off, solves the QPs it
+called infeasible; called as before, it still makes the claim on a QP that ``x = 0``
+satisfies strictly, which no certificate can refute.
 """
 
 from __future__ import annotations
@@ -18,8 +21,9 @@ import pytest
 from saved_qps import load_qp
 from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations import StepQP
+from wuerfel_cvx.solve.adapters.proxqp import proxsuite_form
 from wuerfel_cvx.solve.paths import StepSolution, solve_step_qp
-from wuerfel_cvx.solve.registry import available_solvers
+from wuerfel_cvx.solve.registry import CERTIFICATE_TOLERANCE, available_solvers, solver_options
 
 pytestmark = pytest.mark.integration
 
@@ -39,6 +43,8 @@ most this set to zero (``zero_activity_tolerance``, ``qpsolver/feasibility_highs
 
 needs_highs = pytest.mark.skipif("HIGHS" not in available_solvers(),
                                  reason="highspy is an extra solver, not a dependency")
+needs_proxqp = pytest.mark.skipif("PROXQP" not in available_solvers(),
+                                  reason="proxsuite is an extra solver, not a dependency")
 
 
 def saved(name: str) -> StepQP:
@@ -133,3 +139,49 @@ def test_highs_qp_start_rounds_small_values_away() -> None:
     assert solve(ROUNDED_AWAY)[0] == "kSolveError"
     status, infeasibility = solve(5e-8)
     assert status == "kOptimal" and infeasibility == pytest.approx(5e-8)
+
+
+@needs_proxqp
+@pytest.mark.parametrize("name", ["proxqp-corner-drop", "proxqp-rain-10"])
+def test_proxqp_solves_the_qps_it_called_infeasible(name: str) -> None:
+    qp = saved(name)
+    solution = solve_step_qp(qp, "PROXQP", CASES[name], polishing=False)
+    assert solution.status == "optimal" and solution.verified, solution.residuals
+    assert np.max(np.abs(solution.x - reference(qp).x)) <= AGREEMENT
+
+
+def test_no_certificate_of_infeasibility_exists_for_the_corner_drop_qp() -> None:
+    """``x = 0`` satisfies every row with 2.4e-7 m/s to spare.
+
+    In proxsuite's form (``C = -G``, ``u = -h``, ``l = -inf``) a certificate needs
+    ``C' dz = 0`` and ``u' max(dz, 0) + l' min(dz, 0) < 0``: with ``u > 0`` and
+    ``l = -inf`` no ``dz`` gives a negative sum, whatever the tolerance.
+    """
+    qp = saved("proxqp-corner-drop")
+    assert np.max(qp.ineq_rhs) < -2e-7
+
+
+@needs_proxqp
+def test_proxqp_with_its_certificate_test_on_still_claims_infeasible() -> None:
+    """The claim comes from proxsuite's test, not from the data.
+
+    Called directly with the test on (``eps_primal_inf`` at round-off, as the package
+    called it), proxsuite says ``PRIMAL_INFEASIBLE`` on the corner-drop QP, cold; with the
+    test off, it solves it.
+    """
+    import proxsuite  # type: ignore[import-untyped]  # an optional solver, no stubs
+
+    qp = saved("proxqp-corner-drop")
+    form, _ = proxsuite_form(qp)
+
+    def status(eps_primal_inf: float) -> str:
+        solver = proxsuite.proxqp.dense.QP(qp.n_variables, 0, qp.n_inequalities)
+        for key, value in (solver_options("PROXQP", "high")
+                           | {"eps_primal_inf": eps_primal_inf}).items():
+            setattr(solver.settings, key, value)
+        solver.init(**form)
+        solver.solve()
+        return str(solver.results.info.status.name)
+
+    assert status(CERTIFICATE_TOLERANCE) == "PROXQP_PRIMAL_INFEASIBLE"
+    assert status(solver_options("PROXQP", "high")["eps_primal_inf"]) == "PROXQP_SOLVED"
