@@ -19,8 +19,9 @@ import pytest
 import scipy.sparse as sp
 from scipy.optimize import linprog
 
+from saved_qps import load_qp
 from wuerfel_cvx import simulate
-from wuerfel_cvx.formulations import StepQP, declare_qp
+from wuerfel_cvx.formulations import StepQP
 from wuerfel_cvx.scenes.geometry import FloatArray
 from wuerfel_cvx.solve.paths import (
     SOLVE_PATHS,
@@ -32,7 +33,6 @@ from wuerfel_cvx.solve.paths import (
 )
 from wuerfel_cvx.solve.registry import TOLERANCE_PRESETS, available_solvers
 from wuerfel_cvx.solve.scaling import unknowns_scale
-from wuerfel_cvx.step.contacts import Contacts
 
 pytestmark = [pytest.mark.integration, pytest.mark.filterwarnings(  # cvxpy reading its own
     "ignore:Reading from a sparse CVXPY expression:RuntimeWarning")]  # sparse parameters
@@ -55,11 +55,7 @@ MARGIN_CAP = 1.0
 
 def saved_qp(name: str) -> StepQP:
     """The step QP saved as ``name.npz`` (no contacts are kept: the rows are the data)."""
-    data = np.load(FIXTURES / f"{name}.npz")
-    eq, ineq = (sp.csr_array((data[f"{k}_data"], (data[f"{k}_row"], data[f"{k}_col"])),
-                             shape=tuple(data[f"{k}_shape"])) for k in ("eq", "ineq"))
-    return declare_qp(data["weights"], data["target"], eq, data["eq_rhs"], ineq,
-                      data["ineq_rhs"], Contacts.empty())
+    return load_qp(FIXTURES / f"{name}.npz")
 
 
 def largest_common_slack(qp: StepQP) -> tuple[float, FloatArray]:

@@ -122,9 +122,9 @@ class SolvePath:
 
     ``native``: a solver with an adapter (:mod:`wuerfel_cvx.solve.adapters`) gets the step QP's
     own numbers, one persistent solver per structure and solver, updated in place; a solver
-    without one (SCS, HiGHS) goes ``compiled``.  ``compiled``: a cvxpy DPP problem per
-    structure (:mod:`wuerfel_cvx.solve.cvxpy_forms`).  ``declared``: a cvxpy problem per QP.  PROXQP
-    and DAQP take their adapters on every path
+    without one (SCS) goes ``compiled``.  ``compiled``: a cvxpy DPP problem per
+    structure (:mod:`wuerfel_cvx.solve.cvxpy_forms`).  ``declared``: a cvxpy problem per
+    QP.  PROXQP, DAQP and HiGHS take their adapters on every path
     (:attr:`~wuerfel_cvx.solve.registry.SolverSpec.native_only`).
     ``warm_start``: start the solvers that take one from the last step's solution mapped by
     contact (:mod:`wuerfel_cvx.solve.warm_start`), and OSQP from its structure's last solution.

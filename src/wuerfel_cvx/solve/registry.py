@@ -30,11 +30,21 @@ TOLERANCE_PRESETS: dict[str, float] = {"low": 1e-4, "default": 1e-7, "high": 1e-
 
 
 CERTIFICATE_TOLERANCE = float(np.finfo(np.float64).eps)
-"""PROXQP's ``eps_primal_inf`` and ``eps_dual_inf``: a certificate of infeasibility must
-hold to round-off, whatever the tolerance of the solve.  At any looser value measured (the
-step's ``eps``, and 1e-4 to 1e-13) proxsuite 0.8 certified strictly feasible step QPs
-infeasible (``docs/false-infeasible.md``); at this one it still certifies a truly
-infeasible one."""
+"""PROXQP's ``eps_dual_inf``: a certificate of dual infeasibility must hold to round-off,
+whatever the tolerance of the solve (the step QP's Hessian is positive definite, so none
+holds).  At any looser value measured (the step's ``eps``, and 1e-4 to 1e-13) proxsuite 0.8
+certified strictly feasible step QPs primal infeasible (``docs/false-infeasible.md``)."""
+
+NO_PRIMAL_CERTIFICATE = -1.0
+"""PROXQP's ``eps_primal_inf``: below zero, so that no claim of primal infeasibility passes
+proxsuite's test (its right-hand side is this tolerance times a norm).  That test (0.7.2 and
+0.8.0, dense and sparse ``global_primal_residual_infeasibility``) adds ``-l' min(dz, 0)``
+where Farkas' lemma has ``+l' min(dz, 0)``: with a one-sided row's ``l = -1e20``, any
+negative entry of the dual step ``dz`` passes it once ``C' dz`` is round-off, and a resting
+contact's twin rows let ``dz`` drift along the null space of ``C'`` until it is.  So
+proxsuite certified QPs infeasible that ``x = 0`` satisfies strictly, at any tolerance down
+to round-off (``docs/solver-failures.md``).  A truly infeasible QP now runs to
+``max_iter``: a failed step with status ``user_limit``."""
 
 
 @cache
@@ -171,7 +181,7 @@ SOLVERS: dict[str, SolverSpec] = {
         # tolerances, whose default 1e-4 let PROXQP certify feasible QPs infeasible.
         SolverSpec("PROXQP", "PROXQP", lambda eps: {
             "eps_abs": eps, "eps_rel": 0.0, "max_iter": 10_000,
-            "eps_primal_inf": CERTIFICATE_TOLERANCE, "eps_dual_inf": CERTIFICATE_TOLERANCE},
+            "eps_primal_inf": NO_PRIMAL_CERTIFICATE, "eps_dual_inf": CERTIFICATE_TOLERANCE},
             "proximal augmented Lagrangian (dense backend)", "proxsuite", ("#d62728", "D"),
             adapter="proxqp", native_only=True, takes_warm_start=True,
             timing=Timing(note="its run_time includes its setup (a fresh solver per QP)")),
@@ -189,11 +199,17 @@ SOLVERS: dict[str, SolverSpec] = {
                    timing=Timing(note="its setup_time plus solve_time (dense form built before)")),
         # HiGHS drops matrix entries below small_matrix_value (default 1e-9) from the
         # model; 1e-12 is the floor of that option's range, so only round-off is dropped.
+        # Its QP solver adds qp_regularization_value (default 1e-7) to the Hessian's
+        # diagonal and so answers another QP: x off by about 1e-7 |x| / w, duals missing
+        # stationarity by as much (docs/solver-failures.md). The step QP's own Hessian
+        # is positive definite; the friction problem's zero-weight slacks have a linear
+        # cost and bounded rows. Native on every path (adapters/highs.py): cvxpy's form
+        # turns the targets into right-hand sides, which HiGHS's QP start rounds away.
         SolverSpec("HIGHS", "HIGHS", lambda eps: _quiet_highs() | {
             "primal_feasibility_tolerance": eps, "dual_feasibility_tolerance": eps,
-            "small_matrix_value": 1e-12, "output_flag": False,
-            "time_limit": HIGHS_TIME_LIMIT}, "active-set (QP)",
-            "highspy", ("#e377c2", "X")),
+            "small_matrix_value": 1e-12, "qp_regularization_value": 0.0,
+            "output_flag": False, "time_limit": HIGHS_TIME_LIMIT}, "active-set (QP)",
+            "highspy", ("#e377c2", "X"), adapter="highs", native_only=True),
     )
 }
 """Every solver the package knows; :func:`available_solvers` lists those installed."""

@@ -1,15 +1,15 @@
 """Solver adapters: the step QP's own numbers through each solver's own API.
 
 One module per solver, as qpsolvers has one per solver: :mod:`.osqp`, :mod:`.piqp`,
-:mod:`.clarabel`, :mod:`.daqp`, :mod:`.proxqp`.  Each defines an :class:`Adapter`: set up
-on a step QP's numbers (:class:`~._native.NativeData`), updated in place by the next QP of
-the same structure (sizes, weights and sparsity patterns, so the solver's matrices keep
-their patterns), solved, and answered in one sign convention
+:mod:`.clarabel`, :mod:`.daqp`, :mod:`.proxqp`, :mod:`.highs`.  Each defines an
+:class:`Adapter`: set up on a step QP's numbers (:class:`~._native.NativeData`), updated in
+place by the next QP of the same structure (sizes, weights and sparsity patterns, so the
+solver's matrices keep their patterns), solved, and answered in one sign convention
 (:class:`~._native.Answer`: ``y`` of ``E x = e`` and ``z = z_lower - z_upper`` of
 ``h <= G x <= u``, with ``grad f + E' y - G' z = 0``).
 
 This is the ``native`` solve path (:mod:`wuerfel_cvx.solve.paths`): no cvxpy between the step QP
-and the solver.  A solver without an adapter (SCS, HiGHS) is reached through cvxpy on the
+and the solver.  A solver without an adapter (SCS) is reached through cvxpy on the
 ``compiled`` path.
 """
 

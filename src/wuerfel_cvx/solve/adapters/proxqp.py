@@ -6,7 +6,9 @@ proxsuite's infeasibility certificates, which default to 1e-4 whatever ``eps_abs
 This backend therefore does not go through cvxpy at all, on the first QP of a structure,
 on compiled structures and with ``compiled=False`` alike
 (:attr:`~wuerfel_cvx.solve.registry.SolverSpec.native`); the registry sets the certificates'
-tolerances (:data:`~wuerfel_cvx.solve.registry.CERTIFICATE_TOLERANCE`).  It hands proxsuite's dense
+tolerances (:data:`~wuerfel_cvx.solve.registry.CERTIFICATE_TOLERANCE`; the primal one below
+zero, :data:`~wuerfel_cvx.solve.registry.NO_PRIMAL_CERTIFICATE`, as proxsuite's test of it has
+a sign wrong).  It hands proxsuite's dense
 backend the QP in proxsuite's form ``min x' H x / 2 + g' x``, ``A x = b``, ``l <= C x <= u`` with
 
     H = 2 W + 2 F' F,   g = -H t + l,   A = E,   b = e,
@@ -15,11 +17,13 @@ and, per row of ``G``: ``-G_i x <= -h_i`` (``l_i = -inf``) for a one-sided row, 
 passes it, and ``h_i <= G_i x <= u_i`` for a row with a finite upper bound.  One-sided rows
 are not given as ``h_i <= G_i x <= +inf``: with an infinite upper bound proxsuite 0.8 never
 certifies infeasibility (it ran to its iteration limit on a truly infeasible QP, see
-``docs/false-infeasible.md``).  The objective is the step QP's without its constant
-(proxsuite takes none; with ``eps_rel = 0`` its stopping test is absolute, so the constant
-would not enter it).  proxsuite's Lagrangian is ``H x + g + A' y + C' z = 0``; so ``y`` is
-the package's, and the package's ``z = z_lower - z_upper`` (:mod:`wuerfel_cvx.formulations.qp`)
-is ``z`` on a negated row and ``-z`` on a two-sided one.
+``docs/false-infeasible.md``; the sign error of its test, which the registry now switches
+off, turns a true certificate on a lower bound into a rejected one).  The objective is the
+step QP's without its constant (proxsuite takes none; with ``eps_rel = 0`` its stopping
+test is absolute, so the constant would not enter it).  proxsuite's Lagrangian is
+``H x + g + A' y + C' z = 0``; so ``y`` is the package's, and the package's
+``z = z_lower - z_upper`` (:mod:`wuerfel_cvx.formulations.qp`) is ``z`` on a negated row and
+``-z`` on a two-sided one.
 
 The dense backend is used, as cvxpy uses it.  The sparse one (its default Cholesky
 backend) did not return on a step QP of ``stack-10`` that the dense one solves in 4
