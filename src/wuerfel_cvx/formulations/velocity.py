@@ -381,7 +381,7 @@ def rows_along(model: Model, contacts: Contacts, approach: Approach) -> Approach
                                   motion.fitted, motion.n_boxes, *_ContactCorners.of(contacts),
                                   approach.closest, approach.row_cos, approach.row_sin)
     rate = approach.rate
-    if _same_rows(gradient, m):
+    if _same_rows(gradient, m) and np.all(approach.closest_rate <= rate):
         return ApproachRows(stacked_point_rows(index[:m], gradient[:m],
                                                n_unknown_points(model)), rate)
     matrix = stacked_point_rows(index, gradient, n_unknown_points(model))
