@@ -69,6 +69,22 @@ them alike, a contact's two rows have the same coefficients, and the rate row's 
 side is the larger: the rate row implies the other.  When that holds for every contact (a
 resting stack) the QP takes the rate rows alone, the same feasible set in half the rows.
 
+A point past its face's end.  A contact whose point starts past its face's end
+(:attr:`~wuerfel_cvx.step.contacts.Contacts.clearance` above 0) has the point's distance
+from the face (the segment) as its gap while the point is past the end, so the ramp starts
+at that larger distance and the rows' right-hand sides let the point close it (the card
+house rests on such rows).  The rows still linearise the distance from the face's *line*,
+so ``psi`` is the line distance above the line's own ramp (``phi_0`` the start's line
+distance) once the point has moved over the face, and while it is past the end wherever
+its distance from the face falls below the face's ramp.  There the rows describe ``psi``,
+and its ramp ends at zero, so the point cannot end the step inside.  Measured from the
+face's ramp instead, a corner that slid over the face's end within the step was at its
+line distance, below that ramp by up to the start's clearance: a target the rows cannot
+reach, and the passes ran to :attr:`~VelocityFormulation.max_passes` with the corner left
+inside (in generated scenes where two corners met).  The rate row takes the
+line's ramp's rate where ``psi`` is the line distance's from the first sample on, and the
+closest-approach row's ``r'`` is the rate of the ramp ``psi(tau*)`` is measured from.
+
 Why the closest approach: the motion is homogeneous in ``v`` (``p(tau; s v) = p(s tau; v)``)
 so ``G v0 = phi'(tau*; v0)``, the gap's rate at ``tau*``.  At an interior minimiser of
 ``psi / tau``, ``psi'(tau*) = psi(tau*) / tau*``, so the right-hand side is exactly ``r'``;
