@@ -224,9 +224,9 @@ class VelocityFormulation(FrictionSettings):
         :attr:`gap_tolerance` of its ramp, or after :attr:`max_passes` passes.  If the
         solution moves a body faster than the contacts were searched for (an impulse can
         speed a body up), the next pass takes the contacts within the solution's reach.
-        From the third pass on, the rows are linearised about the mean of the last
-        solution and the last linearisation point: undamped passes can oscillate where
-        fast spins make the gaps strongly nonlinear in the velocities.
+        From pass :data:`FIRST_DAMPED_PASS` on, the rows are linearised about the mean of
+        the last solution and the last linearisation point: undamped passes can oscillate
+        where fast spins make the gaps strongly nonlinear in the velocities.
         """
         if self.linearisation == "start" or passes >= self.max_passes:
             return None
@@ -236,7 +236,7 @@ class VelocityFormulation(FrictionSettings):
         if contacts is previous.contacts and approach.violation <= self.gap_tolerance:
             return None
         last = previous.linearised_about
-        if passes >= 2 and last is not None:
+        if passes + 1 >= FIRST_DAMPED_PASS and last is not None:
             approach = closest_approach(model, state.points, contacts, 0.5 * (solution + last),
                                         dt, self.push_speed)
         rows = rows_along(model, contacts, approach)
@@ -291,6 +291,14 @@ class VelocityFormulation(FrictionSettings):
 
 
 # ---------------------------------------------------------------------- closest-approach rows
+FIRST_DAMPED_PASS = 4
+"""The first Gauss-Newton pass (1 the step's first QP) whose rows are linearised about the
+mean of the last solution and the last linearisation point; earlier ones about the last
+solution (the first about the unconstrained velocities).  Damped from the third pass,
+passes of generated scenes that had nearly converged in the second stalled within a few
+micrometres of the acceptance until ``max_passes`` (the halved steps converge by about half
+a pass); one more undamped pass lets them converge (reports/robustness.md)."""
+
 SAMPLES = 16
 """Intervals of the step on which each contact's ramp margin is sampled to find its
 closest approach, refined by a parabola through the best sample and its neighbours."""
