@@ -393,38 +393,70 @@ def _line_distances(edge: FloatArray, offset: FloatArray) -> FloatArray:
     return np.asarray(cross(edge, offset) / np.hypot(edge[..., 0], edge[..., 1]))
 
 
-def face_gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray) -> FloatArray:
-    """The rows' gaps (m) at times ``tau``: the points' distances from their faces.
+def face_gaps_at(motion: BodyMotion, contacts: Contacts, tau: FloatArray,
+                 ) -> tuple[FloatArray, FloatArray, np.ndarray, np.ndarray]:
+    """The rows' gaps (m) at times ``tau``, the line distances (m), ``past`` and ``over``.
 
     :func:`gaps_at`, but a point that starts past its face's end is held off the face (the
-    segment) while it is past the end: ``hypot(beyond, line distance)``.
+    segment) while it is past the end (``past``): ``hypot(beyond, line distance)``;
+    ``over``: it started past the end and has moved over the face.
     """
-    if contacts.clearance is None or not np.any(contacts.clearance > 0.0):
-        return gaps_at(motion, contacts, tau)
     p_i, p_j, p_k = _corners_at(motion, contacts, tau)
     edge, offset = p_j - p_i, p_k - p_i
-    gaps = _line_distances(edge, offset)
+    lines = _line_distances(edge, offset)
+    none = np.zeros(np.shape(lines), dtype=bool)
+    if contacts.clearance is None or not np.any(contacts.clearance > 0.0):
+        return lines, lines, none, none
     length = np.hypot(edge[..., 0], edge[..., 1])
     place = (offset[..., 0] * edge[..., 0] + offset[..., 1] * edge[..., 1]) / length
     beyond = np.maximum(-place, place - length)
-    past = np.reshape(contacts.clearance > 0.0, (-1,) + (1,) * (np.ndim(tau) - 1)) & (
-        beyond > 0.0)
-    return np.asarray(np.where(past, np.hypot(beyond, gaps), gaps))
+    started = np.reshape(contacts.clearance > 0.0, (-1,) + (1,) * (np.ndim(tau) - 1))
+    past = started & (beyond > 0.0)
+    over = started & ~(beyond > 0.0)
+    return np.asarray(np.where(past, np.hypot(beyond, lines), lines)), lines, past, over
+
+
+def ramp_rate(start: FloatArray, dt: float, push_speed: float) -> FloatArray:
+    """The ramp's rate ``(min(0, phi_0 + dt u) - phi_0) / dt`` (m/s) from start gaps (m)."""
+    return np.asarray((np.minimum(0.0, start + dt * push_speed) - start) / dt)
+
+
+def ramp_margins(motion: BodyMotion, contacts: Contacts, tau: FloatArray, dt: float,
+                 push_speed: float, starts: tuple[FloatArray, FloatArray] | None = None,
+                 ) -> tuple[FloatArray, np.ndarray, tuple[FloatArray, FloatArray]]:
+    """``psi`` (m) at ``tau`` ``(m, K)``, whether it is the line's, the start gaps and lines.
+
+    The gap above its ramp; for a point that started past its face's end, the line distance
+    above the line's ramp once over the face, or where its gap falls below the face's ramp.
+    ``starts``: the start gaps and line distances (m); ``tau[:, 0]`` is 0 where ``None``.
+    """
+    gaps, lines, past, over = face_gaps_at(motion, contacts, tau)
+    start, line_start = (gaps[:, 0], lines[:, 0]) if starts is None else starts
+    face = gaps - start[:, None] - ramp_rate(start, dt, push_speed)[:, None] * tau
+    line = (lines - line_start[:, None]
+            - ramp_rate(line_start, dt, push_speed)[:, None] * tau)
+    on_line = over | (past & ~(face >= 0.0))
+    return np.asarray(np.where(on_line, line, face)), on_line, (start, line_start)
 
 
 def closest_approach(model: Model, points: FloatArray, contacts: Contacts, about: FloatArray,
                      dt: float, push_speed: float,
-                     ) -> tuple[BodyMotion, FloatArray, FloatArray, FloatArray, float]:
-    """``velocity.closest_approach``: the motion, ``tau*``, ``psi(tau*)``, ``r'``, violation."""
+                     ) -> tuple[BodyMotion, FloatArray, FloatArray, FloatArray, FloatArray,
+                                float]:
+    """``velocity.closest_approach``: the motion, ``tau*``, ``psi(tau*)``, rates, violation.
+
+    The rates (m/s): the rate rows' right-hand sides, the closest-approach rows' caps.
+    """
     motion = body_motion(model, points, about.reshape(-1, 2)[: model.n_points])
     m = len(contacts)
     if m == 0:
-        return motion, np.zeros(0), np.zeros(0), np.zeros(0), 0.0
+        return motion, np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), 0.0
     grid = np.linspace(0.0, dt, SAMPLES + 1)
-    gaps = face_gaps_at(motion, contacts, np.broadcast_to(grid, (m, SAMPLES + 1)))
-    start = gaps[:, 0]
-    ramp_rate = (np.minimum(0.0, start + dt * push_speed) - start) / dt
-    margin = gaps - start[:, None] - ramp_rate[:, None] * grid
+    margin, on_line, starts = ramp_margins(motion, contacts,
+                                           np.broadcast_to(grid, (m, SAMPLES + 1)), dt,
+                                           push_speed)
+    rate = ramp_rate(starts[0], dt, push_speed)
+    line_rate = ramp_rate(starts[1], dt, push_speed)
     mean_rate = np.empty_like(margin)
     mean_rate[:, 1:] = margin[:, 1:] / grid[1:]
     mean_rate[:, 0] = 2.0 * mean_rate[:, 1] - mean_rate[:, 2]  # for the parabola only
@@ -436,24 +468,29 @@ def closest_approach(model: Model, points: FloatArray, contacts: Contacts, about
     shift = np.where(curvature > 0.0, 0.5 * (left - right) / np.where(curvature > 0.0,
                                                                       curvature, 1.0), 0.0)
     refined = np.clip((inner + np.clip(shift, -1.0, 1.0)) * dt / SAMPLES, dt / SAMPLES, dt)
-    refined_margin = face_gaps_at(motion, contacts, refined) - start - ramp_rate * refined
+    refined_margin, refined_line, _ = ramp_margins(motion, contacts, refined[:, None], dt,
+                                                   push_speed, starts)
+    refined_margin, refined_line = refined_margin[:, 0], refined_line[:, 0]
     sampled_tau, sampled_margin = grid[best], margin[rows, best]
     take = refined_margin / refined < mean_rate[rows, best]
     violation = float(max(0.0, -np.min(margin), -np.min(refined_margin)))
+    closest_line = np.where(take, refined_line, on_line[rows, best])
     return (motion, np.where(take, refined, sampled_tau),
-            np.where(take, refined_margin, sampled_margin), ramp_rate, violation)
+            np.where(take, refined_margin, sampled_margin),
+            np.where(on_line[:, 1], line_rate, rate), np.where(closest_line, line_rate, rate),
+            violation)
 
 
 def rows_along(model: Model, contacts: Contacts, motion: BodyMotion, about: FloatArray,
                closest: FloatArray, margin: FloatArray, rate: FloatArray,
-               ) -> tuple[sp.csr_array, FloatArray]:
+               closest_rate: FloatArray) -> tuple[sp.csr_array, FloatArray]:
     """``velocity.rows_along``: the rate rows, then the closest-approach rows, and ``h``."""
     m = len(contacts)
     corners = tuple(np.concatenate([values, values]) for values in _contact_corners(contacts))
     blocks = _approach_blocks(motion, corners, np.concatenate([np.zeros(m), closest]))
     matrix = point_rows(2 * m, n_unknown_points(model), blocks)
     lifted = matrix[m:] @ about - margin / closest
-    return matrix, np.concatenate([rate, np.minimum(lifted, rate)])
+    return matrix, np.concatenate([rate, np.minimum(lifted, closest_rate)])
 
 
 def _approach_blocks(motion: BodyMotion, corners: tuple[IntArray, ...],

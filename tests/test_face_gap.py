@@ -14,6 +14,7 @@ import pytest
 
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.formulations import get_formulation
+from wuerfel_cvx.formulations.velocity import VelocityFormulation
 from wuerfel_cvx.lab.bench.friction_targets import displacement
 from wuerfel_cvx.scenes.geometry import FloatArray
 from wuerfel_cvx.step.contacts import TIE_TOLERANCE, Contacts, find_contacts
@@ -90,3 +91,53 @@ def test_the_card_house_stands() -> None:
                           formulation="rigid", friction_model="ccp")
     assert trajectory.metrics["status"].eq("optimal").all()
     assert displacement(trajectory, settle=1.0) <= 1e-4
+
+
+TABLE = {"center": [0.0, -0.5], "size": [40.0, 1.0], "angle": 0.0}
+MEETING_CORNERS = {
+    # Two bodies of the generated scenes 199 and 26 of the robustness sweep
+    # (random_scene(default_rng(0))) at the step before two of their corners met: each
+    # corner past the other's face's end, closing at metres per second, slides over the
+    # face within the step.  Held by the face's ramp there, the passes ran to max_passes
+    # and left a corner 3 mm (scene 199) and 0.35 mm (scene 26) inside.
+    "g-199-step-32": {
+        "squares": [{"center": [0.4731326787583286, 0.43522934023161786],
+                     "size": 0.7726931336421963, "angle": -0.13483687083765022,
+                     "mass": 9.123044976656562,
+                     "velocity": [4.488783339008554, 0.9452910079408281],
+                     "angular_velocity": -4.623114975682974}],
+        "boxes": [{"center": [1.9614342703857044, 0.7718871872540002],
+                   "size": [0.83279127913459, 1.8804065872757374],
+                   "angle": -2.0020303021835404, "mass": 0.1017504598056989,
+                   "velocity": [-4.7874863228512945, -4.531145076242581],
+                   "angular_velocity": 3.947781239173343}]},
+    "g-26-step-25": {
+        "squares": [{"center": [1.805842417933401, 1.4709718616863658],
+                     "size": 0.31025667996466366, "angle": 0.12569869617041135,
+                     "mass": 0.19633616875144147,
+                     "velocity": [-4.471832762562006, 0.8530231652881528],
+                     "angular_velocity": -2.056343580916793},
+                    {"center": [1.0842151374426634, 2.3619726595045725],
+                     "size": 1.269542134144221, "angle": -1.7201613673295149,
+                     "mass": 0.10464891246564158,
+                     "velocity": [2.8381470421629595, -3.612482135923127],
+                     "angular_velocity": -7.86693600969793}],
+        "boxes": []},
+}
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("formulation", ["rigid", "velocity"])
+@pytest.mark.parametrize("name", sorted(MEETING_CORNERS))
+def test_a_corner_sliding_over_a_faces_end_stays_outside(name: str, formulation: str) -> None:
+    # Once over the face the corner is held by its line distance's ramp, which the rows
+    # linearise: the passes converge, and an accepted pass leaves no gap more than
+    # gap_tolerance below its ramp, which ends at zero for a point outside.
+    scene = Scene.from_dict({"name": name, "gravity": [0.0, -9.81], "allow_overlap": False,
+                             "tables": [TABLE], **MEETING_CORNERS[name]})
+    passes = VelocityFormulation()  # rigid's passes are velocity's
+    trajectory = simulate(scene, dt=0.01, steps=2, solver="clarabel", formulation=formulation)
+    metrics = trajectory.metrics
+    assert metrics["status"].eq("optimal").all()
+    assert metrics["passes"].max() < passes.max_passes
+    assert metrics["penetration_m"].max() <= passes.gap_tolerance

@@ -248,15 +248,15 @@ def test_closest_approach_time_is_differentiated_where_it_moves() -> None:
         tau, psi = approach.closest, approach.margin
         return float(tau[0]), float(psi[0])
 
-    tau, psi, _, choices = _closest(x[None, :].astype(complex), inputs, None, False)
+    tau, psi, _, _, choices = _closest(x[None, :].astype(complex), inputs, None, False)
     assert choices["take"][0] and not choices["flat"][0]
     assert forward(x) == pytest.approx((tau[0].real, psi[0].real), rel=1e-12)
     held = _Held(at_rate=np.array([False]), **choices)
     for column in (4, 5, 12, 13):  # the square's y, angle, and about's v_y, omega
         stepped = x[None, :].astype(complex)
         stepped[0, column] += 1j * COMPLEX_STEP
-        tau_d, psi_d, _, _ = _closest(stepped, inputs, held, False)
-        tau_h, psi_h, _, _ = _closest(stepped, inputs, held, True)
+        tau_d, psi_d, _, _, _ = _closest(stepped, inputs, held, False)
+        tau_h, psi_h, _, _, _ = _closest(stepped, inputs, held, True)
         plus, minus = x.copy(), x.copy()
         plus[column] += step
         minus[column] -= step

@@ -304,17 +304,19 @@ def same_approach(model: Model, state: State, about: FloatArray) -> tuple[int, i
     formulation = VelocityFormulation()
     found = find_contacts(model, state.points, formulation.body_reach(model, state, DT))
     ours = closest_approach(model, state.points, found, about, DT, formulation.push_speed)
-    motion, closest, margin, rate, violation = reference.closest_approach(
+    motion, closest, margin, rate, closest_rate, violation = reference.closest_approach(
         model, state.points, found, about, DT, formulation.push_speed)
     for field in dataclasses.fields(motion):
         assert_same_bits(getattr(ours.motion, field.name), getattr(motion, field.name))
     if len(found) == 0:
         return 0, 0
     for compiled, expected in ((ours.closest, closest), (ours.margin, margin),
-                               (ours.rate, rate), (ours.violation, violation)):
+                               (ours.rate, rate), (ours.closest_rate, closest_rate),
+                               (ours.violation, violation)):
         assert_same_bits(compiled, expected)
     rows = rows_along(model, found, ours)
-    matrix, rhs = reference.rows_along(model, found, motion, about, closest, margin, rate)
+    matrix, rhs = reference.rows_along(model, found, motion, about, closest, margin, rate,
+                                       closest_rate)
     m = len(found)
     if rows.matrix.shape[0] == m:  # one row per contact: each contact's two rows are one
         rate_rows = matrix[:m]

@@ -36,7 +36,7 @@ from .cone import ConeRows, contact_cones
 from .motion import rigid_step
 from .qp import FrictionSettings, RowUnits, StepQP, declare_qp, velocity_rows
 from .rows import body_rows
-from .velocity import VelocityFormulation, closest_approach, rows_along
+from .velocity import FIRST_DAMPED_PASS, VelocityFormulation, closest_approach, rows_along
 
 
 @dataclass(frozen=True)
@@ -120,7 +120,8 @@ class RigidFormulation(FrictionSettings):
         if contacts is previous.contacts and approach.violation <= self._velocity.gap_tolerance:
             return None
         last = previous.linearised_about
-        about = 0.5 * (solution + last) if passes >= 2 and last is not None else solution
+        damped = passes + 1 >= FIRST_DAMPED_PASS and last is not None
+        about = 0.5 * (solution + last) if damped and last is not None else solution
         return self._along(model, state, contacts, previous.weights, previous.target, about,
                            dt)
 

@@ -69,6 +69,22 @@ them alike, a contact's two rows have the same coefficients, and the rate row's 
 side is the larger: the rate row implies the other.  When that holds for every contact (a
 resting stack) the QP takes the rate rows alone, the same feasible set in half the rows.
 
+A point past its face's end.  A contact whose point starts past its face's end
+(:attr:`~wuerfel_cvx.step.contacts.Contacts.clearance` above 0) has the point's distance
+from the face (the segment) as its gap while the point is past the end, so the ramp starts
+at that larger distance and the rows' right-hand sides let the point close it (the card
+house rests on such rows).  The rows still linearise the distance from the face's *line*,
+so ``psi`` is the line distance above the line's own ramp (``phi_0`` the start's line
+distance) once the point has moved over the face, and while it is past the end wherever
+its distance from the face falls below the face's ramp.  There the rows describe ``psi``,
+and its ramp ends at zero, so the point cannot end the step inside.  Measured from the
+face's ramp instead, a corner that slid over the face's end within the step was at its
+line distance, below that ramp by up to the start's clearance: a target the rows cannot
+reach, and the passes ran to :attr:`~VelocityFormulation.max_passes` with the corner left
+inside (in generated scenes where two corners met).  The rate row takes the
+line's ramp's rate where ``psi`` is the line distance's from the first sample on, and the
+closest-approach row's ``r'`` is the rate of the ramp ``psi(tau*)`` is measured from.
+
 Why the closest approach: the motion is homogeneous in ``v`` (``p(tau; s v) = p(s tau; v)``)
 so ``G v0 = phi'(tau*; v0)``, the gap's rate at ``tau*``.  At an interior minimiser of
 ``psi / tau``, ``psi'(tau*) = psi(tau*) / tau*``, so the right-hand side is exactly ``r'``;
@@ -208,9 +224,9 @@ class VelocityFormulation(FrictionSettings):
         :attr:`gap_tolerance` of its ramp, or after :attr:`max_passes` passes.  If the
         solution moves a body faster than the contacts were searched for (an impulse can
         speed a body up), the next pass takes the contacts within the solution's reach.
-        From the third pass on, the rows are linearised about the mean of the last
-        solution and the last linearisation point: undamped passes can oscillate where
-        fast spins make the gaps strongly nonlinear in the velocities.
+        From pass :data:`FIRST_DAMPED_PASS` on, the rows are linearised about the mean of
+        the last solution and the last linearisation point: undamped passes can oscillate
+        where fast spins make the gaps strongly nonlinear in the velocities.
         """
         if self.linearisation == "start" or passes >= self.max_passes:
             return None
@@ -220,7 +236,7 @@ class VelocityFormulation(FrictionSettings):
         if contacts is previous.contacts and approach.violation <= self.gap_tolerance:
             return None
         last = previous.linearised_about
-        if passes >= 2 and last is not None:
+        if passes + 1 >= FIRST_DAMPED_PASS and last is not None:
             approach = closest_approach(model, state.points, contacts, 0.5 * (solution + last),
                                         dt, self.push_speed)
         rows = rows_along(model, contacts, approach)
@@ -275,6 +291,14 @@ class VelocityFormulation(FrictionSettings):
 
 
 # ---------------------------------------------------------------------- closest-approach rows
+FIRST_DAMPED_PASS = 4
+"""The first Gauss-Newton pass (1 the step's first QP) whose rows are linearised about the
+mean of the last solution and the last linearisation point; earlier ones about the last
+solution (the first about the unconstrained velocities).  Damped from the third pass,
+passes of generated scenes that had nearly converged in the second stalled within a few
+micrometres of the acceptance until ``max_passes`` (the halved steps converge by about half
+a pass); one more undamped pass lets them converge (reports/robustness.md)."""
+
 SAMPLES = 16
 """Intervals of the step on which each contact's ramp margin is sampled to find its
 closest approach, refined by a parabola through the best sample and its neighbours."""
@@ -309,7 +333,12 @@ class Approach:
     margin: FloatArray
     """``psi(tau*)`` (m) of each contact."""
     rate: FloatArray
-    """The ramp's rate ``r' = (c - phi_0) / dt`` (m/s) of each contact."""
+    """The ramp's rate ``r' = (c - phi_0) / dt`` (m/s) of each contact: its rate row's
+    right-hand side."""
+    closest_rate: FloatArray
+    """The rate (m/s) of the ramp ``psi(tau*)`` is measured from: ``rate``, or for a point
+    that started past its face's end and is over the face at ``tau*``, its line distance's
+    ramp's (module docstring): the cap of its closest-approach row's right-hand side."""
     violation: float
     """Largest ``-psi`` (m) along the motion (0 if none)."""
     row_cos: FloatArray
@@ -339,7 +368,7 @@ def approach_along(motion: BodyMotion, contacts: Contacts, about: FloatArray, dt
     """:func:`closest_approach` along a given rigid ``motion`` (that of ``about``)."""
     if len(contacts) == 0:
         none = np.zeros(0)
-        return Approach(about, motion, none, none, none, 0.0, np.zeros((0, 2)),
+        return Approach(about, motion, none, none, none, none, 0.0, np.zeros((0, 2)),
                         np.zeros((0, 2)))
     grid, turned = _sample_turns(motion.angle, motion.spin, dt, SAMPLES)
     cos, sin = np.cos(turned), np.sin(turned)
@@ -349,13 +378,15 @@ def approach_along(motion: BodyMotion, contacts: Contacts, about: FloatArray, dt
     sampled = _sampled_approach(motion.center, motion.velocity, motion.reference, motion.angle,
                                 motion.spin, cos, sin, grid, *corners, clearance, dt,
                                 push_speed)
-    start, rate, refined, best, best_rate, best_margin, lowest, refined_turns = sampled
-    closest, margin, lowest_refined, row_cos, row_sin = _refined_approach(
+    (start, rate, line_start, line_rate, start_rate, refined, best, best_rate, best_margin,
+     best_line, lowest, refined_turns) = sampled
+    closest, margin, closest_rate, lowest_refined, row_cos, row_sin = _refined_approach(
         motion.center, motion.velocity, motion.reference, cos, sin,
         np.cos(refined_turns), np.sin(refined_turns), grid, *corners, clearance, start, rate,
-        refined, best, best_rate, best_margin)
+        line_start, line_rate, refined, best, best_rate, best_margin, best_line)
     violation = float(max(0.0, -lowest, -lowest_refined))
-    return Approach(about, motion, closest, margin, rate, violation, row_cos, row_sin)
+    return Approach(about, motion, closest, margin, start_rate, closest_rate, violation,
+                    row_cos, row_sin)
 
 
 def rows_along(model: Model, contacts: Contacts, approach: Approach) -> ApproachRows:
@@ -374,7 +405,7 @@ def rows_along(model: Model, contacts: Contacts, approach: Approach) -> Approach
                                   motion.fitted, motion.n_boxes, *_ContactCorners.of(contacts),
                                   approach.closest, approach.row_cos, approach.row_sin)
     rate = approach.rate
-    if _same_rows(gradient, m):
+    if _same_rows(gradient, m) and np.all(approach.closest_rate <= rate):
         return ApproachRows(stacked_point_rows(index[:m], gradient[:m],
                                                n_unknown_points(model)), rate)
     matrix = stacked_point_rows(index, gradient, n_unknown_points(model))
@@ -382,7 +413,8 @@ def rows_along(model: Model, contacts: Contacts, approach: Approach) -> Approach
     # minimum keeps it there where the sampled minimiser is inexact or on the boundary
     closest = (_row_products(matrix.data, matrix.indices, matrix.indptr, m, approach.about)
                - approach.margin / approach.closest)
-    return ApproachRows(matrix, np.concatenate([rate, np.minimum(closest, rate)]))
+    return ApproachRows(matrix, np.concatenate([rate, np.minimum(closest,
+                                                                 approach.closest_rate)]))
 
 
 class _ContactCorners(NamedTuple):
@@ -454,16 +486,23 @@ def _nan_min(a: float, b: float) -> float:
     return b
 
 
+ON_FACE, PAST_END, OVER_FACE = 0, 1, 2
+"""Where a contact's point is at a time of the step (:func:`_face_gap`)."""
+
+
 @compiled
 def _face_gap(center: FloatArray, velocity: FloatArray, reference: FloatArray,
               edge_body: int, point_body: int, corner_i: int, corner_j: int, corner_k: int,
               clearance: float, tau: float, edge_cos: float, edge_sin: float,
-              point_cos: float, point_sin: float) -> float:
+              point_cos: float, point_sin: float) -> tuple[float, float, int]:
     """A contact's gap (m) at ``tau`` (s), as the NumPy code's ``face_gaps_at``.
 
     Its point's distance from its edge's line, or, if the point starts past the face's end
-    (``clearance`` above 0) and is still past it, from the face (the segment).  ``cos`` and
-    ``sin`` of the bodies' angles at ``tau``.
+    (``clearance`` above 0) and is still past it, from the face (the segment).  Also the
+    line distance (m) and where the point is (:func:`_ramp_margin`): :data:`ON_FACE` (it
+    started on the face), :data:`PAST_END` (it started past the face's end and still is)
+    or :data:`OVER_FACE` (it started past the end and has moved over the face).  ``cos``
+    and ``sin`` of the bodies' angles at ``tau``.
     """
     p_i = _corner_at(center, velocity, reference, edge_body, corner_i, tau, edge_cos, edge_sin)
     p_j = _corner_at(center, velocity, reference, edge_body, corner_j, tau, edge_cos, edge_sin)
@@ -472,13 +511,32 @@ def _face_gap(center: FloatArray, velocity: FloatArray, reference: FloatArray,
     edge_x, edge_y = p_j[0] - p_i[0], p_j[1] - p_i[1]
     offset_x, offset_y = p_k[0] - p_i[0], p_k[1] - p_i[1]
     length = math.hypot(edge_x, edge_y)
-    gap: float = (edge_x * offset_y - edge_y * offset_x) / length
+    line: float = (edge_x * offset_y - edge_y * offset_x) / length
+    gap, where = line, ON_FACE
     if clearance > 0.0:
         place = (offset_x * edge_x + offset_y * edge_y) / length
         beyond = _nan_max(-place, place - length)
         if beyond > 0.0:
-            gap = math.hypot(beyond, gap)
-    return gap
+            gap, where = math.hypot(beyond, line), PAST_END
+        else:
+            where = OVER_FACE
+    return gap, line, where
+
+
+@compiled
+def _ramp_margin(gap: float, line: float, where: int, tau: float, start: float, rate: float,
+                 line_start: float, line_rate: float) -> tuple[float, bool]:
+    """``psi(tau)`` (m) and whether it is the line distance's (module docstring).
+
+    The gap above its ramp (from ``start`` at ``rate``), or for a point that started past
+    its face's end, the line distance above the line's ramp (from ``line_start`` at
+    ``line_rate``): once the point is over the face, and while it is past the end where its
+    distance from the face falls below the face's ramp.
+    """
+    face = gap - start - rate * tau
+    if where == ON_FACE or (where == PAST_END and face >= 0.0):
+        return face, False
+    return line - line_start - line_rate * tau, True
 
 
 @compiled
@@ -517,33 +575,44 @@ def _sampled_approach(center: FloatArray, velocity: FloatArray, reference: Float
                       grid: FloatArray, edge_body: IntArray, point_body: IntArray,
                       corner_i: IntArray, corner_j: IntArray, corner_k: IntArray,
                       clearance: FloatArray, dt: float, push_speed: float,
-                      ) -> tuple[FloatArray, FloatArray, FloatArray, IntArray, FloatArray,
-                                 FloatArray, float, FloatArray]:
+                      ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
+                                 FloatArray, IntArray, FloatArray, FloatArray, np.ndarray,
+                                 float, FloatArray]:
     """Each contact's ramp margins on the samples, their minimiser and its refinement.
 
     ``cos`` and ``sin`` ``(B, samples + 1)`` of each body's angle at the sample times
-    ``grid`` (s).  Returns the start gaps (m), the ramps' rates (m/s), the refined times
-    (s), the best samples, their mean rates (m/s) and margins (m), the lowest sampled margin
-    (m; NaN if any is) and the angles ``(m, 2)`` (rad) of the contacts' edge and point
-    bodies at their refined times.
+    ``grid`` (s).  Returns the start gaps (m), the ramps' rates (m/s), the start line
+    distances (m) and their ramps' rates (m/s) (:func:`_ramp_margin`), the rate rows'
+    right-hand sides (m/s; the line's ramp's rate where ``psi`` is the line distance's
+    from the first sample on, else the ramp's), the refined times
+    (s), the best samples, their mean rates (m/s) and margins (m), whether the best sample's
+    point is over the face it started past, the lowest sampled margin (m; NaN if any is)
+    and the angles ``(m, 2)`` (rad) of the contacts' edge and point bodies at their refined
+    times.
     """
     m, samples = edge_body.shape[0], grid.shape[0] - 1
     start, rate, refined = np.empty(m), np.empty(m), np.empty(m)
+    line_start, line_rate, start_rate = np.empty(m), np.empty(m), np.empty(m)
     best = np.empty(m, dtype=np.int64)
     best_rate, best_margin = np.empty(m), np.empty(m)
+    best_line = np.empty(m, dtype=np.bool_)
     refined_turns = np.empty((m, 2))
-    gaps, mean_rate = np.empty(samples + 1), np.empty(samples + 1)
+    gaps, lines = np.empty(samples + 1), np.empty(samples + 1)
+    where, on_line = np.empty(samples + 1, dtype=np.int64), np.empty(samples + 1, dtype=np.bool_)
+    mean_rate = np.empty(samples + 1)
     lowest = np.inf
     for c in range(m):
         a, b = edge_body[c], point_body[c]
         for s in range(samples + 1):
-            gaps[s] = _face_gap(center, velocity, reference, a, b, corner_i[c], corner_j[c],
-                                corner_k[c], clearance[c], grid[s], cos[a, s], sin[a, s],
-                                cos[b, s], sin[b, s])
-        start[c] = gaps[0]
+            gaps[s], lines[s], where[s] = _face_gap(
+                center, velocity, reference, a, b, corner_i[c], corner_j[c], corner_k[c],
+                clearance[c], grid[s], cos[a, s], sin[a, s], cos[b, s], sin[b, s])
+        start[c], line_start[c] = gaps[0], lines[0]
         rate[c] = (_nan_min(0.0, gaps[0] + dt * push_speed) - gaps[0]) / dt
+        line_rate[c] = (_nan_min(0.0, lines[0] + dt * push_speed) - lines[0]) / dt
         for s in range(samples + 1):
-            margin = gaps[s] - start[c] - rate[c] * grid[s]
+            margin, on_line[s] = _ramp_margin(gaps[s], lines[s], where[s], grid[s],
+                                              start[c], rate[c], line_start[c], line_rate[c])
             lowest = _nan_min(lowest, margin)
             gaps[s] = margin  # the gaps are not needed further
             if s > 0:
@@ -551,10 +620,14 @@ def _sampled_approach(center: FloatArray, velocity: FloatArray, reference: Float
         mean_rate[0] = 2.0 * mean_rate[1] - mean_rate[2]  # for the parabola only
         best[c] = _best_sample(mean_rate)
         best_rate[c], best_margin[c] = mean_rate[best[c]], gaps[best[c]]
+        best_line[c] = on_line[best[c]]
+        # the rate row's: the line's where psi is the line distance's from the first sample
+        start_rate[c] = line_rate[c] if on_line[1] else rate[c]
         refined[c] = _parabola_time(mean_rate, best[c], dt)
         refined_turns[c, 0] = angle[a] + spin[a] * refined[c]
         refined_turns[c, 1] = angle[b] + spin[b] * refined[c]
-    return start, rate, refined, best, best_rate, best_margin, lowest, refined_turns
+    return (start, rate, line_start, line_rate, start_rate, refined, best, best_rate,
+            best_margin, best_line, lowest, refined_turns)
 
 
 @compiled
@@ -563,38 +636,45 @@ def _refined_approach(center: FloatArray, velocity: FloatArray, reference: Float
                       refined_sin: FloatArray, grid: FloatArray, edge_body: IntArray,
                       point_body: IntArray, corner_i: IntArray, corner_j: IntArray,
                       corner_k: IntArray, clearance: FloatArray, start: FloatArray,
-                      rate: FloatArray, refined: FloatArray, best: IntArray,
-                      best_rate: FloatArray, best_margin: FloatArray,
-                      ) -> tuple[FloatArray, FloatArray, float, FloatArray, FloatArray]:
+                      rate: FloatArray, line_start: FloatArray, line_rate: FloatArray,
+                      refined: FloatArray, best: IntArray, best_rate: FloatArray,
+                      best_margin: FloatArray, best_line: np.ndarray,
+                      ) -> tuple[FloatArray, FloatArray, FloatArray, float, FloatArray,
+                                 FloatArray]:
     """Each contact's closest approach: the refined time where its mean rate is lower.
 
     ``refined_cos`` and ``refined_sin`` ``(m, 2)`` of the angles at the refined times.
-    Returns ``tau*`` (s), ``psi(tau*)`` (m), the lowest refined margin (m; NaN if any is),
-    and ``cos`` and ``sin`` ``(2 m, 2)`` of the bodies' angles at the rows' times.
+    Returns ``tau*`` (s), ``psi(tau*)`` (m), the rate (m/s) of the ramp ``psi`` is taken
+    from there (:func:`_ramp_margin`), the lowest refined margin (m; NaN if any is), and
+    ``cos`` and ``sin`` ``(2 m, 2)`` of the bodies' angles at the rows' times.
     """
     m = edge_body.shape[0]
-    closest, margin = np.empty(m), np.empty(m)
+    closest, margin, closest_rate = np.empty(m), np.empty(m), np.empty(m)
     row_cos, row_sin = np.empty((2 * m, 2)), np.empty((2 * m, 2))
     lowest = np.inf
     for c in range(m):
         a, b = edge_body[c], point_body[c]
-        gap = _face_gap(center, velocity, reference, a, b, corner_i[c], corner_j[c],
-                        corner_k[c], clearance[c], refined[c], refined_cos[c, 0],
-                        refined_sin[c, 0], refined_cos[c, 1], refined_sin[c, 1])
-        refined_margin = gap - start[c] - rate[c] * refined[c]
+        gap, line, where = _face_gap(center, velocity, reference, a, b, corner_i[c],
+                                     corner_j[c], corner_k[c], clearance[c], refined[c],
+                                     refined_cos[c, 0], refined_sin[c, 0], refined_cos[c, 1],
+                                     refined_sin[c, 1])
+        refined_margin, on_line = _ramp_margin(gap, line, where, refined[c], start[c],
+                                               rate[c], line_start[c], line_rate[c])
         lowest = _nan_min(lowest, refined_margin)
         row_cos[c, 0], row_sin[c, 0] = cos[a, 0], sin[a, 0]
         row_cos[c, 1], row_sin[c, 1] = cos[b, 0], sin[b, 0]
         if refined_margin / refined[c] < best_rate[c]:
             closest[c], margin[c] = refined[c], refined_margin
+            closest_rate[c] = line_rate[c] if on_line else rate[c]
             row_cos[m + c, 0], row_sin[m + c, 0] = refined_cos[c, 0], refined_sin[c, 0]
             row_cos[m + c, 1], row_sin[m + c, 1] = refined_cos[c, 1], refined_sin[c, 1]
         else:
             s = best[c]
             closest[c], margin[c] = grid[s], best_margin[c]
+            closest_rate[c] = line_rate[c] if best_line[c] else rate[c]
             row_cos[m + c, 0], row_sin[m + c, 0] = cos[a, s], sin[a, s]
             row_cos[m + c, 1], row_sin[m + c, 1] = cos[b, s], sin[b, s]
-    return closest, margin, lowest, row_cos, row_sin
+    return closest, margin, closest_rate, lowest, row_cos, row_sin
 
 
 @compiled

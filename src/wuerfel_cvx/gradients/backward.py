@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..formulations.qp import StepQP
+from ..formulations.velocity import FIRST_DAMPED_PASS
 from ..scenes.geometry import FloatArray, rot90
 from ..solve.kkt import POLISHED, REUSED, ActiveSet, guess_active_set
 from ..solve.paths import StepSolution
@@ -172,7 +173,7 @@ def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
             continue
         if index == 0:  # the first pass is linearised about the target
             a_target += about
-        elif index == 1:  # the second about the first answer
+        elif index + 1 < FIRST_DAMPED_PASS:  # the next ones about the last answer
             a_x, carried = about, np.zeros(3 * n)
         else:  # later ones about the mean of the last answer and the last point
             a_x, carried = 0.5 * about, 0.5 * about
@@ -194,9 +195,10 @@ recorded linearisation point and the one :func:`_about_rule` expects."""
 def _about_rule(record: StepTape, chain: tuple[tuple[StepQP, StepSolution], ...]) -> None:
     """Refuse a step whose passes were not linearised as the backward pass chains them.
 
-    Pass 1 about the step's target (without a Coulomb step's friction impulse), pass 2
-    about pass 1's answer, pass ``q >= 3`` about the mean of pass ``q - 1``'s answer and
-    point (:meth:`RigidFormulation.refine <wuerfel_cvx.formulations.rigid.RigidFormulation.
+    Pass 1 about the step's target (without a Coulomb step's friction impulse), pass ``q``
+    below :data:`~wuerfel_cvx.formulations.velocity.FIRST_DAMPED_PASS` about pass
+    ``q - 1``'s answer, later ones about the mean of pass ``q - 1``'s answer and point
+    (:meth:`RigidFormulation.refine <wuerfel_cvx.formulations.rigid.RigidFormulation.
     refine>`).  A Coulomb step whose fixed point re-linearised its rows is refused: its
     passes interleave with friction problems, and are not chained.
     """
@@ -205,7 +207,8 @@ def _about_rule(record: StepTape, chain: tuple[tuple[StepQP, StepSolution], ...]
     expected = [target]
     for index in range(1, len(chain)):
         answer, last = chain[index - 1][1].x, chain[index - 1][0].linearised_about
-        expected.append(answer if index == 1 or last is None else 0.5 * (answer + last))
+        expected.append(answer if index + 1 < FIRST_DAMPED_PASS or last is None
+                        else 0.5 * (answer + last))
     for (qp, _), about in zip(chain, expected, strict=True):
         recorded = qp.linearised_about
         scale = 1.0 + float(np.max(np.abs(about), initial=0.0))

@@ -377,6 +377,11 @@ class _Held:
     """The refined time clipped to ``dt / SAMPLES`` (-1) or ``dt`` (+1), else 0."""
     take: np.ndarray
     """The refined time beats the best sample."""
+    grid_line: np.ndarray
+    """``psi`` is the line distance's above the line's ramp, per contact and sample time
+    (:func:`_ramp_margins`)."""
+    refined_line: np.ndarray
+    """... at the refined time."""
     at_rate: np.ndarray
     """The closest-approach row's right side is the ramp's rate (the minimum in
     :func:`~wuerfel_cvx.formulations.velocity.rows_along`)."""
@@ -450,8 +455,8 @@ def _approach_corners(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
 
 def _face_gaps(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
                choices: tuple[np.ndarray, np.ndarray] | None,
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The rows' gaps (m) at ``tau`` ``(m, K)`` and the choices ``past`` and ``before``.
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The rows' gaps (m) at ``tau`` ``(m, K)``, the line distances (m), the choices.
 
     ``face_gaps_at`` of the NumPy reference (tests/reference_kernels.py) in analytic arithmetic:
     ``choices`` (``past``, ``before``, each ``(m, K)``) held, or made where ``None``.
@@ -469,14 +474,38 @@ def _face_gaps(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
         past, before = choices
         beyond = np.where(before, -place, place - length)
     safe = np.where(past, beyond, 1.0)
-    return np.where(past, np.sqrt(safe * safe + gaps * gaps), gaps), past, before
+    return np.where(past, np.sqrt(safe * safe + gaps * gaps), gaps), gaps, past, before
+
+
+def _ramp_rate(start: np.ndarray, pushed: np.ndarray, inputs: _ApproachInputs) -> np.ndarray:
+    """The ramp's rate (m/s) from start gaps (m): ``u`` for a deep start, else ``-phi_0 / dt``."""
+    return np.where(pushed, inputs.push_speed + 0.0 * start, -start / inputs.dt)
+
+
+def _ramp_margins(gaps: np.ndarray, lines: np.ndarray, past: np.ndarray,
+                  inputs: _ApproachInputs, tau: np.ndarray, starts: tuple[np.ndarray, ...],
+                  on_line: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """``psi`` (m) at ``tau`` ``(m, K)`` and the choice ``on_line`` (held, or made if ``None``).
+
+    As the forward pass's ``_ramp_margin``: the gap above its ramp, or for a point that
+    started past its face's end, the line distance above the line's ramp once over the
+    face or where its gap falls below the face's ramp.  ``starts``: the start gaps and line
+    distances (m) and their ramps' rates (m/s).
+    """
+    start, line_start, rate, line_rate = starts
+    face = gaps - start[:, None] - rate[:, None] * tau
+    line = lines - line_start[:, None] - line_rate[:, None] * tau
+    if on_line is None:
+        on_line = inputs.beyond_face[:, None] & ~(past & (face.real >= 0.0))
+    return np.where(on_line, line, face), on_line
 
 
 def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
              hold_closest: bool, forced: FloatArray | None = None,
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-    """``tau*`` (s), ``psi(tau*)`` (m) and the ramp rate ``r'`` (m/s) of each contact.
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+    """``tau*`` (s), ``psi(tau*)`` (m), the rows' right sides' rates (m/s) of each contact.
 
+    The rates: the rate row's right side and the closest-approach row's cap.
     The arithmetic of :func:`~wuerfel_cvx.formulations.velocity.closest_approach` with its
     choices held (``held``) or made (``None``; returned as a dict of :class:`_Held`'s fields
     but ``at_rate``).  ``hold_closest``: ``tau*`` from the real parts only (its dependence
@@ -490,12 +519,14 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
         return _held_closest(x, inputs, held)
     if held is None and forced is not None and np.all(np.isin(forced, grid)):
         return _held_closest(x, inputs, _sampled_choices(x, inputs, grid, forced))
-    gaps, *grid_faces = _face_gaps(x, inputs, np.broadcast_to(grid, (m, samples + 1)),
-                                   None if held is None else held.grid_faces)
-    start = gaps[:, 0]
+    gaps, lines, *grid_faces = _face_gaps(x, inputs, np.broadcast_to(grid, (m, samples + 1)),
+                                          None if held is None else held.grid_faces)
+    start, line_start = gaps[:, 0], lines[:, 0]
     pushed = (start.real + dt * inputs.push_speed < 0.0) if held is None else held.pushed
-    rate = np.where(pushed, inputs.push_speed + 0.0 * start, -start / dt)
-    margin = gaps - start[:, None] - rate[:, None] * grid
+    starts = (start, line_start, _ramp_rate(start, pushed, inputs),
+              _ramp_rate(line_start, line_start.real + dt * inputs.push_speed < 0.0, inputs))
+    margin, grid_line = _ramp_margins(gaps, lines, grid_faces[0], inputs, grid[None, :],
+                                      starts, None if held is None else held.grid_line)
     mean_rate = margin[:, 1:] / grid[1:]
     best = 1 + np.argmin(mean_rate.real, axis=1) if held is None else held.best
     sampled = None
@@ -517,9 +548,12 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
                 if held is None else held.tau_clip)
     refined = np.where(tau_clip < 0.0, dt / samples + 0.0 * refined,
                        np.where(tau_clip > 0.0, dt + 0.0 * refined, refined))
-    gap_refined, *refined_faces = _face_gaps(x, inputs, refined[:, None],
-                                             None if held is None else held.refined_faces)
-    refined_margin = gap_refined[:, 0] - start - rate * refined
+    gap_refined, line_refined, *refined_faces = _face_gaps(
+        x, inputs, refined[:, None], None if held is None else held.refined_faces)
+    refined_margin, refined_line = _ramp_margins(
+        gap_refined, line_refined, refined_faces[0], inputs, refined[:, None], starts,
+        None if held is None else held.refined_line)
+    refined_margin = refined_margin[:, 0]
     take = (refined_margin.real / refined.real < mean_rate.real[rows, best - 1]
             if held is None else held.take)
     if sampled is not None:
@@ -535,14 +569,40 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
     else:
         flat = held.flat
     tau = np.where(flat | hold_closest, tau.real + 0.0 * tau, tau)
-    faces = tuple(np.where(take[:, None], r, g[rows, best][:, None])
-                  for r, g in zip(refined_faces, grid_faces, strict=True))
-    psi = (_face_gaps(x, inputs, tau[:, None], faces)[0][:, 0]  # type: ignore[arg-type]
-           - start - rate * tau)
     choices = dict(grid_faces=tuple(grid_faces), refined_faces=tuple(refined_faces),
                    pushed=pushed, best=best, curved=curved, shift_clip=shift_clip,
-                   tau_clip=tau_clip, take=take, flat=flat, tau=tau.real.copy())
-    return tau, psi, rate, choices
+                   tau_clip=tau_clip, take=take, grid_line=grid_line,
+                   refined_line=refined_line, flat=flat, tau=tau.real.copy())
+    return (tau, *_psi_at(x, inputs, tau, starts, _closest_choices(choices)), choices)
+
+
+def _closest_choices(choices: dict[str, Any]) -> tuple[tuple[np.ndarray, ...], np.ndarray,
+                                                        np.ndarray]:
+    """The choices at ``tau*`` and the rate row's, each ``(m, 1)``.
+
+    The face choices (``past``, ``before``) at ``tau*``, its ``on_line``, and the first
+    sample's ``on_line`` (the rate row's ramp).
+    """
+    take, best = choices["take"], choices["best"]
+    rows = np.arange(take.shape[0])
+    faces = tuple(np.where(take[:, None], r, g[rows, best][:, None])
+                  for r, g in zip(choices["refined_faces"], choices["grid_faces"], strict=True))
+    on_line = np.where(take[:, None], choices["refined_line"],
+                       choices["grid_line"][rows, best][:, None])
+    return faces, on_line, choices["grid_line"][:, 1:2]
+
+
+def _psi_at(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
+            starts: tuple[np.ndarray, ...],
+            held: tuple[tuple[np.ndarray, ...], np.ndarray, np.ndarray],
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``psi(tau*)`` (m), the rate rows' right sides and the closest rows' caps (m/s)."""
+    faces, on_line, first_line = held
+    gaps, lines, past, _ = _face_gaps(x, inputs, tau[:, None], faces)  # type: ignore[arg-type]
+    psi = _ramp_margins(gaps, lines, past, inputs, tau[:, None], starts, on_line)[0][:, 0]
+    rate, line_rate = starts[2], starts[3]
+    return (psi, np.where(first_line[:, 0], line_rate, rate),
+            np.where(on_line[:, 0], line_rate, rate))
 
 
 def _sampled_choices(x: np.ndarray, inputs: _ApproachInputs, grid: FloatArray,
@@ -556,38 +616,47 @@ def _sampled_choices(x: np.ndarray, inputs: _ApproachInputs, grid: FloatArray,
     best = np.rint(forced / grid[1]).astype(np.int64)
     rows = np.arange(m)
     grid_faces = (np.zeros((m, columns), dtype=bool), np.zeros((m, columns), dtype=bool))
-    for tau, column in ((np.zeros(m), np.zeros(m, dtype=np.int64)), (grid[best], best)):
-        _, past, before = _face_gaps(x, inputs, tau[:, None], None)
+    grid_line = np.zeros((m, columns), dtype=bool)
+    first = np.ones(m, dtype=np.int64)
+    times = ((np.zeros(m), 0 * first), (grid[first], first), (grid[best], best))
+    found = []
+    for tau, column in times:  # the start, the first sample (the rate row's ramp), tau*
+        gaps, lines, past, before = _face_gaps(x, inputs, tau[:, None], None)
         grid_faces[0][rows, column], grid_faces[1][rows, column] = past[:, 0], before[:, 0]
-    start = _face_gaps(x, inputs, np.zeros((m, 1)),
-                       (grid_faces[0][:, :1], grid_faces[1][:, :1]))[0][:, 0]
+        found.append((gaps, lines, past))
+    start, line_start = found[0][0][:, 0], found[0][1][:, 0]
+    pushed = start.real + inputs.dt * inputs.push_speed < 0.0
+    starts = (start, line_start, _ramp_rate(start, pushed, inputs),
+              _ramp_rate(line_start, line_start.real + inputs.dt * inputs.push_speed < 0.0,
+                         inputs))
+    for (gaps, lines, past), (tau, column) in zip(found[1:], times[1:], strict=True):
+        grid_line[rows, column] = _ramp_margins(gaps, lines, past, inputs, tau[:, None],
+                                                starts, None)[1][:, 0]
     none, false = np.zeros(m), np.zeros(m, dtype=bool)
     return _Held(grid_faces=grid_faces, refined_faces=(false[:, None], false[:, None]),
-                 pushed=start.real + inputs.dt * inputs.push_speed < 0.0, best=best,
-                 curved=false, shift_clip=none, tau_clip=none, take=false,
+                 pushed=pushed, best=best, curved=false, shift_clip=none, tau_clip=none,
+                 take=false, grid_line=grid_line, refined_line=false[:, None],
                  at_rate=false, flat=~false, tau=np.asarray(forced, dtype=np.float64))
 
 
 def _held_closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
     """:func:`_closest` where every ``tau*`` is held: the gaps at the start and at ``tau*``.
 
     The same numbers without the sampled search (which then moves nothing).  Returns the
     choices too (``held``'s fields but ``at_rate``).
     """
-    rows = np.arange(x.shape[0])
-    start = _face_gaps(x, inputs, np.zeros((x.shape[0], 1)),
-                       (held.grid_faces[0][:, :1], held.grid_faces[1][:, :1]))[0][:, 0]
-    rate = np.where(held.pushed, inputs.push_speed + 0.0 * start, -start / inputs.dt)
+    gaps, lines, *_ = _face_gaps(x, inputs, np.zeros((x.shape[0], 1)),
+                                 (held.grid_faces[0][:, :1], held.grid_faces[1][:, :1]))
+    start, line_start = gaps[:, 0], lines[:, 0]
+    starts = (start, line_start, _ramp_rate(start, held.pushed, inputs),
+              _ramp_rate(line_start, line_start.real + inputs.dt * inputs.push_speed < 0.0,
+                         inputs))
     assert held.tau is not None
     tau = held.tau + 0.0 * start
-    faces = tuple(np.where(held.take[:, None], r, g[rows, held.best][:, None])
-                  for r, g in zip(held.refined_faces, held.grid_faces, strict=True))
-    psi = (_face_gaps(x, inputs, tau[:, None], faces)[0][:, 0]  # type: ignore[arg-type]
-           - start - rate * tau)
     choices = {name: getattr(held, name) for name in held.__dataclass_fields__
                if name != "at_rate"}
-    return tau, psi, rate, choices
+    return (tau, *_psi_at(x, inputs, tau, starts, _closest_choices(choices)), choices)
 
 
 def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArray, FloatArray],
@@ -604,7 +673,7 @@ def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArra
     at ``tau``; plus ``sign mu s`` with the slip row ``s`` at the start.
     """
     m = x.shape[0]
-    tau, psi, rate, choices = _closest(x, inputs, held, hold_closest, forced)
+    tau, psi, rate, closest_rate, choices = _closest(x, inputs, held, hold_closest, forced)
     times = np.stack([0.0 * tau, tau], axis=1)  # (m, 2): the rate row, the closest-approach row
     p_i, p_j, p_k, o_i, o_j, o_k = _approach_corners(x, inputs, times)
     g_i, g_j, g_k = _rot(p_k - p_j), _rot(p_i - p_k), _rot(p_j - p_i)
@@ -616,8 +685,8 @@ def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArra
     along = np.sum(normal[:, 1, :3] * x[:, 8:11], axis=1) + np.sum(normal[:, 1, 3:]
                                                                    * x[:, 11:14], axis=1)
     closest = along - psi / tau
-    at_rate = rate.real < closest.real if held is None else held.at_rate
-    rhs = np.concatenate([rate, np.where(at_rate, rate, closest)])
+    at_rate = closest_rate.real < closest.real if held is None else held.at_rate
+    rhs = np.concatenate([rate, np.where(at_rate, closest_rate, closest)])
     edge = p_j[:, 0] - p_i[:, 0]
     length = np.sqrt(_dot2(edge, edge))
     tangent = edge / length[:, None]

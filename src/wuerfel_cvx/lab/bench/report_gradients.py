@@ -363,7 +363,7 @@ def closest_time_rows() -> list[list[str]]:
         tau, psi = approach.closest, approach.margin
         return float(tau[0]), float(psi[0])
 
-    tau, psi, _, choices = _closest(x[None, :].astype(complex), inputs, None, False)
+    tau, psi, _, _, choices = _closest(x[None, :].astype(complex), inputs, None, False)
     held = _Held(at_rate=np.array([False]), **choices)
     t, p = float(tau[0].real), float(psi[0].real)
     rows = []
