@@ -1,6 +1,6 @@
 """The exported QPs solved by the package's own solve path, for the comparison with qpbenchmark.
 
-Each QP is solved cold (declared afresh in cvxpy, no compiled structure and no warm start,
+Each QP is solved cold (a fresh solve path: no compiled structure and no warm start,
 as qpbenchmark solves each problem on its own) by :func:`wuerfel_cvx.solve.paths.solve_step_qp`
 with every installed solver of the registry at every tolerance preset, and checked by the
 package's relative KKT residuals.  One row per QP x solver x tolerance in ``ours.csv``:
