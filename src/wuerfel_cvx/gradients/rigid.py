@@ -706,6 +706,12 @@ def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArra
     return entries, rhs[normal_row], held or _Held(at_rate=at_rate, **choices)
 
 
+STACKED_CONTACTS = 1024
+"""Most contacts :func:`_grouped` stacks into one evaluation (the complex steps take 14
+copies of each): enough that NumPy's per-call overhead is spread, few enough that the
+evaluation's arrays stay in cache."""
+
+
 @dataclass(frozen=True)
 class _Part:
     """One pass's closest-approach contacts as one evaluation takes them.
@@ -757,8 +763,19 @@ def _grouped(parts: list[_Part], key: Any, evaluate: Any) -> list[tuple[Any, ...
     where returned, its contacts' held choices.
     """
     results: list[tuple[Any, ...]] = [()] * len(parts)
-    for value in {key(part) for part in parts}:
-        members = [index for index, part in enumerate(parts) if key(part) == value]
+    keys = [key(part) for part in parts]
+    batches: list[list[int]] = []
+    for value in dict.fromkeys(keys):
+        batch: list[int] = []
+        size = 0
+        for index in (index for index, found in enumerate(keys) if found == value):
+            if batch and size + parts[index].x.shape[0] > STACKED_CONTACTS:
+                batches.append(batch)
+                batch, size = [], 0
+            batch.append(index)
+            size += parts[index].x.shape[0]
+        batches.append(batch)
+    for members in batches:
         out = evaluate(_stacked([parts[index] for index in members]))
         row_end, contact_end = 0, 0
         for index in members:
