@@ -457,13 +457,15 @@ def _approach_corners(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
 
 def _face_gaps(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
                choices: tuple[np.ndarray, np.ndarray] | None,
+               corners: tuple[np.ndarray, ...] | None = None,
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The rows' gaps (m) at ``tau`` ``(m, K)``, the line distances (m), the choices.
 
     ``face_gaps_at`` of the NumPy reference (tests/reference_kernels.py) in analytic arithmetic:
     ``choices`` (``past``, ``before``, each ``(m, K)``) held, or made where ``None``.
+    ``corners``: :func:`_approach_corners` at ``tau`` where already found.
     """
-    p_i, p_j, p_k, *_ = _approach_corners(x, inputs, tau)
+    p_i, p_j, p_k, *_ = _approach_corners(x, inputs, tau) if corners is None else corners
     edge, offset = p_j - p_i, p_k - p_i
     length = np.sqrt(_dot2(edge, edge))
     gaps = _cross(edge, offset) / length
@@ -504,6 +506,7 @@ def _ramp_margins(gaps: np.ndarray, lines: np.ndarray, past: np.ndarray,
 
 def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
              hold_closest: bool, forced: FloatArray | None = None,
+             corners: tuple[np.ndarray, ...] | None = None,
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
     """``tau*`` (s), ``psi(tau*)`` (m), the rows' right sides' rates (m/s) of each contact.
 
@@ -513,12 +516,14 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
     but ``at_rate``).  ``hold_closest``: ``tau*`` from the real parts only (its dependence
     on the inputs dropped; for measuring what that dependence contributes).  ``forced``: the
     forward pass's own ``tau*``, whose choice between a sample and the refined time (and
-    which sample) is taken where the two are within round-off of each other.
+    which sample) is taken where the two are within round-off of each other.  ``corners``:
+    :func:`_approach_corners` at ``(0, held.tau)`` ``(m, 2)`` where ``tau*`` is held.
     """
     m, samples, dt = x.shape[0], SAMPLES, inputs.dt
     grid = np.linspace(0.0, dt, samples + 1)
-    if held is not None and held.tau is not None and np.all(held.flat | hold_closest):
-        return _held_closest(x, inputs, held)
+    if _all_held(held, hold_closest):
+        assert held is not None
+        return _held_closest(x, inputs, held, corners)
     if held is None and forced is not None and np.all(np.isin(forced, grid)):
         return _held_closest(x, inputs, _sampled_choices(x, inputs, grid, forced))
     gaps, lines, *grid_faces = _face_gaps(x, inputs, np.broadcast_to(grid, (m, samples + 1)),
@@ -597,10 +602,12 @@ def _closest_choices(choices: dict[str, Any]) -> tuple[tuple[np.ndarray, ...], n
 def _psi_at(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
             starts: tuple[np.ndarray, ...],
             held: tuple[tuple[np.ndarray, ...], np.ndarray, np.ndarray],
+            corners: tuple[np.ndarray, ...] | None = None,
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``psi(tau*)`` (m), the rate rows' right sides and the closest rows' caps (m/s)."""
     faces, on_line, first_line = held
-    gaps, lines, past, _ = _face_gaps(x, inputs, tau[:, None], faces)  # type: ignore[arg-type]
+    gaps, lines, past, _ = _face_gaps(x, inputs, tau[:, None], faces,  # type: ignore[arg-type]
+                                      corners)
     psi = _ramp_margins(gaps, lines, past, inputs, tau[:, None], starts, on_line)[0][:, 0]
     rate, line_rate = starts[2], starts[3]
     return (psi, np.where(first_line[:, 0], line_rate, rate),
@@ -642,14 +649,16 @@ def _sampled_choices(x: np.ndarray, inputs: _ApproachInputs, grid: FloatArray,
 
 
 def _held_closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
+                  corners: tuple[np.ndarray, ...] | None = None,
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
     """:func:`_closest` where every ``tau*`` is held: the gaps at the start and at ``tau*``.
 
     The same numbers without the sampled search (which then moves nothing).  Returns the
-    choices too (``held``'s fields but ``at_rate``).
+    choices too (``held``'s fields but ``at_rate``).  ``corners`` as :func:`_closest`'s.
     """
     gaps, lines, *_ = _face_gaps(x, inputs, np.zeros((x.shape[0], 1)),
-                                 (held.grid_faces[0][:, :1], held.grid_faces[1][:, :1]))
+                                 (held.grid_faces[0][:, :1], held.grid_faces[1][:, :1]),
+                                 None if corners is None else tuple(c[:, :1] for c in corners))
     start, line_start = gaps[:, 0], lines[:, 0]
     starts = (start, line_start, _ramp_rate(start, held.pushed, inputs),
               _ramp_rate(line_start, line_start.real + inputs.dt * inputs.push_speed < 0.0,
@@ -658,7 +667,14 @@ def _held_closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
     tau = held.tau + 0.0 * start
     choices = {name: getattr(held, name) for name in held.__dataclass_fields__
                if name != "at_rate"}
-    return (tau, *_psi_at(x, inputs, tau, starts, _closest_choices(choices)), choices)
+    return (tau, *_psi_at(x, inputs, tau, starts, _closest_choices(choices),
+                          None if corners is None else tuple(c[:, 1:] for c in corners)),
+            choices)
+
+
+def _all_held(held: _Held | None, hold_closest: bool) -> bool:
+    """Whether every ``tau*`` of an evaluation is held (:func:`_held_closest` then)."""
+    return bool(held is not None and held.tau is not None and np.all(held.flat | hold_closest))
 
 
 def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArray, FloatArray],
@@ -675,9 +691,16 @@ def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArra
     at ``tau``; plus ``sign mu s`` with the slip row ``s`` at the start.
     """
     m = x.shape[0]
-    tau, psi, rate, closest_rate, choices = _closest(x, inputs, held, hold_closest, forced)
-    times = np.stack([0.0 * tau, tau], axis=1)  # (m, 2): the rate row, the closest-approach row
-    p_i, p_j, p_k, o_i, o_j, o_k = _approach_corners(x, inputs, times)
+    corners = None
+    if _all_held(held, hold_closest):  # the corners at the start and at tau*, found once
+        assert held is not None and held.tau is not None
+        corners = _approach_corners(x, inputs, np.stack([0.0 * held.tau, held.tau], axis=1))
+    tau, psi, rate, closest_rate, choices = _closest(x, inputs, held, hold_closest, forced,
+                                                     corners)
+    if corners is None:
+        times = np.stack([0.0 * tau, tau], axis=1)  # (m, 2): the rate row, the closest row
+        corners = _approach_corners(x, inputs, times)
+    p_i, p_j, p_k, o_i, o_j, o_k = corners
     g_i, g_j, g_k = _rot(p_k - p_j), _rot(p_i - p_k), _rot(p_j - p_i)
     scale = 1.0 / np.sqrt(_dot2(g_k, g_k))
     normal = np.concatenate([(g_i + g_j) * scale[..., None],
@@ -868,7 +891,7 @@ def approach_rows_of(model: Model, passes: Sequence[ApproachPass], push_speed: f
             _held_at(held, sub)))
     derivatives = _grouped(
         [part for part, wanted in zip(stepped, subs, strict=True) if wanted.size],
-        lambda part: bool(np.all(part.held.flat | hold_closest)),
+        lambda part: _all_held(part.held, hold_closest),
         lambda part: _complex_steps(part.x, part.inputs, part.rows, part.held, hold_closest))
     taken = iter(derivatives)
     return [_approach_result(model, qp, part.rows, value[:2], wanted,
