@@ -123,13 +123,15 @@ def gradient(trajectory: Trajectory, tape: GradientTape | None, dloss_dpoints: F
     flagged, weak, switches = [], [], []
     actives = [[_active(record, qp, solution) for qp, solution in _chain(record)]
                for record in tape.steps]
-    approach = _approach_rows(tape, trajectory.points, actives)
+    approach: dict[int, list[ContactRows | None]] = {}
     for index in range(len(tape.steps) - 1, -1, -1):
+        if index not in approach:
+            approach = _approach_rows(tape, trajectory.points, actives, index)
         record = tape.steps[index]
         k = record.step
         adjoints.add_points(trajectory.points[k], dloss[k])
         count, at_switch = _step_back(tape, record, trajectory.points[k - 1], adjoints,
-                                      actives[index], approach[index])
+                                      actives[index], approach.pop(index))
         if count:
             flagged.append(k)
             weak.append(count)
@@ -165,20 +167,32 @@ def _active(record: StepTape, qp: StepQP, solution: StepSolution) -> tuple[Activ
     return active, guessed
 
 
-def _approach_rows(tape: GradientTape, points: FloatArray,
-                   actives: list[list[tuple[ActiveSet, bool]]],
-                   ) -> list[list[ContactRows | None]]:
-    """Each pass's closest-approach rows with their tight rows' derivatives.
+BLOCK_CONTACTS = 4096
+"""Contacts whose closest-approach rows :func:`_approach_rows` finds together: a few
+stacked evaluations' worth (:data:`~wuerfel_cvx.gradients.rigid.STACKED_CONTACTS`), the
+rows' derivatives of a block of steps held at a time (about 3 kB a contact)."""
 
-    ``None`` for a pass without tight rows, and for every pass of a run with rows at the
-    start.  All passes of the run in one :func:`~wuerfel_cvx.gradients.rigid.approach_rows_of`: the
-    rows depend on the recorded run alone, not on the adjoint.
+
+def _approach_rows(tape: GradientTape, points: FloatArray,
+                   actives: list[list[tuple[ActiveSet, bool]]], last: int,
+                   ) -> dict[int, list[ContactRows | None]]:
+    """Closest-approach rows with their tight rows' derivatives, by step index and pass.
+
+    Step ``last``'s and its predecessors' up to :data:`BLOCK_CONTACTS` contacts.  ``None``
+    for a pass without tight rows, and for every pass of a run with rows at the start.  The
+    block's passes in one :func:`~wuerfel_cvx.gradients.rigid.approach_rows_of` (a few
+    stacked evaluations rather than two per pass): the rows depend on the recorded
+    run alone, not on the adjoint.
     """
-    found: list[list[ContactRows | None]] = [[None] * len(step) for step in actives]
     if not _closest_approach(tape):
-        return found
-    where, passes = [], []
-    for index, (record, step) in enumerate(zip(tape.steps, actives, strict=True)):
+        return {last: [None] * len(actives[last])}
+    found: dict[int, list[ContactRows | None]] = {}
+    where, passes, contacts = [], [], 0
+    for index in range(last, -1, -1):
+        if contacts >= BLOCK_CONTACTS:
+            break
+        record, step = tape.steps[index], actives[index]
+        found[index] = [None] * len(step)
         _about_rule(record, _chain(record))
         for position, ((qp, _), (active, _)) in enumerate(zip(_chain(record), step,
                                                               strict=True)):
@@ -186,6 +200,7 @@ def _approach_rows(tape: GradientTape, points: FloatArray,
             if tight.size:
                 where.append((index, position))
                 passes.append((points[record.step - 1], qp, tight))
+                contacts += len(qp.contacts)
     rows = approach_rows_of(tape.model, passes,
                             float(getattr(tape.formulation, "push_speed", 1.0)), tape.dt)
     for (index, position), found_rows in zip(where, rows, strict=True):
