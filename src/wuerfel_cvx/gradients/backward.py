@@ -45,7 +45,15 @@ from .adjoint import (
     unshifted_target,
     weak_rows,
 )
-from .rigid import LOCAL, approach_contacts, approach_rows, contact_rows, row_contacts, slip_rows
+from .rigid import (
+    LOCAL,
+    ContactRows,
+    approach_contacts,
+    approach_rows_of,
+    contact_rows,
+    row_contacts,
+    slip_rows,
+)
 from .tape import WRT_NAMES, GradientError, GradientTape, StepTape
 
 if TYPE_CHECKING:
@@ -113,10 +121,17 @@ def gradient(trajectory: Trajectory, tape: GradientTape | None, dloss_dpoints: F
                             f"through an answer that failed its KKT check")
     adjoints = _Adjoints(tape.model.n_boxes)
     flagged, weak, switches = [], [], []
-    for record in reversed(tape.steps):
+    actives = [[_active(record, qp, solution) for qp, solution in _chain(record)]
+               for record in tape.steps]
+    approach: dict[int, list[ContactRows | None]] = {}
+    for index in range(len(tape.steps) - 1, -1, -1):
+        if index not in approach:
+            approach = _approach_rows(tape, trajectory.points, actives, index)
+        record = tape.steps[index]
         k = record.step
         adjoints.add_points(trajectory.points[k], dloss[k])
-        count, at_switch = _step_back(tape, record, trajectory.points[k - 1], adjoints)
+        count, at_switch = _step_back(tape, record, trajectory.points[k - 1], adjoints,
+                                      actives[index], approach.pop(index))
         if count:
             flagged.append(k)
             weak.append(count)
@@ -136,8 +151,66 @@ def _closest_approach(tape: GradientTape) -> bool:
     return getattr(tape.formulation, "linearisation", "start") == "closest-approach"
 
 
+def _chain(record: StepTape) -> tuple[tuple[StepQP, StepSolution], ...]:
+    """A step's QPs with their answers, its first pass first, the step's own QP last."""
+    return record.passes + ((record.qp, record.solution),)
+
+
+def _active(record: StepTape, qp: StepQP, solution: StepSolution) -> tuple[ActiveSet, bool]:
+    """An answer's active set, and whether it was guessed (its polish rejected)."""
+    if not solution.verified:
+        raise GradientError(f"step {record.step}: a pass was not verified")
+    guessed = solution.polish not in (POLISHED, REUSED) or solution.active is None
+    active = solution.active
+    if active is None:
+        active = guess_active_set(qp, solution.x, solution.ineq_dual)
+    return active, guessed
+
+
+BLOCK_CONTACTS = 4096
+"""Contacts whose closest-approach rows :func:`_approach_rows` finds together: a few
+stacked evaluations' worth (:data:`~wuerfel_cvx.gradients.rigid.STACKED_CONTACTS`), the
+rows' derivatives of a block of steps held at a time (about 3 kB a contact)."""
+
+
+def _approach_rows(tape: GradientTape, points: FloatArray,
+                   actives: list[list[tuple[ActiveSet, bool]]], last: int,
+                   ) -> dict[int, list[ContactRows | None]]:
+    """Closest-approach rows with their tight rows' derivatives, by step index and pass.
+
+    Step ``last``'s and its predecessors' up to :data:`BLOCK_CONTACTS` contacts.  ``None``
+    for a pass without tight rows, and for every pass of a run with rows at the start.  The
+    block's passes in one :func:`~wuerfel_cvx.gradients.rigid.approach_rows_of` (a few
+    stacked evaluations rather than two per pass): the rows depend on the recorded
+    run alone, not on the adjoint.
+    """
+    if not _closest_approach(tape):
+        return {last: [None] * len(actives[last])}
+    found: dict[int, list[ContactRows | None]] = {}
+    where, passes, contacts = [], [], 0
+    for index in range(last, -1, -1):
+        if contacts >= BLOCK_CONTACTS:
+            break
+        record, step = tape.steps[index], actives[index]
+        found[index] = [None] * len(step)
+        _about_rule(record, _chain(record))
+        for position, ((qp, _), (active, _)) in enumerate(zip(_chain(record), step,
+                                                              strict=True)):
+            tight = np.concatenate([active.lower, active.upper]).astype(np.int64)
+            if tight.size:
+                where.append((index, position))
+                passes.append((points[record.step - 1], qp, tight))
+                contacts += len(qp.contacts)
+    rows = approach_rows_of(tape.model, passes,
+                            float(getattr(tape.formulation, "push_speed", 1.0)), tape.dt)
+    for (index, position), found_rows in zip(where, rows, strict=True):
+        found[index][position] = found_rows
+    return found
+
+
 def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
-               adjoints: _Adjoints) -> tuple[int, int]:
+               adjoints: _Adjoints, actives: list[tuple[ActiveSet, bool]],
+               approach: list[ContactRows | None]) -> tuple[int, int]:
     """Carry ``adjoints`` from the state after ``record``'s step to the state before it.
 
     Returns how many of its rows are weakly active (at least 1 for an answer whose polish
@@ -150,9 +223,7 @@ def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
     """
     dt, n = tape.dt, tape.model.n_boxes
     closest = _closest_approach(tape)
-    chain = record.passes + ((record.qp, record.solution),)
-    if closest:
-        _about_rule(record, chain)
+    chain = _chain(record)
     a_x = np.concatenate([dt * adjoints.center + adjoints.velocity,
                           (dt * adjoints.angle + adjoints.angular_velocity)[:, None]],
                          axis=1).ravel()
@@ -161,11 +232,13 @@ def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
     for index in range(len(chain) - 1, -1, -1):
         qp, solution = chain[index]
         adjoint, friction, flagged, active = _pass_adjoint(record, qp, solution, a_x,
-                                                           index == len(chain) - 1)
+                                                           index == len(chain) - 1,
+                                                           actives[index])
         weak, switches = weak + flagged, switches + _switches(tape, qp, active)
         a_target += adjoint.target
         a_weights += adjoint.weights
-        about = carried + (_rows_back(tape, qp, solution.x, points, adjoint, adjoints)
+        about = carried + (_rows_back(tape, qp, solution.x, points, adjoint, adjoints,
+                                      approach[index])
                            if adjoint.rows.size else 0.0)
         if friction is not None:
             _slips_back(tape, record, points, friction, adjoint.unknowns_adjoint, adjoints)
@@ -220,14 +293,13 @@ def _about_rule(record: StepTape, chain: tuple[tuple[StepQP, StepSolution], ...]
 
 
 def _pass_adjoint(record: StepTape, qp: StepQP, solution: StepSolution, a_x: FloatArray,
-                  last: bool) -> tuple[QPAdjoint, FrictionAdjoint | None, int, ActiveSet]:
-    """One pass's adjoint (a Coulomb step's fixed point for the last), its weak rows."""
-    if not solution.verified:
-        raise GradientError(f"step {record.step}: a pass was not verified")
-    active = solution.active
-    guessed = solution.polish not in (POLISHED, REUSED) or active is None
-    if active is None:
-        active = guess_active_set(qp, solution.x, solution.ineq_dual)
+                  last: bool, found: tuple[ActiveSet, bool],
+                  ) -> tuple[QPAdjoint, FrictionAdjoint | None, int, ActiveSet]:
+    """One pass's adjoint (a Coulomb step's fixed point for the last), its weak rows.
+
+    ``found``: its active set and whether it was guessed (:func:`_active`).
+    """
+    active, guessed = found
     friction, weak = None, 0
     if last and record.forces is not None and qp.cones is not None:  # the fixed point
         adjoint, friction, weak = coulomb_adjoint(
@@ -259,7 +331,8 @@ def _switches(tape: GradientTape, qp: StepQP, active: ActiveSet) -> int:
 
 
 def _rows_back(tape: GradientTape, qp: StepQP, x: FloatArray, points: FloatArray,
-               adjoint: QPAdjoint, adjoints: _Adjoints) -> FloatArray:
+               adjoint: QPAdjoint, adjoints: _Adjoints, approach: ContactRows | None,
+               ) -> FloatArray:
     """The tight rows' part: ``dL/dG_r = z_r a_x - a_nu,r x``, ``dL/dh_r = a_nu,r``.
 
     Carried to the contacts' bodies' coordinates and friction coefficients; returns the
@@ -269,10 +342,8 @@ def _rows_back(tape: GradientTape, qp: StepQP, x: FloatArray, points: FloatArray
     model, tight = tape.model, adjoint.rows
     multiplier, row_adjoint = adjoint.row_multiplier, adjoint.row_adjoint
     about = np.zeros(3 * model.n_boxes)
-    if _closest_approach(tape):
-        rows = approach_rows(model, points, qp.contacts, qp,
-                             float(getattr(tape.formulation, "push_speed", 1.0)), tape.dt,
-                             needed=tight)
+    if approach is not None:  # closest-approach rows, found for the whole run at once
+        rows = approach
     else:
         beta = float(getattr(tape.formulation, "beta", 0.2))
         rows = contact_rows(model, points, qp.contacts, qp, tape.dt, beta)

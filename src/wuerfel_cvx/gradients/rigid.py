@@ -30,6 +30,8 @@ themselves (which points face which edges) are discrete and held.
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -455,13 +457,15 @@ def _approach_corners(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
 
 def _face_gaps(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
                choices: tuple[np.ndarray, np.ndarray] | None,
+               corners: tuple[np.ndarray, ...] | None = None,
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The rows' gaps (m) at ``tau`` ``(m, K)``, the line distances (m), the choices.
 
     ``face_gaps_at`` of the NumPy reference (tests/reference_kernels.py) in analytic arithmetic:
     ``choices`` (``past``, ``before``, each ``(m, K)``) held, or made where ``None``.
+    ``corners``: :func:`_approach_corners` at ``tau`` where already found.
     """
-    p_i, p_j, p_k, *_ = _approach_corners(x, inputs, tau)
+    p_i, p_j, p_k, *_ = _approach_corners(x, inputs, tau) if corners is None else corners
     edge, offset = p_j - p_i, p_k - p_i
     length = np.sqrt(_dot2(edge, edge))
     gaps = _cross(edge, offset) / length
@@ -502,6 +506,7 @@ def _ramp_margins(gaps: np.ndarray, lines: np.ndarray, past: np.ndarray,
 
 def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
              hold_closest: bool, forced: FloatArray | None = None,
+             corners: tuple[np.ndarray, ...] | None = None,
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
     """``tau*`` (s), ``psi(tau*)`` (m), the rows' right sides' rates (m/s) of each contact.
 
@@ -511,12 +516,14 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
     but ``at_rate``).  ``hold_closest``: ``tau*`` from the real parts only (its dependence
     on the inputs dropped; for measuring what that dependence contributes).  ``forced``: the
     forward pass's own ``tau*``, whose choice between a sample and the refined time (and
-    which sample) is taken where the two are within round-off of each other.
+    which sample) is taken where the two are within round-off of each other.  ``corners``:
+    :func:`_approach_corners` at ``(0, held.tau)`` ``(m, 2)`` where ``tau*`` is held.
     """
     m, samples, dt = x.shape[0], SAMPLES, inputs.dt
     grid = np.linspace(0.0, dt, samples + 1)
-    if held is not None and held.tau is not None and np.all(held.flat | hold_closest):
-        return _held_closest(x, inputs, held)
+    if _all_held(held, hold_closest):
+        assert held is not None
+        return _held_closest(x, inputs, held, corners)
     if held is None and forced is not None and np.all(np.isin(forced, grid)):
         return _held_closest(x, inputs, _sampled_choices(x, inputs, grid, forced))
     gaps, lines, *grid_faces = _face_gaps(x, inputs, np.broadcast_to(grid, (m, samples + 1)),
@@ -595,10 +602,12 @@ def _closest_choices(choices: dict[str, Any]) -> tuple[tuple[np.ndarray, ...], n
 def _psi_at(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
             starts: tuple[np.ndarray, ...],
             held: tuple[tuple[np.ndarray, ...], np.ndarray, np.ndarray],
+            corners: tuple[np.ndarray, ...] | None = None,
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``psi(tau*)`` (m), the rate rows' right sides and the closest rows' caps (m/s)."""
     faces, on_line, first_line = held
-    gaps, lines, past, _ = _face_gaps(x, inputs, tau[:, None], faces)  # type: ignore[arg-type]
+    gaps, lines, past, _ = _face_gaps(x, inputs, tau[:, None], faces,  # type: ignore[arg-type]
+                                      corners)
     psi = _ramp_margins(gaps, lines, past, inputs, tau[:, None], starts, on_line)[0][:, 0]
     rate, line_rate = starts[2], starts[3]
     return (psi, np.where(first_line[:, 0], line_rate, rate),
@@ -640,14 +649,16 @@ def _sampled_choices(x: np.ndarray, inputs: _ApproachInputs, grid: FloatArray,
 
 
 def _held_closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
+                  corners: tuple[np.ndarray, ...] | None = None,
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
     """:func:`_closest` where every ``tau*`` is held: the gaps at the start and at ``tau*``.
 
     The same numbers without the sampled search (which then moves nothing).  Returns the
-    choices too (``held``'s fields but ``at_rate``).
+    choices too (``held``'s fields but ``at_rate``).  ``corners`` as :func:`_closest`'s.
     """
     gaps, lines, *_ = _face_gaps(x, inputs, np.zeros((x.shape[0], 1)),
-                                 (held.grid_faces[0][:, :1], held.grid_faces[1][:, :1]))
+                                 (held.grid_faces[0][:, :1], held.grid_faces[1][:, :1]),
+                                 None if corners is None else tuple(c[:, :1] for c in corners))
     start, line_start = gaps[:, 0], lines[:, 0]
     starts = (start, line_start, _ramp_rate(start, held.pushed, inputs),
               _ramp_rate(line_start, line_start.real + inputs.dt * inputs.push_speed < 0.0,
@@ -656,7 +667,14 @@ def _held_closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
     tau = held.tau + 0.0 * start
     choices = {name: getattr(held, name) for name in held.__dataclass_fields__
                if name != "at_rate"}
-    return (tau, *_psi_at(x, inputs, tau, starts, _closest_choices(choices)), choices)
+    return (tau, *_psi_at(x, inputs, tau, starts, _closest_choices(choices),
+                          None if corners is None else tuple(c[:, 1:] for c in corners)),
+            choices)
+
+
+def _all_held(held: _Held | None, hold_closest: bool) -> bool:
+    """Whether every ``tau*`` of an evaluation is held (:func:`_held_closest` then)."""
+    return bool(held is not None and held.tau is not None and np.all(held.flat | hold_closest))
 
 
 def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArray, FloatArray],
@@ -673,9 +691,16 @@ def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArra
     at ``tau``; plus ``sign mu s`` with the slip row ``s`` at the start.
     """
     m = x.shape[0]
-    tau, psi, rate, closest_rate, choices = _closest(x, inputs, held, hold_closest, forced)
-    times = np.stack([0.0 * tau, tau], axis=1)  # (m, 2): the rate row, the closest-approach row
-    p_i, p_j, p_k, o_i, o_j, o_k = _approach_corners(x, inputs, times)
+    corners = None
+    if _all_held(held, hold_closest):  # the corners at the start and at tau*, found once
+        assert held is not None and held.tau is not None
+        corners = _approach_corners(x, inputs, np.stack([0.0 * held.tau, held.tau], axis=1))
+    tau, psi, rate, closest_rate, choices = _closest(x, inputs, held, hold_closest, forced,
+                                                     corners)
+    if corners is None:
+        times = np.stack([0.0 * tau, tau], axis=1)  # (m, 2): the rate row, the closest row
+        corners = _approach_corners(x, inputs, times)
+    p_i, p_j, p_k, o_i, o_j, o_k = corners
     g_i, g_j, g_k = _rot(p_k - p_j), _rot(p_i - p_k), _rot(p_j - p_i)
     scale = 1.0 / np.sqrt(_dot2(g_k, g_k))
     normal = np.concatenate([(g_i + g_j) * scale[..., None],
@@ -704,20 +729,91 @@ def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArra
     return entries, rhs[normal_row], held or _Held(at_rate=at_rate, **choices)
 
 
-def approach_rows(model: Model, points: FloatArray, contacts: Contacts, qp: StepQP,
-                  push_speed: float, dt: float, *, hold_closest: bool = False,
-                  needed: IntArray | None = None) -> ContactRows:
-    """The rows of ``qp`` (a closest-approach pass of ``rigid``) with derivatives.
+STACKED_CONTACTS = 1024
+"""Most contacts :func:`_grouped` stacks into one evaluation (the complex steps take 14
+copies of each): enough that NumPy's per-call overhead is spread, few enough that the
+evaluation's arrays stay in cache."""
 
-    Derivatives with respect to :data:`APPROACH_LOCAL`: the start coordinates of each
-    contact's bodies, their friction coefficients and the pass's linearisation point
-    ``qp.linearised_about``, through the closest-approach time ``tau*`` as the forward pass
-    computes it (sampled, refined by a parabola: a smooth function of the inputs while its
-    discrete choices, :class:`_Held`, stay).  By complex steps (:data:`COMPLEX_STEP`) through
-    the same arithmetic, exact to round-off.  ``hold_closest`` drops ``tau*``'s dependence;
-    ``needed``: the rows whose derivatives are wanted (the others' are left 0; all by
-    default).
+
+@dataclass(frozen=True)
+class _Part:
+    """One pass's closest-approach contacts as one evaluation takes them.
+
+    ``x`` ``(m, 14)`` (:data:`APPROACH_LOCAL`), the contacts' fixed inputs, the QP rows (each
+    one's normal row and cone edge, :func:`_normal_rows`), the held choices (or ``None``:
+    made) and the forward pass's ``tau*`` (s).
     """
+
+    x: np.ndarray
+    inputs: _ApproachInputs
+    rows: tuple[IntArray, FloatArray]
+    held: _Held | None = None
+    forced: FloatArray | None = None
+
+
+def _stacked(parts: list[_Part]) -> _Part:
+    """``parts`` as one evaluation: contacts concatenated, each part's rows renumbered.
+
+    Every number of :func:`_approach_values` is per contact (its choices too), so the
+    stacked evaluation's numbers are each part's own.
+    """
+    counts = [part.x.shape[0] for part in parts]
+    total, offsets = sum(counts), np.cumsum([0] + counts[:-1])
+    normal = [np.where(part.rows[0] < m, first + part.rows[0], total + first + part.rows[0] - m)
+              for part, m, first in zip(parts, counts, offsets, strict=True)]
+    first = parts[0]
+    def joined(values: list[Any]) -> Any:
+        if isinstance(values[0], tuple):
+            return tuple(joined(list(group)) for group in zip(*values, strict=True))
+        return np.concatenate(values) if isinstance(values[0], np.ndarray) else values[0]
+    inputs = _ApproachInputs(**{name: joined([getattr(part.inputs, name) for part in parts])
+                                for name in first.inputs.__dataclass_fields__})
+    held = (None if first.held is None else
+            _Held(**{name: joined([getattr(part.held, name) for part in parts])
+                     for name in first.held.__dataclass_fields__}))
+    return _Part(np.concatenate([part.x for part in parts]), inputs,
+                 (np.concatenate(normal).astype(np.int64),
+                  np.concatenate([part.rows[1] for part in parts])),
+                 held, None if first.forced is None
+                 else np.concatenate([part.forced for part in parts]))
+
+
+def _grouped(parts: list[_Part], key: Any, evaluate: Any) -> list[tuple[Any, ...]]:
+    """``evaluate`` of each part, the parts with equal ``key`` stacked into one evaluation.
+
+    ``key`` is a branch of :func:`_closest` taken for a whole evaluation; the parts are
+    stacked by :func:`_stacked`.  Returns per part its rows' results (row-wise arrays) and,
+    where returned, its contacts' held choices.
+    """
+    results: list[tuple[Any, ...]] = [()] * len(parts)
+    keys = [key(part) for part in parts]
+    batches: list[list[int]] = []
+    for value in dict.fromkeys(keys):
+        batch: list[int] = []
+        size = 0
+        for index in (index for index, found in enumerate(keys) if found == value):
+            if batch and size + parts[index].x.shape[0] > STACKED_CONTACTS:
+                batches.append(batch)
+                batch, size = [], 0
+            batch.append(index)
+            size += parts[index].x.shape[0]
+        batches.append(batch)
+    for members in batches:
+        out = evaluate(_stacked([parts[index] for index in members]))
+        row_end, contact_end = 0, 0
+        for index in members:
+            rows, m = len(parts[index].rows[0]), parts[index].x.shape[0]
+            span = slice(row_end, row_end + rows)
+            contacts = np.arange(contact_end, contact_end + m)
+            results[index] = tuple(_held_at(item, contacts) if isinstance(item, _Held)
+                                   else item[span] for item in out)
+            row_end, contact_end = row_end + rows, contact_end + m
+    return results
+
+
+def _approach_part(model: Model, points: FloatArray, contacts: Contacts, qp: StepQP,
+                   push_speed: float, dt: float) -> _Part:
+    """A closest-approach pass's contacts as :func:`_approach_values` takes them."""
     about = qp.linearised_about
     if about is None:
         raise GradientError("a closest-approach pass without its linearisation point")
@@ -736,31 +832,98 @@ def approach_rows(model: Model, points: FloatArray, contacts: Contacts, qp: Step
     inputs = _ApproachInputs(motion.reference[edge, contacts.edge_i % 4],
                              motion.reference[edge, contacts.edge_j % 4],
                              motion.reference[point, contacts.point % 4], beyond, dt, push_speed)
-    rows = _normal_rows(qp, len(contacts))
-    entries, rhs, held = _approach_values(x.astype(np.complex128), inputs, rows, None,
-                                          hold_closest, forward.closest)
-    grad_entries = np.zeros(entries.shape + (len(APPROACH_LOCAL),))
-    grad_rhs = np.zeros(rhs.shape + (len(APPROACH_LOCAL),))
-    wanted = np.arange(len(rows[0])) if needed is None else np.asarray(needed, dtype=np.int64)
-    if wanted.size:  # derivatives of the wanted rows only, from their contacts' inputs
-        m = len(contacts)
-        sub = np.unique(rows[0][wanted] % m)
+    return _Part(x, inputs, _normal_rows(qp, len(contacts)), None, forward.closest)
+
+
+ApproachPass = tuple[FloatArray, StepQP, "IntArray | None"]
+"""A closest-approach pass to differentiate: the step's start corners ``(n, 4, 2)`` (m), its
+QP (rows, contacts, linearisation point), the rows whose derivatives are wanted (``None``:
+all)."""
+
+
+def approach_rows(model: Model, points: FloatArray, contacts: Contacts, qp: StepQP,
+                  push_speed: float, dt: float, *, hold_closest: bool = False,
+                  needed: IntArray | None = None) -> ContactRows:
+    """The rows of ``qp`` with derivatives: :func:`approach_rows_of` of one pass.
+
+    ``qp`` a closest-approach pass of ``rigid``, ``contacts`` its contacts.
+    """
+    if contacts is not qp.contacts:
+        qp = dataclasses.replace(qp, contacts=contacts)
+    return approach_rows_of(model, [(points, qp, needed)], push_speed, dt,
+                            hold_closest=hold_closest)[0]
+
+
+def approach_rows_of(model: Model, passes: Sequence[ApproachPass], push_speed: float, dt: float,
+                     *, hold_closest: bool = False) -> list[ContactRows]:
+    """The rows of each pass's QP (closest-approach passes of ``rigid``) with derivatives.
+
+    Derivatives with respect to :data:`APPROACH_LOCAL`: the start coordinates of each
+    contact's bodies, their friction coefficients and the pass's linearisation point
+    ``qp.linearised_about``, through the closest-approach time ``tau*`` as the forward pass
+    computes it (sampled, refined by a parabola: a smooth function of the inputs while its
+    discrete choices, :class:`_Held`, stay).  By complex steps (:data:`COMPLEX_STEP`) through
+    the same arithmetic, exact to round-off.  ``hold_closest`` drops ``tau*``'s dependence;
+    each pass's wanted rows get derivatives (the others' are left 0).  The passes (a run's
+    steps) are evaluated together, a few NumPy evaluations for all of them rather than
+    per pass: the numbers are per contact, the same either way.
+    """
+    grid = np.linspace(0.0, dt, SAMPLES + 1)
+    parts = [_approach_part(model, points, qp.contacts, qp, push_speed, dt)
+             for points, qp, _ in passes]
+    values = _grouped(parts, lambda part: bool(np.all(np.isin(part.forced, grid))),
+                      lambda part: _approach_values(part.x.astype(np.complex128), part.inputs,
+                                                    part.rows, None, hold_closest, part.forced))
+    subs, stepped = [], []
+    for (_, _, needed), part, (_, _, held) in zip(passes, parts, values, strict=True):
+        rows = part.rows
+        wanted = np.arange(len(rows[0])) if needed is None else np.asarray(needed, np.int64)
+        m = part.x.shape[0]
+        sub = np.unique(rows[0][wanted] % max(m, 1))
         place = np.full(m, -1, dtype=np.int64)
         place[sub] = np.arange(sub.size)
         normal = rows[0][wanted]
-        sub_rows = ((normal // m) * sub.size + place[normal % m], rows[1][wanted])
-        sub_held = _Held(**{name: _taken(getattr(held, name), sub)
-                            for name in held.__dataclass_fields__})
-        sub_inputs = _ApproachInputs(inputs.ref_i[sub], inputs.ref_j[sub], inputs.ref_k[sub],
-                                     inputs.beyond_face[sub], dt, push_speed)
-        grad_entries[wanted], grad_rhs[wanted] = _complex_steps(x[sub], sub_inputs, sub_rows,
-                                                                sub_held, hold_closest)
+        subs.append(wanted)
+        stepped.append(_Part(part.x[sub], _ApproachInputs(
+            part.inputs.ref_i[sub], part.inputs.ref_j[sub], part.inputs.ref_k[sub],
+            part.inputs.beyond_face[sub], dt, push_speed),
+            ((normal // max(m, 1)) * sub.size + place[normal % max(m, 1)], rows[1][wanted]),
+            _held_at(held, sub)))
+    derivatives = _grouped(
+        [part for part, wanted in zip(stepped, subs, strict=True) if wanted.size],
+        lambda part: _all_held(part.held, hold_closest),
+        lambda part: _complex_steps(part.x, part.inputs, part.rows, part.held, hold_closest))
+    taken = iter(derivatives)
+    return [_approach_result(model, qp, part.rows, value[:2], wanted,
+                             next(taken) if wanted.size else None)
+            for (_, qp, _), part, value, wanted in zip(passes, parts, values, subs, strict=True)]
+
+
+def _approach_result(model: Model, qp: StepQP, rows: tuple[IntArray, FloatArray],
+                     values: tuple[np.ndarray, np.ndarray],
+                     wanted: IntArray, derivatives: tuple[FloatArray, FloatArray] | None,
+                     ) -> ContactRows:
+    """One pass's :class:`ContactRows`, checked against the recorded QP.
+
+    From its rows' values and its wanted rows' derivatives (``None``: none wanted).
+    """
+    entries, rhs = values
+    grad_entries = np.zeros(entries.shape + (len(APPROACH_LOCAL),))
+    grad_rhs = np.zeros(rhs.shape + (len(APPROACH_LOCAL),))
+    if derivatives is not None:
+        grad_entries[wanted], grad_rhs[wanted] = derivatives
     tangents = [Tangent(entries[:, k].real, grad_entries[:, k]) for k in range(6)]
+    contacts = qp.contacts
     result = ContactRows((tangents[0], tangents[1], tangents[2]),
                          (tangents[3], tangents[4], tangents[5]),
                          Tangent(rhs.real, grad_rhs), rows[0] % max(len(contacts), 1))
     _check(model, result, qp, contacts)
     return result
+
+
+def _held_at(held: _Held, sub: IntArray) -> _Held:
+    """``held``'s choices of the contacts ``sub``."""
+    return _Held(**{name: _taken(getattr(held, name), sub) for name in held.__dataclass_fields__})
 
 
 def _taken(value: Any, sub: IntArray) -> Any:
