@@ -538,8 +538,10 @@ def _remembered(matrix: sp.csc_matrix, n: int) -> _LargeSystem | None:
     """
     if n < DISSECTION_MIN_UNKNOWNS:
         return None
-    key = hashlib.blake2b(matrix.indptr.tobytes() + matrix.indices.tobytes()
-                          + n.to_bytes(8, "little"), digest_size=16).digest()
+    digest = hashlib.blake2b(n.to_bytes(8, "little"), digest_size=16)
+    digest.update(matrix.indptr.data)  # the arrays' own buffers, not copies of them
+    digest.update(matrix.indices.data)
+    key = digest.digest()
     known = _LARGE_SYSTEMS.pop(key, None)
     if known is None:
         coupling = matrix[n:, :n]

@@ -17,6 +17,7 @@ import pandas as pd
 
 from . import plots
 from .markdown import format_ms, format_number, markdown_table
+from .selection import reusing
 
 PILE_SCENE = "field-pyramid-100"
 """Box2D's large pyramid (5050 boxes), the target's scene."""
@@ -35,12 +36,13 @@ def reuse_pairs(results: pd.DataFrame) -> pd.DataFrame:
     if "reuse_active_sets" not in results.columns:
         return pd.DataFrame()
     ok = results[plots.is_value(results["status"], "ok")]
-    flags = ok["reuse_active_sets"].astype("boolean").fillna(False).astype(bool)
-    plain = ok[~flags & plots.plain_variant(ok.assign(reuse_active_sets=False))]
+    flags = reusing(ok)
+    otherwise_plain = plots.plain_variant(ok.assign(reuse_active_sets=False))  # reuse aside
+    plain = ok[~flags & otherwise_plain]
     columns = ["call_wall_time_per_step", "wall_time_per_step_median",
                "solver_time_per_step_mean", "solve_time_per_step", "reused_fraction",
                "n_squares"]
-    pairs = ok[flags][_TWIN_KEY + columns].merge(
+    pairs = ok[flags & otherwise_plain][_TWIN_KEY + columns].merge(
         plain[_TWIN_KEY + columns[:4]], on=_TWIN_KEY, suffixes=("", "_solved"))
     return pairs.sort_values(["n_squares", "scene", "solver"]).reset_index(drop=True)
 

@@ -102,7 +102,7 @@ def plain_variant(results: pd.DataFrame) -> pd.Series:
             & ~results["sleep"].fillna(False).astype(bool)
             & ~results["islands"].fillna(False).astype(bool)
             & ~_other_friction_model(results) & ~_other_solve_path(results)
-            & ~_unpolished(results) & ~_reusing(results))
+            & ~_unpolished(results) & ~reusing(results))
 
 
 def _unpolished(results: pd.DataFrame) -> pd.Series:
@@ -114,7 +114,7 @@ def _unpolished(results: pd.DataFrame) -> pd.Series:
             ).fillna(False).astype(bool)
 
 
-def _reusing(results: pd.DataFrame) -> pd.Series:
+def reusing(results: pd.DataFrame) -> pd.Series:
     """Mask of rows run with ``reuse_active_sets`` (a missing column or cell: no)."""
     if "reuse_active_sets" not in results.columns:
         return pd.Series(False, index=results.index)
@@ -144,13 +144,13 @@ def variant_labels(results: pd.DataFrame) -> pd.Series:
     paths = results["solve_path"].astype("string").fillna("").where(_other_solve_path(results),
                                                                     "")
     unpolished = _unpolished(results)
-    reusing = _reusing(results)
+    reused = reusing(results)
     labels = [" ".join(part for part in (
         f"table {mass:.0e} kg" if pd.notna(mass) else "", "extra rod" if rod else "",
         "sleep" if sleep else "", "islands" if island else "", model if odd else "",
         path, "unpolished" if raw else "", "reuse" if reuse else "") if part)
         for mass, rod, sleep, island, model, odd, path, raw, reuse in zip(
-            masses, rods, sleeps, islands, models, other, paths, unpolished, reusing,
+            masses, rods, sleeps, islands, models, other, paths, unpolished, reused,
             strict=True)]
     return pd.Series(labels, index=results.index, dtype=object)
 
