@@ -32,6 +32,7 @@ from ...trajectory import Trajectory
 from ...versions import package_version
 from ..peers import peer_version, simulate_peer
 from . import schema
+from .bare_call import bare_calls
 from .friction_summary import column_max, friction_summary
 from .suite import (
     DEFAULT_FRICTION_MODEL,
@@ -162,7 +163,7 @@ def measure_point(point: GridPoint, reference: Reference | None,
            **_call_timing(trajectory, call_seconds),
            **_accuracy(trajectory, point, reference),
            **friction_summary(trajectory, peer=point.engine != "wuerfel_cvx"),
-           **_polish_summary(trajectory),
+           **_polish_summary(trajectory), **_bare_call_floor(point, scene, failure),
            "reference_disagreement": disagreement}
     series = trajectory.metrics.reindex(columns=list(schema.SERIES_COLUMNS))
     return PointResult(schema.new_row(**row), series)
@@ -304,6 +305,20 @@ def _call_timing(trajectory: Trajectory, seconds: float) -> dict[str, Any]:
             "call_over_solver_mean": per_step / own if own > 0 else np.nan,
             **stages, "solver_time_per_step_mean": own,
             "outside_steps_time_per_step": per_step - float(metrics["step_time_s"].mean())}
+
+
+def _bare_call_floor(point: GridPoint, scene: Scene,
+                     failure: StepFailure | None) -> dict[str, Any]:
+    """The floor under the call / solver ratio (:mod:`.bare_call`), if the point asks for it.
+
+    Only for a completed point run with the default settings (its row is in the report's
+    table of the default run).
+    """
+    if not (point.bare_call_floor and point.runs_defaults and failure is None):
+        return {}
+    floor = bare_calls(scene, point.settings(), point.steps)
+    return {"bare_call_time_per_step": floor.per_step,
+            "bare_call_over_solver": floor.over_solver}
 
 
 def _nan_mean(column: pd.Series) -> float:

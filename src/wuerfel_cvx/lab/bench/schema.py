@@ -24,7 +24,7 @@ import pandas as pd
 from ...errors import InputError
 from ...formulations import FORMULATIONS
 
-SCHEMA_VERSION = 10
+SCHEMA_VERSION = 11
 
 PROVENANCE_FILE = "provenance.json"
 """Beside a results CSV: the physics fingerprint its rows were measured on and the code
@@ -70,6 +70,7 @@ ADDED_COLUMNS: dict[int, dict[str, Any]] = {
         "polish_rejections": None, "max_push_at_distance": None, "max_push_gap_product": None},
     9: dict.fromkeys(STAGE_TIME_COLUMNS),
     10: {"reuse_active_sets": False, "reused_fraction": None},
+    11: {"bare_call_time_per_step": None, "bare_call_over_solver": None},
 }
 """Per schema version, the columns it added and their value in the rows of older files:
 a constant, ``None`` (not measured then: missing), or a function of the older frame giving
@@ -81,7 +82,8 @@ structures on a direct path that no longer exists: left empty) and did not time 
 ``simulate`` call; version 7 did not polish (``polish`` false) nor measure pushes at a
 distance row by row (``polish`` left empty: the plots take such rows as plain, not as the
 unpolished variant of a newer run); version 8 did not split a step's time into stages;
-version 9 did not reuse active sets (its runs solved every QP)."""
+version 9 did not reuse active sets (its runs solved every QP); version 10 did not replay
+a run's solver calls bare."""
 
 ColumnType = Literal["str", "int", "float", "bool"]
 
@@ -175,6 +177,12 @@ COLUMNS: tuple[Column, ...] = (
     _c("record_time_per_step", "float", "s", "mean time per step of the metrics and recording"),
     _c("outside_steps_time_per_step", "float", "s",
        "call_wall_time_per_step minus the mean step: set-up and the loop around the steps"),
+    _c("bare_call_time_per_step", "float", "s",
+       "the run's solver calls replayed bare (the adapters' update and solve calls alone, "
+       "wuerfel_cvx.lab.bench.bare_call), per step; empty unless the suite asked for it"),
+    _c("bare_call_over_solver", "float", "1",
+       "bare_call_time_per_step over the solver's own time in the same calls: the floor "
+       "under call_over_solver_mean of any Python loop calling this solver"),
     _c("wall_time_per_step_p90", "float", "s", "90th percentile wall time of a step"),
     _c("solver_time_per_step_median", "float", "s", "median of the solver's own time"),
     _c("modelling_time_per_step_median", "float", "s",
@@ -426,7 +434,7 @@ CLOCK_COLUMNS: frozenset[str] = frozenset({
     "solver_time_per_step_median", "modelling_time_per_step_median",
     "step_over_solver_median", "wall_time_per_simulated_second", "total_wall_time",
     "call_wall_time_per_step", "call_over_solver_mean", "step_time_s", "solver_time_s",
-    *STAGE_TIME_COLUMNS})
+    "bare_call_time_per_step", "bare_call_over_solver", *STAGE_TIME_COLUMNS})
 """The results and series columns read off a clock.  They differ from run to run; the
 others are physics, the same bits on every run of a deterministic solver."""
 

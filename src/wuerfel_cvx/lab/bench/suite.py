@@ -26,6 +26,8 @@ Cartesian product of its lists::
     settle = 0.0                        # with "settled": time (s) given to settle first
     compare_every = 1                   # steps between re-solves by the reference solver
     time_limit = 600.0                  # wall seconds per grid point before it is stopped
+    bare_call_floor = false             # true: default-settings points also replay their
+                                        # solver calls bare (wuerfel_cvx.lab.bench.bare_call)
 
     [[grid]]
     scenes = ["tilted-drop", "stack-3"]
@@ -83,14 +85,14 @@ _LIST_KEYS = {"scenes": str, "formulations": str, "solvers": str, "tols": str,
               "solve_paths": str, "polishing": bool,
               "reuse_active_sets": bool}
 _SCALAR_KEYS = {"duration": float, "reference": str, "settle": float, "compare_every": int,
-                "time_limit": float}
+                "time_limit": float, "bare_call_floor": bool}
 _DEFAULTS: dict[str, Any] = {
     "formulations": [DEFAULT_FORMULATION], "solvers": ["CLARABEL"], "tols": ["default"],
     "dts": [0.01], "table_masses": ["fixed"], "extra_rods": [False], "sleeps": [False],
     "islands": [False], "friction_models": [DEFAULT_FRICTION_MODEL], "peers": [],
     "solve_paths": [NATIVE], "polishing": [True], "reuse_active_sets": [False],
     "reference": "dt/8", "settle": 0.0,
-    "compare_every": 1, "time_limit": 600.0,
+    "compare_every": 1, "time_limit": 600.0, "bare_call_floor": False,
 }
 
 
@@ -139,6 +141,10 @@ class GridPoint:
     settle: float = 0.0
     """With reference ``settled``: the time (s) the scene is given to come to rest; the
     trajectory error is measured from the state at that time on.  0 otherwise."""
+    bare_call_floor: bool = False
+    """Measure the floor under the call / solver ratio when the point runs the default
+    settings (:attr:`runs_defaults`): its solver calls replayed bare
+    (:mod:`wuerfel_cvx.lab.bench.bare_call`).  A measurement, not a setting: not in the id."""
 
     def settings(self) -> Settings:
         """The run's :class:`~wuerfel_cvx.settings.Settings` (not for a peer point)."""
@@ -148,6 +154,15 @@ class GridPoint:
                         table_mass=self.table_mass, extra_rod=self.extra_rod,
                         sleep=SleepSettings() if self.sleep else None, islands=self.islands,
                         polish=self.polish, reuse_active_sets=self.reuse_active_sets)
+
+    @property
+    def runs_defaults(self) -> bool:
+        """Whether the point is ours and runs the default :class:`Settings` at its dt and solver."""
+        if self.engine != "wuerfel_cvx":
+            return False
+        settings = self.settings()
+        return settings == Settings(dt=self.dt, solver=self.solver,
+                                    friction_model=settings.friction_model)
 
     @property
     def scene_input(self) -> str:
@@ -383,7 +398,8 @@ def _expand(suite: str, s: dict[str, Any], source: str, where: str,
                           friction_model=friction_model, solve_path=path,
                           polish=bool(polish), reuse_active_sets=bool(reuse),
                           scene_file=files[scene],
-                          settle=float(s["settle"]))
+                          settle=float(s["settle"]),
+                          bare_call_floor=bool(s["bare_call_floor"]))
         points.setdefault(point.point_id, point)
     return list(points.values())
 
