@@ -315,6 +315,8 @@ class FrictionMemory:
 
     def remember(self, steps: Sequence[tuple[CoulombStep, IntArray | None]]) -> None:
         """Keep the impulses the fixed points of one step ended with, forget the rest."""
+        if not steps and not self.impulses.size:
+            return  # nothing remembered, nothing to forget (every step without the fixed point)
         self.contacts = ContactIndex.of(np.concatenate(
             [np.zeros((0, 3), dtype=np.int64)]
             + [outcome.qp.contacts.ids(boxes, self.n_boxes) for outcome, boxes in steps]))

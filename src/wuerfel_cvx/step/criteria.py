@@ -48,6 +48,7 @@ import numpy as np
 from ..formulations.qp import RowUnits, StepQP
 from ..friction.forces import ContactForces
 from ..scenes.geometry import FloatArray, cross
+from ..solve import residual_kernel
 from ..solve.paths import VERIFY_FACTOR, StepSolution
 from .contacts import Contacts
 from .model import Model, State
@@ -73,7 +74,9 @@ def row_pushes(qp: StepQP, solution: StepSolution, units: RowUnits) -> dict[str,
     """
     if not qp.n_inequalities:
         return {"push_at_distance_Ns": 0.0, "push_gap_product_Nsm": 0.0}
-    lhs = qp.ineq_matrix @ solution.x
+    rows = qp.ineq_matrix  # G x: scipy's product, bit for bit, without its per-call checks
+    lhs = residual_kernel.csr_product(rows.data, rows.indices, rows.indptr,
+                                      np.asarray(solution.x, dtype=np.float64))
     multiplier = solution.ineq_dual
     slack = lhs - qp.ineq_rhs
     if qp.upper_rows.size:

@@ -41,6 +41,28 @@ def total_energy(model: Model, state: State) -> float:
     return kinetic_energy(model, state) + potential_energy(model, state)
 
 
+STATE_COLUMNS = ("rod_drift", "kinetic_energy_J", "potential_energy_J", "total_energy_J")
+"""The metrics columns that are functions of a step's state alone (:func:`state_metrics`)."""
+
+
+def state_metrics(model: Model, points: FloatArray,
+                  velocities: FloatArray) -> dict[str, FloatArray]:
+    """:data:`STATE_COLUMNS` of a run's states ``(T, 4 n, 2)`` (m, m/s), one value a state.
+
+    Computed for all states at once, each operation that of :func:`rod_length_drift`,
+    :func:`kinetic_energy` and :func:`potential_energy` on one state, reduced over the same
+    axis in the same order, so each value is theirs bit for bit (``tests/test_metrics.py``):
+    a run records them at its end instead of in each step.
+    """
+    i, j = model.rods[:, 0], model.rods[:, 1]
+    lengths = np.linalg.norm(points[:, i] - points[:, j], axis=2)
+    drift = np.max(np.abs(lengths - model.rod_lengths) / model.rod_lengths, axis=1)
+    kinetic = 0.5 * np.sum(model.point_masses * np.sum(velocities**2, axis=2), axis=1)
+    potential = -np.sum(model.point_masses * (points @ model.gravity), axis=1)
+    return {"rod_drift": drift, "kinetic_energy_J": kinetic,
+            "potential_energy_J": potential, "total_energy_J": kinetic + potential}
+
+
 def largest_corner_distance(points: FloatArray, reference: FloatArray) -> float:
     """Largest corner distance (m) between two runs ``(T, 4 n, 2)`` over the instants both have.
 

@@ -20,7 +20,7 @@ from ..settings import SETTING_NAMES, Settings
 from ..solve.paths import PATH_COUNTS
 from ..trajectory import NULLABLE_COLUMNS, Trajectory
 from ..versions import package_version
-from .metrics import kinetic_energy, potential_energy, rod_length_drift
+from .metrics import state_metrics
 from .model import Model, State
 
 METRIC_COLUMNS = (
@@ -65,18 +65,6 @@ without friction); a step whose rows push at a distance beyond the bound derived
 tolerance is not ``verified``.  ``coulomb_iterations`` and ``coulomb_converged`` are the
 Coulomb fixed point's (:data:`~wuerfel_cvx.friction.coulomb.COULOMB_COLUMNS`; empty without it).
 """
-
-
-def physical_metrics(model: Model, state: State, penetration: float) -> dict[str, float]:
-    """The physical diagnostics of a state: rod drift (1), penetration (m), energies (J).
-
-    ``penetration`` is the state's deepest penetration (m), from its contact search.
-    """
-    kinetic = kinetic_energy(model, state)
-    potential = potential_energy(model, state)
-    return {"rod_drift": rod_length_drift(model, state.points), "penetration_m": penetration,
-            "kinetic_energy_J": kinetic, "potential_energy_J": potential,
-            "total_energy_J": kinetic + potential}
 
 
 def run_info(scene: Scene, settings: Settings, *, formulation: Formulation | None = None,
@@ -136,7 +124,12 @@ class TrajectoryRecorder:
         return recorder
 
     def record(self, time: float, state: State, row: dict[str, Any]) -> None:
-        """Append the state at ``time`` (s) after a step, and that step's metrics ``row``."""
+        """Append the state at ``time`` (s) after a step, and that step's metrics ``row``.
+
+        The row's :data:`~wuerfel_cvx.step.metrics.STATE_COLUMNS` (the rod drift and the
+        energies, functions of the state alone) are left to :meth:`trajectory`, which
+        computes them for every state at once.
+        """
         self.times.append(time)
         self.points.append(state.points)
         self.velocities.append(state.velocities)
@@ -148,9 +141,14 @@ class TrajectoryRecorder:
         Whole steps only: a state whose row a Ctrl-C kept from being recorded is left out.
         """
         states = len(self.rows) + 1
+        points = np.array(self.points[:states])
+        velocities = np.array(self.velocities[:states])
         metrics = pd.DataFrame(self.rows, columns=list(METRIC_COLUMNS))
-        metrics = metrics.astype({**NULLABLE_COLUMNS, **self.column_dtypes})
-        return Trajectory(times=np.array(self.times[:states]),
-                          points=np.array(self.points[:states]),
-                          velocities=np.array(self.velocities[:states]), metrics=metrics,
+        if self.rows:  # each step's row: the state after it
+            for column, values in state_metrics(self.model, points[1:], velocities[1:]).items():
+                metrics[column] = values
+        for column, dtype in {**NULLABLE_COLUMNS, **self.column_dtypes}.items():
+            metrics[column] = metrics[column].astype(dtype)  # the frame's astype copies all
+        return Trajectory(times=np.array(self.times[:states]), points=points,
+                          velocities=velocities, metrics=metrics,
                           table_points=self.model.table_points.copy(), info=dict(self.info))

@@ -26,7 +26,7 @@ from ...scenes.scene import Scene
 from ...settings import checked_dt
 from ...step.metrics import deepest_penetration
 from ...step.model import Model, State
-from ...step.recorder import TrajectoryRecorder, info_of, physical_metrics
+from ...step.recorder import TrajectoryRecorder, info_of
 from ...step.simulation import checked_steps
 from ...trajectory import Trajectory
 from ...versions import package_version as package_version  # re-exported by peers
@@ -144,7 +144,7 @@ def run_peer(engine: str, package: str, scene: Scene, world: PeerWorld, dt: floa
         row = {"step": step, "time_s": step * float(dt),
                **_engine_row(model, engine, world.n_contacts(), stepped - started,
                              finished - started),
-               **physical_metrics(model, state, deepest_penetration(model, state.points))}
+               "penetration_m": deepest_penetration(model, state.points)}
         recorder.record(step * float(dt), state, row)
     return recorder.trajectory()
 

@@ -35,6 +35,7 @@ import scipy.sparse as sp
 from ..._sparse import canonical_csc
 from ...formulations.qp import StepQP
 from ...scenes.geometry import FloatArray
+from .. import residual_kernel
 from ..warm_start import WarmStart
 
 
@@ -148,7 +149,7 @@ class NativeData:
 
     @cached_property
     def _at_target(self) -> FloatArray:
-        return np.asarray(self.qp.ineq_matrix @ self.qp.target, dtype=np.float64)
+        return _product(self.qp.ineq_matrix, self.qp.target)
 
     @property
     def target(self) -> FloatArray:
@@ -158,7 +159,7 @@ class NativeData:
     @cached_property
     def eq_rhs(self) -> FloatArray:
         """``e - E t``."""
-        return np.asarray(self.qp.eq_rhs - self.qp.eq_matrix @ self.qp.target,
+        return np.asarray(self.qp.eq_rhs - _product(self.qp.eq_matrix, self.qp.target),
                           dtype=np.float64)
 
     @cached_property
@@ -197,6 +198,12 @@ class NativeData:
         """``x = t + d`` from a solver's ``d``."""
         return np.asarray(self.target + np.asarray(deviation, dtype=np.float64),
                           dtype=np.float64)
+
+
+def _product(rows: sp.csr_array, x: FloatArray) -> FloatArray:
+    """``A x`` (scipy's product, bit for bit, without its per-call checks)."""
+    return residual_kernel.csr_product(rows.data, rows.indices, rows.indptr,
+                                       np.asarray(x, dtype=np.float64))
 
 
 RowBlock = tuple[sp.csr_array, float, "np.ndarray | None"]
