@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from pandas.api.types import pandas_dtype
 
 from ..formulations import Formulation, get_formulation
 from ..scenes.geometry import FloatArray
@@ -148,7 +149,8 @@ class TrajectoryRecorder:
             for column, values in state_metrics(self.model, points[1:], velocities[1:]).items():
                 metrics[column] = values
         for column, dtype in {**NULLABLE_COLUMNS, **self.column_dtypes}.items():
-            metrics[column] = metrics[column].astype(dtype)  # the frame's astype copies all
+            # column by column: the frame's astype copies every column
+            metrics[column] = metrics[column].astype(pandas_dtype(dtype))
         return Trajectory(times=np.array(self.times[:states]), points=points,
                           velocities=velocities, metrics=metrics,
                           table_points=self.model.table_points.copy(), info=dict(self.info))
