@@ -164,7 +164,7 @@ class VelocityFormulation(FrictionSettings):
         """
         return motion.body_reach(state.velocities, model.n_tables,
                                         0.5 * self.contact_margin, dt,
-                                        float(dt * np.linalg.norm(model.gravity)))
+                                        dt * model.gravity_norm)
 
     def build(self, model: Model, state: State, contacts: Contacts, dt: float) -> StepQP:
         """The step QP in the new velocities (pure function of its arguments).
@@ -254,7 +254,7 @@ class VelocityFormulation(FrictionSettings):
         """
         searched = self.body_reach(model, state, dt)
         moving = State(state.points, solution.reshape(-1, 2)[: model.n_points])
-        travel = self.body_reach(model, moving, dt) - dt * dt * np.linalg.norm(model.gravity)
+        travel = self.body_reach(model, moving, dt) - dt * dt * model.gravity_norm
         if np.all(travel <= searched):
             return contacts
         wider = find_contacts(model, state.points, np.maximum(searched, travel))

@@ -102,8 +102,8 @@ def push_bound(model: Model, state: State, dt: float, eps: float) -> float:
     units of 1 m/s, as in the relative residuals).  A row pushing harder at a distance is a
     solver's answer that the residuals let through and the physics does not.
     """
-    mass = float(np.sum(model.point_masses))
-    speed = float(np.linalg.norm(model.gravity)) * dt + (
+    mass = model.total_mass
+    speed = model.gravity_norm * dt + (
         float(np.max(np.linalg.norm(state.velocities, axis=1))) if state.velocities.size else 0.0)
     return VERIFY_FACTOR * eps * dt * (0.5 + mass * speed * (1.0 + speed))
 

@@ -12,6 +12,7 @@ equality ("Tischrestriktion").
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -100,6 +101,16 @@ class Model:
             reference_corners=self.reference_corners[squares],
             friction=np.concatenate([self.friction[squares], self.friction[self.n_boxes:]]),
         )
+
+    @cached_property
+    def total_mass(self) -> float:
+        """The boxes' mass (kg): the sum of their corners'."""
+        return float(np.sum(self.point_masses))
+
+    @cached_property
+    def gravity_norm(self) -> float:
+        """``|g|`` (m/s^2)."""
+        return float(np.linalg.norm(self.gravity))
 
     @property
     def n_points(self) -> int:
