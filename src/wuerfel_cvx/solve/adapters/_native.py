@@ -159,6 +159,8 @@ class NativeData:
     @cached_property
     def eq_rhs(self) -> FloatArray:
         """``e - E t``."""
+        if not self.qp.n_equalities:
+            return np.zeros(0)
         return np.asarray(self.qp.eq_rhs - _product(self.qp.eq_matrix, self.qp.target),
                           dtype=np.float64)
 
