@@ -655,3 +655,16 @@ def refined(matrix: sp.csc_matrix, factor: tuple[IntArray, IntArray, FloatArray,
             break
         point = point + ldl_solve(*factor, new_of_old, residual)  # type: ignore[operator]
     return best
+
+
+# --------------------------------------------------------------------------------------
+# The physical check (wuerfel_cvx.step.criteria, compiled there)
+# --------------------------------------------------------------------------------------
+
+
+def gaps_after(all_points: FloatArray, contacts: Contacts) -> FloatArray:
+    """Signed distance (m) of each contact's point from its edge line at ``all_points``."""
+    p_i, p_j, p_k = (all_points[index] for index in (contacts.edge_i, contacts.edge_j,
+                                                     contacts.point))
+    edge = p_j - p_i
+    return np.asarray(cross(edge, p_k - p_i) / np.linalg.norm(edge, axis=1), dtype=np.float64)

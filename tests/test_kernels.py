@@ -54,6 +54,7 @@ from wuerfel_cvx.solve.paths import Residuals, StepSolution, _checked_scales, kk
 from wuerfel_cvx.solve.scaling import data_magnitude
 from wuerfel_cvx.step import contacts
 from wuerfel_cvx.step.contacts import find_contacts
+from wuerfel_cvx.step.criteria import gaps_after
 from wuerfel_cvx.step.model import Model, State
 
 pytestmark = pytest.mark.integration
@@ -430,3 +431,22 @@ def test_the_kkt_check_is_the_references(scene: str, formulation: str, steps: in
         same_data_check(qp, rng)
         checked += 1
     assert checked > 0
+
+
+# --------------------------------------------------------------------------------------
+# The physical check
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("kind", "key"), ROW_CASES[:-1])
+def test_the_gaps_after_a_step_are_the_references(kind: str, key: str | int) -> None:
+    rng = np.random.default_rng(23)
+    compared = 0
+    for model, state in row_states(kind, key):
+        found = find_contacts(model, state.points, 0.1)
+        moved = state.points + 0.01 * rng.normal(size=state.points.shape)  # after a step
+        all_points = model.all_points(moved)
+        assert_same_bits(gaps_after(all_points, found),
+                         reference.gaps_after(all_points, found))
+        compared += len(found)
+    assert compared > 0

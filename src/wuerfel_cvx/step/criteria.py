@@ -45,13 +45,14 @@ import math
 
 import numpy as np
 
+from .._numba import compiled
 from ..formulations.qp import RowUnits, StepQP
 from ..friction.forces import ContactForces
-from ..scenes.geometry import FloatArray, cross
+from ..scenes.geometry import FloatArray
 from ..solve import residual_kernel
 from ..solve.paths import VERIFY_FACTOR, StepSolution
 from .contacts import Contacts
-from .model import Model, State
+from .model import IntArray, Model, State
 
 FRICTION_COLUMNS: tuple[str, ...] = ("coulomb_violation_Ns", "dissipation_violation_J",
                                      "friction_work_J")
@@ -136,11 +137,28 @@ def ccp_forces(qp: StepQP, solution: StepSolution) -> ContactForces | None:
 
 
 def gaps_after(all_points: FloatArray, contacts: Contacts) -> FloatArray:
-    """Signed distance (m) of each contact's point from its edge line at ``all_points``."""
-    p_i, p_j, p_k = (all_points[index] for index in (contacts.edge_i, contacts.edge_j,
-                                                     contacts.point))
-    edge = p_j - p_i
-    return np.asarray(cross(edge, p_k - p_i) / np.linalg.norm(edge, axis=1), dtype=np.float64)
+    """Signed distance (m) of each contact's point from its edge line at ``all_points``.
+
+    ``cross(p_j - p_i, p_k - p_i) / |p_j - p_i|`` by a compiled loop (:func:`_gaps`), each
+    operation as :func:`~wuerfel_cvx.scenes.geometry.cross` and ``np.linalg.norm`` do it.
+    """
+    return _gaps(all_points, contacts.edge_i, contacts.edge_j, contacts.point)
+
+
+@compiled
+def _gaps(points: FloatArray, edge_i: IntArray, edge_j: IntArray,
+          point: IntArray) -> FloatArray:
+    """Per contact, ``cross(edge, p_k - p_i) / |edge|`` (m), ``edge = p_j - p_i``."""
+    gaps = np.empty(edge_i.shape[0])
+    for c in range(edge_i.shape[0]):
+        i, j, k = edge_i[c], edge_j[c], point[c]
+        edge_x = points[j, 0] - points[i, 0]
+        edge_y = points[j, 1] - points[i, 1]
+        offset_x = points[k, 0] - points[i, 0]
+        offset_y = points[k, 1] - points[i, 1]
+        gaps[c] = ((edge_x * offset_y - edge_y * offset_x)
+                   / math.sqrt(edge_x * edge_x + edge_y * edge_y))
+    return gaps
 
 
 def contact_criteria(forces: ContactForces | None, normal: FloatArray, model: Model,
