@@ -136,7 +136,12 @@ def run_job(job: Job, scale: float = 1.0) -> bool:
     deadline = time.monotonic() + 60.0 * job.budget_minutes * scale
     for command in job.commands:
         print(f"{job.name}: {' '.join(command)}", file=sys.stderr, flush=True)
-        status = _run_until(command, deadline)
+        try:
+            status = _run_until(command, deadline)
+        except FileNotFoundError:
+            print(f"{job.name}: command '{command[0]}' not found (is the package's "
+                  "environment active?)", file=sys.stderr)
+            return False
         if status == INTERRUPTED:
             print(f"{job.name}: budget spent; finished rows are kept, run again to resume",
                   file=sys.stderr)
