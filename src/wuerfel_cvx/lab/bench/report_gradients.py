@@ -9,7 +9,7 @@ measurement and writes the Markdown (a few minutes on two cores):
   stack, for CLARABEL, OSQP and PIQP and both friction models (the inputs and losses of
   ``tests/test_gradients.py``);
 * one step's adjoint against cvxpy's own derivative (``Problem.backward``, which needs the
-  optional package diffcp; the row says so when it is missing);
+  package diffcp, of the `gradients` extra; the row says so when it is missing);
 * the cost of a gradient: the backward pass's time over the recorded run's, on stack-10 and
   20-body piles, alternated repeats (min and median);
 * the same differences with rigid's closest-approach rows, and on landings that take two
@@ -464,8 +464,8 @@ not the adjoint's.""",
 One step QP of the slide, declared as a DPP problem in cvxpy and differentiated by
 `Problem.backward` (diffcp on SCS's conic form), against the hand-derived adjoint of
 `wuerfel_cvx.gradients.adjoint.qp_adjoint`; relative to the largest entry of dL/dt.
-diffcp is not among the package's dependencies or extras: for this report it was installed
-beside them (`pip install diffcp`); without it the row says it was not run.""",
+diffcp comes with the `gradients` extra (`pip install .[gradients]`, and with `test`);
+without it the row says it was not run.""",
     "cost": """## Cost
 
 Time of `Trajectory.gradient` (centre, velocity, friction, mass) over the time of the run
