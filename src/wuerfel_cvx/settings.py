@@ -103,7 +103,7 @@ class Settings:
                              f"{', '.join(FRICTION_MODELS)})", field="friction_model")
         if self.gradients:
             check_supported(formulation, self.friction_model, islands=self.islands,
-                            sleep=self.sleep, polish=self.polish)
+                            sleep=self.sleep, polish=self.polish, table_mass=self.table_mass)
         if self.table_mass is not None and not (
                 isinstance(self.table_mass, int | float) and math.isfinite(self.table_mass)
                 and self.table_mass > 0):

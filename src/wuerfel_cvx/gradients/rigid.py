@@ -263,6 +263,55 @@ def slip_rows(model: Model, points: FloatArray, contacts: Contacts) -> SlipRows:
                     geometry.mu)
 
 
+@dataclass(frozen=True)
+class CornerRows:
+    """Inequality rows in corner columns (``velocity``), with derivatives (:data:`LOCAL`).
+
+    Each row has three blocks: on the edge's ends ``i``, ``j`` and the point ``k`` (the
+    corners' indices among all points; a table's are not unknowns).
+    """
+
+    corners: tuple[IntArray, IntArray, IntArray]
+    blocks: tuple[Vector, Vector, Vector]
+    """Each block's entries ``(x, y)`` (1)."""
+    rhs: Tangent
+    """``h`` (m/s); zero for the friction part alone."""
+
+
+def corner_rows(model: Model, points: FloatArray, contacts: Contacts, contact: IntArray,
+                sign: FloatArray, rate: FloatArray | None) -> CornerRows:
+    """Rows of contacts ``contact`` (cone edge ``sign``) in the corner velocities.
+
+    With the contacts' rates (1/s, one per contact) the start rows ``(g + sign mu s) . v >=
+    -rate gap`` (the module docstring's blocks, before the corner map); without
+    (``None``) the friction part ``sign mu s`` alone, the rest of a closest-approach row
+    being rigid's rows times the fit (:mod:`wuerfel_cvx.gradients.velocity`).
+    """
+    geometry = _geometry(model, points, contacts)
+    factor = _take(geometry.mu, contact) * sign
+    blocks = []
+    for side, slip in zip(geometry.side, geometry.slip, strict=True):
+        block = (_take(slip[0], contact) * factor, _take(slip[1], contact) * factor)
+        if rate is not None:
+            block = (block[0] + _take(side[0], contact), block[1] + _take(side[1], contact))
+        blocks.append(block)
+    rhs = (_constant(np.zeros(len(contact))) if rate is None
+           else _take(geometry.gap * (-rate), contact))
+    return CornerRows((contacts.edge_i[contact], contacts.edge_j[contact],
+                       contacts.point[contact]), (blocks[0], blocks[1], blocks[2]), rhs)
+
+
+def cone_rows(qp: StepQP, closest: bool) -> tuple[IntArray, FloatArray]:
+    """Each inequality row's normal row and cone edge (+1, -1, 0), ``rigid`` or ``velocity``.
+
+    Start rows have one normal row per contact (its index is the contact's);
+    closest-approach rows a rate row and a closest-approach row per contact, or the rate
+    rows alone (:func:`_normal_rows`).
+    """
+    return (_normal_rows(qp, len(qp.contacts)) if closest
+            else _row_signs(qp, len(qp.contacts)))
+
+
 def row_contacts(qp: StepQP) -> IntArray:
     """The contact of each inequality row of a ``rigid`` step QP."""
     return _row_signs(qp, len(qp.contacts))[0]
@@ -813,13 +862,18 @@ def _grouped(parts: list[_Part], key: Any, evaluate: Any) -> list[tuple[Any, ...
 
 def _approach_part(model: Model, points: FloatArray, contacts: Contacts, qp: StepQP,
                    push_speed: float, dt: float) -> _Part:
-    """A closest-approach pass's contacts as :func:`_approach_values` takes them."""
+    """A closest-approach pass's contacts as :func:`_approach_values` takes them.
+
+    ``qp.linearised_about``: body velocities ``(u_x, u_y, omega)`` per body (``rigid``) or
+    corner velocities (``velocity``'s rows seen in body columns, :func:`~wuerfel_cvx.
+    gradients.velocity.approach_view`), followed by the motion they describe.
+    """
     about = qp.linearised_about
     if about is None:
         raise GradientError("a closest-approach pass without its linearisation point")
-    forward = closest_approach(model, points, contacts,
-                               corner_velocities(points, about.reshape(-1, 3)).ravel(), dt,
-                               push_speed)
+    if about.size == 3 * model.n_boxes:  # rigid's body velocities, else velocity's corners
+        about = corner_velocities(points, about.reshape(-1, 3)).ravel()
+    forward = closest_approach(model, points, contacts, about, dt, push_speed)
     motion = forward.motion
     edge, point = contacts.edge_body, contacts.point_body
     x = np.concatenate([motion.center[edge], motion.angle[edge, None],
