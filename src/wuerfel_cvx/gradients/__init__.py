@@ -62,5 +62,5 @@ from .tape import (
 )
 
 __all__ = ["CORNER_FRICTION_MODELS", "SUPPORTED_FORMULATIONS", "SUPPORTED_FRICTION_MODELS",
-           "WRT_NAMES", "GradientError", "GradientTape", "StepTape", "check_supported", "checked_names",
-           "gradient"]
+           "WRT_NAMES", "GradientError", "GradientTape", "StepTape", "check_supported",
+           "checked_names", "gradient"]
