@@ -567,8 +567,7 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
     forward pass's own ``tau*``, whose choice between a sample and the refined time (and
     which sample) is taken where the two are within round-off of each other.  ``corners``:
     :func:`_approach_corners` at ``(0, held.tau)`` ``(m, 2)`` where ``tau*`` is held.
-    ``ramps``: the forward pass's rates ``(m, 2)`` (m/s) of its rows' ramps, whose choices
-    are taken where they were made at a tie (:func:`_forward_ramps`).
+    ``ramps``: the forward pass's rows' ramps' rates ``(m, 2)`` (:func:`_forward_ramps`).
     """
     m, samples, dt = x.shape[0], SAMPLES, inputs.dt
     grid = np.linspace(0.0, dt, samples + 1)
@@ -628,8 +627,7 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
         flat = held.flat
     tau = np.where(flat | hold_closest, tau.real + 0.0 * tau, tau)
     if held is None and ramps is not None:
-        grid_line, refined_line = _forward_ramps(grid_line, refined_line, best, take, starts,
-                                                 ramps)
+        grid_line, refined_line = _forward_ramps(grid_line, refined_line, best, take, starts, ramps)
     choices = dict(grid_faces=tuple(grid_faces), refined_faces=tuple(refined_faces),
                    pushed=pushed, best=best, curved=curved, shift_clip=shift_clip,
                    tau_clip=tau_clip, take=take, grid_line=grid_line,

@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._sparse import empty_rows
+from ..formulations.motion import body_motion
 from ..formulations.qp import StepQP, declare_qp
 from ..formulations.rows import body_rows
 from ..formulations.velocity import closest_approach, rows_along
@@ -68,17 +69,11 @@ class CornerFit:
 
     @classmethod
     def of(cls, model: Model, points: FloatArray) -> CornerFit:
-        """The fit of the boxes whose corners are ``points`` ``(4 n, 2)`` (m)."""
-        corners = points.reshape(-1, 4, 2)[:model.n_boxes]
-        centre = corners.mean(axis=1)
-        cross = (model.reference_corners[..., 0] * (corners[..., 1] - centre[:, None, 1])
-                 - model.reference_corners[..., 1] * (corners[..., 0] - centre[:, None, 0]))
-        dot = np.sum(model.reference_corners * (corners - centre[:, None, :]), axis=2)
-        angle = np.arctan2(cross.sum(axis=1), dot.sum(axis=1))
-        cos, sin = np.cos(angle)[:, None], np.sin(angle)[:, None]
-        reference = model.reference_corners
-        fitted = np.stack([cos * reference[..., 0] - sin * reference[..., 1],
-                           sin * reference[..., 0] + cos * reference[..., 1]], axis=-1)
+        """The fit of the boxes whose corners are ``points`` ``(4 n, 2)`` (m).
+
+        The forward pass's own (:func:`~wuerfel_cvx.formulations.motion.body_motion`).
+        """
+        fitted = body_motion(model, points, np.zeros_like(points)).fitted[:model.n_boxes]
         return cls(fitted, np.sum(fitted * fitted, axis=(1, 2)))
 
     def to_bodies(self, corner: FloatArray) -> FloatArray:
