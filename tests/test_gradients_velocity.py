@@ -7,7 +7,9 @@ Checked here, independently of each other:
 * whole runs against central finite differences: the smooth segments of
   :mod:`test_gradients` (a tilted drop, a slide with ``ccp``, a resting stack) with
   closest-approach rows for CLARABEL, OSQP and PIQP, with start rows
-  (``velocity-baumgarte``), and spinning rain-4 (frictionless, a step of two passes);
+  (``velocity-baumgarte``), with ``coulomb`` friction (its fixed point at
+  ``coulomb_tolerance`` 1e-10, as in :mod:`test_gradients_closest`), and spinning rain-4
+  (frictionless, a step of two passes);
 * against ``rigid``'s gradient of the same run: on these scenes the two formulations pose
   the same QP in different unknowns (their trajectories agree to 1e-14 m), so the exact
   derivatives agree too, though one comes from an 8-unknown KKT system with rods per body and
@@ -46,6 +48,8 @@ from test_gradients_closest import (
     tilted_drop,
 )
 from wuerfel_cvx import Scene, simulate
+from wuerfel_cvx.formulations import Formulation
+from wuerfel_cvx.formulations.rigid import RigidFormulation
 from wuerfel_cvx.formulations.velocity import VelocityFormulation
 from wuerfel_cvx.gradients import WRT_NAMES, GradientError
 from wuerfel_cvx.gradients.velocity import CornerFit
@@ -76,6 +80,16 @@ def test_velocity_stack_gradient_matches_finite_differences(solver: str) -> None
     assert_matches_differences(resting_stack(), top_x, STACK_INPUTS, 30, solver, "velocity")
 
 
+@pytest.mark.parametrize("linearisation", ["closest-approach", "start"])
+@pytest.mark.parametrize("case", ["drop", "slide"])
+def test_velocity_coulomb_gradient_matches_finite_differences(case: str,
+                                                              linearisation: str) -> None:
+    scene, loss, steps = WATCHED[case]
+    formulation = VelocityFormulation(friction_model="coulomb", coulomb_tolerance=1e-10,
+                                      linearisation=linearisation)  # type: ignore[arg-type]
+    assert_matches_differences(scene(), loss, ALL_INPUTS, steps, "CLARABEL", formulation)
+
+
 @pytest.mark.parametrize("case", ["drop", "slide"])
 def test_velocity_baumgarte_gradient_matches_finite_differences(case: str) -> None:
     scene, loss, steps = WATCHED[case]
@@ -83,21 +97,30 @@ def test_velocity_baumgarte_gradient_matches_finite_differences(case: str) -> No
                                "velocity-baumgarte")
 
 
-def _gradients(scene: Scene, loss: object, steps: int, formulation: str, dt: float,
-               ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+def _gradients(scene: Scene, loss: object, steps: int, formulation: str | Formulation,
+               dt: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     trajectory = simulate(scene, dt=dt, steps=steps, solver="CLARABEL",
                           formulation=formulation, gradients=True)
     return trajectory.points, trajectory.gradient(loss(trajectory.points),  # type: ignore[operator]
                                                   WRT_NAMES)
 
 
-@pytest.mark.parametrize("formulation, rigid", [("velocity", "rigid"),
-                                                ("velocity-baumgarte", "rigid-baumgarte")])
+PAIRS = {"velocity": ("velocity", "rigid"),
+         "velocity-baumgarte": ("velocity-baumgarte", "rigid-baumgarte"),
+         "velocity-coulomb": (VelocityFormulation(friction_model="coulomb",
+                                                  coulomb_tolerance=1e-10),
+                              RigidFormulation(friction_model="coulomb",
+                                               coulomb_tolerance=1e-10))}
+"""Each velocity formulation and the rigid one posing its QP in body velocities."""
+
+
+@pytest.mark.parametrize("pair", PAIRS)
 @pytest.mark.parametrize("case", [*WATCHED, "rain"])
-def test_velocity_gradient_matches_rigid_gradient_of_the_same_run(case: str, formulation: str,
-                                                                  rigid: str) -> None:
+def test_velocity_gradient_matches_rigid_gradient_of_the_same_run(case: str,
+                                                                  pair: str) -> None:
     scene, loss, steps, dt = ((spinning_rain, final_state, 64, 0.01) if case == "rain"
                               else (*WATCHED[case], 1 / 240))
+    formulation, rigid = PAIRS[pair]
     points, gradient = _gradients(scene(), loss, steps, formulation, dt)
     rigid_points, expected = _gradients(scene(), loss, steps, rigid, dt)
     assert np.max(np.abs(points - rigid_points)) < 1e-12  # the same run
@@ -151,7 +174,6 @@ def test_the_fit_and_its_transpose_are_adjoint() -> None:
 
 @pytest.mark.unit
 @pytest.mark.parametrize("options, message", [
-    ({"formulation": "velocity", "friction_model": "coulomb"}, "ccp"),
     ({"formulation": VelocityFormulation(position_update="linear")}, "rigid position update"),
     ({"formulation": "velocity", "table_mass": 10.0}, "fixed tables"),
 ])

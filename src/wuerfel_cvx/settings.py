@@ -77,8 +77,8 @@ class Settings:
     """Record what a gradient through the run needs (each step's QP and polished answer),
     for :meth:`Trajectory.gradient <wuerfel_cvx.trajectory.Trajectory.gradient>`; the run
     must be one the backward pass covers (:mod:`wuerfel_cvx.gradients`: ``rigid``,
-    frictionless, ``ccp`` or ``coulomb``; ``velocity``, frictionless or ``ccp``; no islands
-    or sleep, polishing on), else :class:`InputError`."""
+    ``velocity``, frictionless, ``ccp`` or ``coulomb``; no islands or sleep, polishing on),
+    else :class:`InputError`."""
 
     def __post_init__(self) -> None:
         set_field = object.__setattr__  # normalised once, on a frozen object

@@ -17,7 +17,7 @@ What is covered: the ``rigid`` formulation, frictionless contacts, ``ccp`` frict
 velocities and angular velocities, the bodies' friction coefficients and masses, and
 gravity; its rows linearised at the step's start or at closest approach
 (``RigidFormulation(linearisation="closest-approach")``).  The ``velocity`` formulation
-likewise (``velocity`` and ``velocity-baumgarte``), frictionless and ``ccp``: its
+likewise (``velocity`` and ``velocity-baumgarte``), with the same friction models: its
 corner-velocity unknowns held by rods, differentiated through the fit that makes its rigid
 states' corner velocities a body's motion (:mod:`wuerfel_cvx.gradients.velocity`).
 
@@ -33,10 +33,9 @@ pass's ``about`` is carried to those (:mod:`~wuerfel_cvx.gradients.backward`).  
 step whose fixed point re-linearised its rows (passes interleaved with friction problems)
 is refused.  What is not covered, and why:
 
-* ``velocity`` with ``coulomb`` friction, heavy tables or the linear position update: its
-  fixed point is not differentiated in corner coordinates; heavy tables add unknowns and
-  equalities besides the rods; the linear update leaves the rigid states the corner-space
-  derivatives rely on.
+* ``velocity`` with heavy tables or the linear position update: heavy tables add unknowns
+  and equalities besides the rods; the linear update leaves the rigid states the
+  corner-space derivatives rely on.
 * ``seed`` formulations: acceleration-level, no friction; not covered.
 
 Where the active set changes, the derivative is one-sided: the backward pass holds the
@@ -51,7 +50,6 @@ from __future__ import annotations
 
 from .backward import checked_names, gradient
 from .tape import (
-    CORNER_FRICTION_MODELS,
     SUPPORTED_FORMULATIONS,
     SUPPORTED_FRICTION_MODELS,
     WRT_NAMES,
@@ -61,6 +59,6 @@ from .tape import (
     check_supported,
 )
 
-__all__ = ["CORNER_FRICTION_MODELS", "SUPPORTED_FORMULATIONS", "SUPPORTED_FRICTION_MODELS",
-           "WRT_NAMES", "GradientError", "GradientTape", "StepTape", "check_supported",
-           "checked_names", "gradient"]
+__all__ = ["SUPPORTED_FORMULATIONS", "SUPPORTED_FRICTION_MODELS", "WRT_NAMES",
+           "GradientError", "GradientTape", "StepTape", "check_supported", "checked_names",
+           "gradient"]

@@ -235,12 +235,14 @@ def friction_state(qp: StepQP, x: FloatArray, ineq_dual: FloatArray, active: Act
 
 def coulomb_adjoint(qp: StepQP, target: FloatArray, x: FloatArray, ineq_dual: FloatArray,
                     active: ActiveSet, forces: ContactForces, gradient: FloatArray,
-                    step: int) -> tuple[QPAdjoint, FrictionAdjoint, int]:
+                    step: int, eq_dual: FloatArray | None = None,
+                    ) -> tuple[QPAdjoint, FrictionAdjoint, int]:
     """The adjoint of a ``coulomb`` step's fixed point (the module docstring).
 
     ``qp`` is the last contact QP, ``target`` the step's own target ``t`` (without the held
     friction impulse), ``(x, z)`` its polished answer on ``active``, ``forces`` the fixed
-    point's impulses, ``gradient`` ``dL/dx``.  Returns the QP part (as
+    point's impulses, ``gradient`` ``dL/dx``, ``eq_dual`` the equalities' ``y`` (the rods of
+    ``velocity``).  Returns the QP part (as
     :func:`~wuerfel_cvx.gradients.adjoint.qp_adjoint`'s), the friction part, and the number
     of contacts at the stick-slip boundary.
     """
@@ -281,7 +283,10 @@ def coulomb_adjoint(qp: StepQP, target: FloatArray, x: FloatArray, ineq_dual: Fl
     mu_gradient = np.where(state.sliding, -2.0 * state.sigma * state.normal * (slip @ a_x), 0.0)
     qp_part = QPAdjoint(target=2.0 * qp.weights * a_x, weights=2.0 * a_x * (target - x),
                         rows=tight, row_multiplier=np.asarray(ineq_dual[tight], dtype=np.float64),
-                        row_adjoint=a_z, unknowns_adjoint=a_x)
+                        row_adjoint=a_z, unknowns_adjoint=a_x,
+                        eq_multiplier=(np.zeros(n_eq) if eq_dual is None
+                                       else np.asarray(eq_dual, dtype=np.float64)),
+                        eq_adjoint=solution[n:n + n_eq])
     return qp_part, FrictionAdjoint(2.0 * friction, stick_adjoint, mu_gradient), state.weak
 
 

@@ -55,6 +55,7 @@ from .rigid import (
     cone_rows,
     contact_rows,
     corner_rows,
+    corner_slips,
     row_contacts,
     slip_rows,
 )
@@ -271,7 +272,8 @@ def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
         about = carried + _pass_rows_back(tape, fit, qp, solution.x, points, adjoint,
                                           adjoints, approach[index])
         if friction is not None:
-            _slips_back(tape, record, points, friction, adjoint.unknowns_adjoint, adjoints)
+            _slips_back(tape, record, points, friction, adjoint.unknowns_adjoint, adjoints,
+                        fit is not None)
         if fit is not None:
             adjoints.angle += rods_back(tape.model, points, solution.x, adjoint)
         if not closest:
@@ -346,7 +348,9 @@ def _corner_rows_back(tape: GradientTape, fit: CornerFit, qp: StepQP, x: FloatAr
     check_rows(model, qp, fit, approach, normal, rows)
     tight = adjoint.rows
     bodies = (contacts.edge_body[contact[tight]], contacts.point_body[contact[tight]])
-    _scatter(model, *bodies, corner_local(model, rows, tight, adjoint, x), adjoints)
+    _scatter(model, *bodies, corner_local(model, rows, tight, adjoint.row_multiplier,
+                                          adjoint.row_adjoint, adjoint.unknowns_adjoint, x),
+             adjoints)
     if approach is None:
         return np.zeros(qp.n_variables)
     seen = dataclasses.replace(adjoint, rows=normal[tight],
@@ -402,7 +406,7 @@ def _pass_adjoint(record: StepTape, qp: StepQP, solution: StepSolution, a_x: Flo
     if last and record.forces is not None and qp.cones is not None:  # the fixed point
         adjoint, friction, weak = coulomb_adjoint(
             qp, unshifted_target(qp, record.forces), solution.x, solution.ineq_dual, active,
-            record.forces, a_x, record.step)
+            record.forces, a_x, record.step, solution.eq_dual)
     else:
         adjoint = qp_adjoint(qp, solution.x, solution.ineq_dual, active, a_x, record.step,
                              solution.eq_dual)
@@ -468,16 +472,25 @@ def _rows_back(tape: GradientTape, qp: StepQP, x: FloatArray, points: FloatArray
 
 def _slips_back(tape: GradientTape, record: StepTape, points: FloatArray,
                 friction: FrictionAdjoint, unknowns_adjoint: FloatArray,
-                adjoints: _Adjoints) -> None:
+                adjoints: _Adjoints, corners: bool = False) -> None:
     """A ``coulomb`` step's slip rows and coefficients (:mod:`~wuerfel_cvx.gradients.adjoint`).
 
     ``dL/dS_c = slip_unknowns_c a_x - slip_solution_c x`` and ``dL/dmu_c``, carried to the
-    contacts' local inputs by the slip rows' derivatives.
+    contacts' local inputs by the slip rows' derivatives: in body columns (``rigid``) or,
+    with ``corners``, in corner columns (``velocity``).
     """
     model, qp, x = tape.model, record.qp, record.solution.x
     involved = np.flatnonzero((friction.slip_unknowns != 0.0) | (friction.slip_solution != 0.0)
                               | (friction.mu != 0.0))
     if not involved.size:
+        return
+    if corners:
+        blocks, mu = corner_slips(model, points, qp.contacts)
+        local = friction.mu[involved, None] * mu.grad[involved] + corner_local(
+            model, blocks, involved, friction.slip_unknowns[involved],
+            friction.slip_solution[involved], unknowns_adjoint, x)
+        _scatter(model, qp.contacts.edge_body[involved], qp.contacts.point_body[involved],
+                 local, adjoints)
         return
     rows = slip_rows(model, points, qp.contacts)
     local = friction.mu[involved, None] * rows.mu.grad[involved]

@@ -301,6 +301,21 @@ def corner_rows(model: Model, points: FloatArray, contacts: Contacts, contact: I
                        contacts.point[contact]), (blocks[0], blocks[1], blocks[2]), rhs)
 
 
+def corner_slips(model: Model, points: FloatArray, contacts: Contacts,
+                 ) -> tuple[CornerRows, Tangent]:
+    """Every contact's slip row ``s`` in corner columns and its coefficient ``mu``.
+
+    With derivatives (:data:`LOCAL`): what a ``velocity`` step's ``coulomb`` friction
+    depends on (the rows' right sides are zero).
+    """
+    geometry = _geometry(model, points, contacts)
+    every = np.arange(len(contacts), dtype=np.int64)
+    blocks = [(_take(slip[0], every), _take(slip[1], every)) for slip in geometry.slip]
+    return (CornerRows((contacts.edge_i, contacts.edge_j, contacts.point),
+                       (blocks[0], blocks[1], blocks[2]), _constant(np.zeros(len(contacts)))),
+            geometry.mu)
+
+
 def cone_rows(qp: StepQP, closest: bool) -> tuple[IntArray, FloatArray]:
     """Each inequality row's normal row and cone edge (+1, -1, 0), ``rigid`` or ``velocity``.
 

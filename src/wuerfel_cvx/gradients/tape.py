@@ -31,12 +31,7 @@ SUPPORTED_FORMULATIONS = ("rigid", "rigid-baumgarte", "velocity", "velocity-baum
 docstring of :mod:`wuerfel_cvx.gradients` says why the others are not yet)."""
 
 SUPPORTED_FRICTION_MODELS = ("ccp", "coulomb")
-"""Friction models a gradient can be taken through (frictionless contacts always);
-``velocity`` takes ``ccp`` only (:data:`CORNER_FRICTION_MODELS`)."""
-
-CORNER_FRICTION_MODELS = ("ccp",)
-"""Friction models a gradient through ``velocity`` covers: its ``coulomb`` fixed point is
-not differentiated in corner coordinates (:mod:`wuerfel_cvx.gradients.velocity`)."""
+"""Friction models a gradient can be taken through (frictionless contacts always)."""
 
 
 class GradientError(InputError):
@@ -102,11 +97,11 @@ def check_supported(formulation: Formulation, friction_model: str | None, *,
                f"formulations only, not '{formulation.name}'")
     model = str(friction_model or (formulation.friction.friction_model
                                    if formulation.friction is not None else "ccp"))
+    if model.strip().lower() not in SUPPORTED_FRICTION_MODELS:
+        refuse(f"gradients are implemented for friction_model "
+               f"{', '.join(SUPPORTED_FRICTION_MODELS)} (and frictionless contacts) only, "
+               f"not '{model}'")
     corners = bool(getattr(formulation, "rods", False))
-    covered = CORNER_FRICTION_MODELS if corners else SUPPORTED_FRICTION_MODELS
-    if model.strip().lower() not in covered:
-        refuse(f"gradients through '{formulation.name}' are implemented for friction_model "
-               f"{', '.join(covered)} (and frictionless contacts) only, not '{model}'")
     if corners and getattr(formulation, "position_update", "rigid") != "rigid":
         refuse("gradients through 'velocity' need its rigid position update")
     if corners and table_mass is not None:

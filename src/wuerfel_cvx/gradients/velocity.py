@@ -35,9 +35,14 @@ differentiates the corner-space QP and advance with respect to those coordinates
   dJ w_r``: rigid's row adjoint with ``J x`` and ``J a_x``, plus a turn of the fit
   (:func:`fit_turns`); the linearisation point's adjoint comes back through ``J'``.
 
+* ``coulomb`` friction: the fixed point's conditions
+  (:func:`~wuerfel_cvx.gradients.adjoint.coulomb_adjoint`) hold in any unknowns, the rods'
+  equalities among them; its slip rows ``s`` are corner blocks
+  (:func:`~wuerfel_cvx.gradients.rigid.corner_slips`).
+
 Every recomputed row is checked against the recorded QP (:func:`check_rows`).  What is not
-covered: ``coulomb`` friction, heavy tables (``table_mass``) and the linear position update
-(refused by :func:`~wuerfel_cvx.gradients.tape.check_supported`).
+covered: heavy tables (``table_mass``) and the linear position update (refused by
+:func:`~wuerfel_cvx.gradients.tape.check_supported`).
 """
 
 from __future__ import annotations
@@ -147,22 +152,25 @@ def rods_back(model: Model, points: FloatArray, x: FloatArray,
     return angle
 
 
-def corner_local(model: Model, rows: CornerRows, picked: IntArray, adjoint: QPAdjoint,
+def corner_local(model: Model, rows: CornerRows, picked: IntArray, multiplier: FloatArray,
+                 row_adjoint: FloatArray, unknowns_adjoint: FloatArray,
                  x: FloatArray) -> FloatArray:
-    """``dL/d(local)`` ``(t, 8)`` of the tight rows, ``picked`` among ``rows``'s rows.
+    """``dL/d(local)`` ``(t, 8)`` of rows ``picked`` among ``rows``'s rows.
 
-    ``w_r . dG_r + a_nu,r dh_r`` with ``w_r = z_r a_x - a_nu,r x`` on each block's corner.
+    ``w_r . dG_r + a_nu,r dh_r`` with ``w_r = z_r a_x - a_nu,r x`` on each block's corner
+    (``z`` the ``multiplier``, ``a_nu`` the ``row_adjoint`` of each picked row, ``a_x`` the
+    ``unknowns_adjoint``); for a ``coulomb`` step's slip rows ``2 lambda_t`` and ``a_s``.
     """
-    multiplier, row_adjoint = adjoint.row_multiplier[:, None], adjoint.row_adjoint[:, None]
+    multiplier, row_adjoint = multiplier[:, None], row_adjoint[:, None]
     local = row_adjoint * rows.rhs.grad[picked]
-    a_x, values = adjoint.unknowns_adjoint.reshape(-1, 2), x.reshape(-1, 2)
+    a_x, values = unknowns_adjoint.reshape(-1, 2), x.reshape(-1, 2)
     for index, block in zip(rows.corners, rows.blocks, strict=True):
         corner = index[picked]
         moving = (corner < model.n_points)[:, None]
         safe = np.where(moving[:, 0], corner, 0)
         w = np.where(moving, multiplier * a_x[safe] - row_adjoint * values[safe], 0.0)
         local += w[:, 0, None] * block[0].grad[picked] + w[:, 1, None] * block[1].grad[picked]
-    return local
+    return np.asarray(local, dtype=np.float64)
 
 
 def fit_turns(model: Model, fit: CornerFit, view: ContactRows, normal: IntArray,

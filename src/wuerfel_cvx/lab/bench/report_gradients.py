@@ -258,20 +258,27 @@ def cost_rows(repeats: int) -> list[list[str]]:
 def velocity_rows() -> list[list[str]]:
     """:func:`fd_agreement` through ``velocity``, and against ``rigid``'s gradient of the run.
 
-    Closest-approach rows for every solver, start rows (``velocity-baumgarte``) for CLARABEL;
-    ``ccp`` friction (rain-4 is frictionless).
+    ``ccp`` (rain-4 is frictionless) with closest-approach rows for every solver and start
+    rows (``velocity-baumgarte``) for CLARABEL; ``coulomb`` with closest-approach rows for
+    CLARABEL on the drop and the slide.
     """
     cases = [(name, scene, loss, inputs, steps, DT, "ccp")
              for name, scene, loss, inputs, steps in fd_cases()]
     cases.append(("spinning rain-4, dt 0.01 (64 steps)", spinning_rain(), _spinning_rain_loss,
                   RAIN_INPUTS, 64, 0.01, "frictionless"))
+    cases += [(name, scene, loss, inputs, steps, DT, "coulomb")
+              for name, scene, loss, inputs, steps in fd_cases()[:2]]
     rows = []
     for name, scene, loss, inputs, steps, dt, model in cases:
+        friction = "coulomb" if model == "coulomb" else "ccp"
         for linearisation, solvers in (("closest-approach", SOLVERS), ("start", SOLVERS[:1])):
             for solver in solvers:
-                passes, against = against_rigid(scene, loss, steps, dt, solver, linearisation)
-                worst, where, crossings = fd_agreement(scene, loss, inputs, steps, solver, "ccp",
-                                                       linearisation, dt, "velocity")
+                if model == "coulomb" and (linearisation == "start" or solver != "CLARABEL"):
+                    continue
+                passes, against = against_rigid(scene, loss, steps, dt, solver, linearisation,
+                                                friction)
+                worst, where, crossings = fd_agreement(scene, loss, inputs, steps, solver,
+                                                       friction, linearisation, dt, "velocity")
                 rows.append([name, model, linearisation, solver, passes, f"{worst:.1e}", where,
                              str(crossings), f"{against:.1e}",
                              "yes" if max(worst, against) <= 1e-5 else "no"])
@@ -279,17 +286,18 @@ def velocity_rows() -> list[list[str]]:
 
 
 def against_rigid(scene: Scene, loss: Loss, steps: int, dt: float, solver: str,
-                  linearisation: str) -> tuple[str, float]:
+                  linearisation: str, model: str = "ccp") -> tuple[str, float]:
     """Steps with passes of the ``velocity`` run, and its gradient against ``rigid``'s.
 
     Every input of :data:`~wuerfel_cvx.gradients.tape.WRT_NAMES`, as
     ``|velocity - rigid| / max(|rigid|, FLOOR_SCALE)``, the worst.
     """
     from ...gradients import WRT_NAMES
+    tolerance = FD_COULOMB_TOLERANCE if model == "coulomb" else None
     gradients = []
     for name in ("velocity", "rigid"):
         trajectory = simulate(scene, dt=dt, steps=steps, solver=solver, gradients=True,
-                              formulation=formulation("ccp", None, linearisation, name))
+                              formulation=formulation(model, tolerance, linearisation, name))
         gradients.append(trajectory.gradient(loss(trajectory.points), WRT_NAMES))
         if name == "velocity":
             assert trajectory.tape is not None
@@ -565,8 +573,9 @@ spin, least squares): the advance is J, the objective's target the rigid state's
 velocities, the rods' rows turn with the body (their right sides stay 0 under rigid
 changes), start rows are three corner blocks each, and a closest-approach row is rigid's
 row times J plus its cone's slip blocks (`wuerfel_cvx.gradients.velocity`).  The QP's
-adjoint is the same reduced KKT solve, now with the rods' equalities.  `coulomb`, heavy
-tables and the linear position update are refused.  Central differences as above (the
+adjoint is the same reduced KKT solve, now with the rods' equalities; `coulomb`'s fixed
+point the same conditions with the rods among them and its slip rows in corner columns.
+Heavy tables and the linear position update are refused.  Central differences as above (the
 last case as in the closest-approach table), and the largest relative difference of every
 input's derivative (all of `WRT_NAMES`) from `rigid`'s gradient of the same run (the same
 formulation family, `rigid` or `rigid-baumgarte`: on these scenes the two pose the same QP
