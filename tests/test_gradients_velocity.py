@@ -130,6 +130,19 @@ def test_velocity_gradient_matches_rigid_gradient_of_the_same_run(case: str,
     assert gradient["crossings"] == expected["crossings"]
 
 
+def test_velocity_gradient_with_the_sixth_rod_matches_rigid_gradient() -> None:
+    """``extra_rod``: six rods a box, one of them dependent (the KKT solve is rank deficient)."""
+    gradients = []
+    for formulation, options in (("velocity", {"extra_rod": True}), ("rigid", {})):
+        trajectory = simulate(tilted_drop(), dt=1 / 240, steps=60, solver="CLARABEL",
+                              formulation=formulation, gradients=True, **options)
+        gradients.append(trajectory.gradient(final_heights(trajectory.points), WRT_NAMES))
+    for name in WRT_NAMES:
+        np.testing.assert_allclose(gradients[0][name], gradients[1][name],
+                                   rtol=AGAINST_RIGID["rel"], atol=AGAINST_RIGID["abs"],
+                                   err_msg=name)
+
+
 def test_velocity_gradient_chains_through_the_gauss_newton_passes() -> None:
     """Frictionless spinning rain: a landing whose step takes two passes."""
     scene, steps = spinning_rain(), 64
