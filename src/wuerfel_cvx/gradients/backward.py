@@ -18,7 +18,10 @@ coordinates of :mod:`wuerfel_cvx.gradients.rigid`), from the last state to the f
    friction coefficients.
 
 At the first state ``a_c``, ``a_theta``, ``a_u``, ``a_omega`` are the gradients with respect to
-the scene's ``center``, ``angle``, ``velocity`` and ``angular_velocity``.  The cost is one
+the scene's ``center``, ``angle``, ``velocity`` and ``angular_velocity``.  Through
+``velocity`` (corner-velocity unknowns held by rods) the state adjoint is the same; steps 2
+and 3 go through the fit of the corner velocities to the bodies' motion, and the rods'
+equalities join the rows (:mod:`~wuerfel_cvx.gradients.velocity`).  The cost is one
 sparse LDL-like factorisation of each step's reduced KKT matrix, about what the polish of
 the forward run paid.
 """
