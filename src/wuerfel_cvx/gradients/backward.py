@@ -341,7 +341,9 @@ def _corner_rows_back(tape: GradientTape, fit: CornerFit, qp: StepQP, x: FloatAr
     velocities.
     """
     model, contacts = tape.model, qp.contacts
-    closest = approach is not None
+    closest = _closest_approach(tape)
+    if closest and approach is None:
+        raise GradientError("a closest-approach pass's tight rows were not differentiated")
     normal, sign = cone_rows(qp, closest)
     contact = normal % max(len(contacts), 1)
     rate = None if closest else np.where(contacts.distance > 0.0, 1.0 / tape.dt,
