@@ -179,7 +179,7 @@ def test_gradient_without_recording_is_an_input_error() -> None:
 
 def test_gradient_of_unsupported_run_is_refused_up_front() -> None:
     with pytest.raises(GradientError, match="rigid"):
-        simulate(slide_scene(), dt=1 / 240, steps=1, formulation="velocity", gradients=True)
+        simulate(slide_scene(), dt=1 / 240, steps=1, formulation="seed", gradients=True)
 
 
 def test_gradient_through_an_unverified_step_is_refused() -> None:
