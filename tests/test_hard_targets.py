@@ -12,6 +12,7 @@ import pytest
 
 from wuerfel_cvx import simulate
 from wuerfel_cvx.lab.bench import schema
+from wuerfel_cvx.lab.bench.report import provenance_line_of
 from wuerfel_cvx.lab.bench.suite import Suite
 from wuerfel_cvx.lab.bench.targets import (
     ENERGY_RISE,
@@ -162,8 +163,10 @@ def test_report_shows_before_and_after_and_how_to_regenerate(results: pd.DataFra
 def test_the_committed_report_is_generated_from_the_committed_numbers() -> None:
     hard = REPO / "reports" / "hard"
     after, generated_after = hard / "targets-after.csv", hard / "generated-energy-after.csv"
+    provenance = hard / "targets-after-provenance.json"
     text = render(schema.read_results(hard / "targets-before.csv"),
                   read_generated(hard / "generated-energy-before.csv"),
                   schema.read_results(after) if after.exists() else None,
-                  read_generated(generated_after) if generated_after.exists() else None)
+                  read_generated(generated_after) if generated_after.exists() else None,
+                  provenance=provenance_line_of(provenance) if provenance.exists() else "")
     assert (hard / "targets.md").read_text(encoding="utf-8") == text

@@ -27,6 +27,16 @@ def test_a_finished_job_runs_its_commands_in_order(tmp_path: Path) -> None:
     assert log.read_text() == "ab"
 
 
+def test_a_missing_command_is_one_line_and_the_job_fails(capsys: pytest.CaptureFixture[str],
+                                                         tmp_path: Path) -> None:
+    log = tmp_path / "log"
+    job = Job("lost", (("no-such-command-here",), (sys.executable, "-c",
+                                                   f"open({str(log)!r}, 'w')")), 1.0)
+    assert not run_job(job)
+    assert "'no-such-command-here' not found" in capsys.readouterr().err
+    assert not log.exists()  # the job stops at its first missing command
+
+
 def test_a_spent_budget_interrupts_the_command_and_skips_the_rest(tmp_path: Path) -> None:
     """The command gets Ctrl-C at the deadline, and the report step after it does not run.
 

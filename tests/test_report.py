@@ -428,7 +428,8 @@ def test_a_results_csv_with_a_wrong_header_still_lists_the_columns(tmp_path: Pat
                              r"'solver_time_per_step_mean', 'polish_time_per_step', "
                              r"'update_time_per_step', 'record_time_per_step', "
                              r"'outside_steps_time_per_step', 'bare_call_time_per_step', "
-                             r"'bare_call_over_solver', 'max_overlap_depth', 'energy_gain', "
+                             r"'bare_call_over_solver', 'kkt_factor_time', "
+                             r"'max_overlap_depth', 'energy_gain', "
                              r"'friction_model', "):
         write_report(broken, tmp_path / "reports")
 

@@ -77,8 +77,8 @@ class Settings:
     """Record what a gradient through the run needs (each step's QP and polished answer),
     for :meth:`Trajectory.gradient <wuerfel_cvx.trajectory.Trajectory.gradient>`; the run
     must be one the backward pass covers (:mod:`wuerfel_cvx.gradients`: ``rigid``,
-    frictionless, ``ccp`` or ``coulomb``, no islands or sleep, polishing on), else
-    :class:`InputError`."""
+    ``velocity``, frictionless, ``ccp`` or ``coulomb``; no islands or sleep, polishing on),
+    else :class:`InputError`."""
 
     def __post_init__(self) -> None:
         set_field = object.__setattr__  # normalised once, on a frozen object
@@ -103,7 +103,7 @@ class Settings:
                              f"{', '.join(FRICTION_MODELS)})", field="friction_model")
         if self.gradients:
             check_supported(formulation, self.friction_model, islands=self.islands,
-                            sleep=self.sleep, polish=self.polish)
+                            sleep=self.sleep, polish=self.polish, table_mass=self.table_mass)
         if self.table_mass is not None and not (
                 isinstance(self.table_mass, int | float) and math.isfinite(self.table_mass)
                 and self.table_mass > 0):

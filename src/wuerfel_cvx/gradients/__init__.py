@@ -8,14 +8,18 @@ recorded with ``gradients=True`` keeps each step's QP and answer
 (:mod:`wuerfel_cvx.gradients.tape`); :meth:`Trajectory.gradient
 <wuerfel_cvx.trajectory.Trajectory.gradient>` propagates a loss's gradient backwards through
 the steps (:mod:`wuerfel_cvx.gradients.backward`), each step's QP numbers differentiated
-with respect to the state and the parameters exactly (:mod:`wuerfel_cvx.gradients.rigid`).
+with respect to the state and the parameters exactly (:mod:`wuerfel_cvx.gradients.rigid`,
+and in corner coordinates :mod:`wuerfel_cvx.gradients.velocity`).
 
 What is covered: the ``rigid`` formulation, frictionless contacts, ``ccp`` friction and
 ``coulomb`` friction (through its converged fixed point:
 :mod:`wuerfel_cvx.gradients.adjoint`), with respect to the initial centres, angles,
 velocities and angular velocities, the bodies' friction coefficients and masses, and
 gravity; its rows linearised at the step's start or at closest approach
-(``RigidFormulation(linearisation="closest-approach")``).
+(``RigidFormulation(linearisation="closest-approach")``).  The ``velocity`` formulation
+likewise (``velocity`` and ``velocity-baumgarte``), with the same friction models: its
+corner-velocity unknowns held by rods, differentiated through the fit that makes its rigid
+states' corner velocities a body's motion (:mod:`wuerfel_cvx.gradients.velocity`).
 
 *Closest-approach rows and their passes: what is differentiated.*  Each pass's rows are
 functions of the start coordinates, the friction coefficients and the pass's linearisation
@@ -29,9 +33,9 @@ pass's ``about`` is carried to those (:mod:`~wuerfel_cvx.gradients.backward`).  
 step whose fixed point re-linearised its rows (passes interleaved with friction problems)
 is refused.  What is not covered, and why:
 
-* ``velocity`` and ``velocity-baumgarte``: their unknowns are corner velocities
-  held by rod equalities, and their rows are in corner space; the rows' derivatives here
-  are in three columns per body.
+* ``velocity`` with heavy tables or the linear position update: heavy tables add unknowns
+  and equalities besides the rods; the linear update leaves the rigid states the
+  corner-space derivatives rely on.
 * ``seed`` formulations: acceleration-level, no friction; not covered.
 
 Where the active set changes, the derivative is one-sided: the backward pass holds the

@@ -66,7 +66,7 @@ round-off).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -100,15 +100,20 @@ class QPAdjoint:
     """``a_nu,r`` of each tight row: ``dL/dh_r``."""
     unknowns_adjoint: FloatArray
     """``a_x``."""
+    eq_multiplier: FloatArray = field(default_factory=lambda: np.zeros(0))
+    """``y`` of each equality row: ``dL/dE_r = -(y_r a_x + a_y,r x)`` ..."""
+    eq_adjoint: FloatArray = field(default_factory=lambda: np.zeros(0))
+    """... and ``a_y,r = dL/de_r`` (empty for a QP without equalities)."""
 
 
 def qp_adjoint(qp: StepQP, x: FloatArray, ineq_dual: FloatArray, active: ActiveSet,
-               gradient: FloatArray, step: int) -> QPAdjoint:
+               gradient: FloatArray, step: int, eq_dual: FloatArray | None = None) -> QPAdjoint:
     """The adjoint of ``qp``'s solution ``x`` (multipliers ``ineq_dual``) on ``active``.
 
-    ``gradient`` is ``dL/dx``.  Raises :class:`GradientError` for a QP with a coupling or
-    linear cost (not posed by the formulations a gradient covers) or a KKT matrix that does
-    not factor.
+    ``gradient`` is ``dL/dx``; ``eq_dual`` the equality rows' multipliers ``y`` (the
+    stationarity ``2 W (x - t) + E' y - G' z = 0``), for a QP with equalities.  Raises
+    :class:`GradientError` for a QP with a coupling or linear cost (not posed by the
+    formulations a gradient covers) or a KKT matrix that does not factor.
     """
     if qp.cost_factor is not None or qp.linear is not None:
         raise GradientError(f"step {step}: the backward pass covers QPs without coupling or "
@@ -124,7 +129,10 @@ def qp_adjoint(qp: StepQP, x: FloatArray, ineq_dual: FloatArray, active: ActiveS
     rows = np.concatenate([active.lower, active.upper]).astype(np.int64)
     return QPAdjoint(target=2.0 * qp.weights * a_x, weights=2.0 * a_x * (qp.target - x),
                      rows=rows, row_multiplier=np.asarray(ineq_dual[rows], dtype=np.float64),
-                     row_adjoint=a_nu, unknowns_adjoint=a_x)
+                     row_adjoint=a_nu, unknowns_adjoint=a_x,
+                     eq_multiplier=(np.zeros(n_eq) if eq_dual is None
+                                    else np.asarray(eq_dual, dtype=np.float64)),
+                     eq_adjoint=solution[n:n + n_eq])
 
 
 def weak_rows(qp: StepQP, x: FloatArray, ineq_dual: FloatArray, active: ActiveSet) -> int:
@@ -227,12 +235,14 @@ def friction_state(qp: StepQP, x: FloatArray, ineq_dual: FloatArray, active: Act
 
 def coulomb_adjoint(qp: StepQP, target: FloatArray, x: FloatArray, ineq_dual: FloatArray,
                     active: ActiveSet, forces: ContactForces, gradient: FloatArray,
-                    step: int) -> tuple[QPAdjoint, FrictionAdjoint, int]:
+                    step: int, eq_dual: FloatArray | None = None,
+                    ) -> tuple[QPAdjoint, FrictionAdjoint, int]:
     """The adjoint of a ``coulomb`` step's fixed point (the module docstring).
 
     ``qp`` is the last contact QP, ``target`` the step's own target ``t`` (without the held
     friction impulse), ``(x, z)`` its polished answer on ``active``, ``forces`` the fixed
-    point's impulses, ``gradient`` ``dL/dx``.  Returns the QP part (as
+    point's impulses, ``gradient`` ``dL/dx``, ``eq_dual`` the equalities' ``y`` (the rods of
+    ``velocity``).  Returns the QP part (as
     :func:`~wuerfel_cvx.gradients.adjoint.qp_adjoint`'s), the friction part, and the number
     of contacts at the stick-slip boundary.
     """
@@ -273,7 +283,10 @@ def coulomb_adjoint(qp: StepQP, target: FloatArray, x: FloatArray, ineq_dual: Fl
     mu_gradient = np.where(state.sliding, -2.0 * state.sigma * state.normal * (slip @ a_x), 0.0)
     qp_part = QPAdjoint(target=2.0 * qp.weights * a_x, weights=2.0 * a_x * (target - x),
                         rows=tight, row_multiplier=np.asarray(ineq_dual[tight], dtype=np.float64),
-                        row_adjoint=a_z, unknowns_adjoint=a_x)
+                        row_adjoint=a_z, unknowns_adjoint=a_x,
+                        eq_multiplier=(np.zeros(n_eq) if eq_dual is None
+                                       else np.asarray(eq_dual, dtype=np.float64)),
+                        eq_adjoint=solution[n:n + n_eq])
     return qp_part, FrictionAdjoint(2.0 * friction, stick_adjoint, mu_gradient), state.weak
 
 

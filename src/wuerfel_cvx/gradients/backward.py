@@ -18,13 +18,17 @@ coordinates of :mod:`wuerfel_cvx.gradients.rigid`), from the last state to the f
    friction coefficients.
 
 At the first state ``a_c``, ``a_theta``, ``a_u``, ``a_omega`` are the gradients with respect to
-the scene's ``center``, ``angle``, ``velocity`` and ``angular_velocity``.  The cost is one
+the scene's ``center``, ``angle``, ``velocity`` and ``angular_velocity``.  Through
+``velocity`` (corner-velocity unknowns held by rods) the state adjoint is the same; steps 2
+and 3 go through the fit of the corner velocities to the bodies' motion, and the rods'
+equalities join the rows (:mod:`~wuerfel_cvx.gradients.velocity`).  The cost is one
 sparse LDL-like factorisation of each step's reduced KKT matrix, about what the polish of
 the forward run paid.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -47,14 +51,27 @@ from .adjoint import (
 )
 from .rigid import (
     LOCAL,
+    ApproachPass,
     ContactRows,
     approach_contacts,
     approach_rows_of,
+    cone_rows,
     contact_rows,
+    corner_rows,
+    corner_slips,
     row_contacts,
     slip_rows,
 )
 from .tape import WRT_NAMES, GradientError, GradientTape, StepTape
+from .velocity import (
+    CornerFit,
+    approach_view,
+    check_rows,
+    corner_local,
+    fit_turns,
+    objective_back,
+    rods_back,
+)
 
 if TYPE_CHECKING:
     from ..trajectory import Trajectory
@@ -199,13 +216,24 @@ def _approach_rows(tape: GradientTape, points: FloatArray,
             tight = np.concatenate([active.lower, active.upper]).astype(np.int64)
             if tight.size:
                 where.append((index, position))
-                passes.append((points[record.step - 1], qp, tight))
+                passes.append(_approach_pass(tape, points[record.step - 1], qp, tight))
                 contacts += len(qp.contacts)
     rows = approach_rows_of(tape.model, passes,
                             float(getattr(tape.formulation, "push_speed", 1.0)), tape.dt)
     for (index, position), found_rows in zip(where, rows, strict=True):
         found[index][position] = found_rows
     return found
+
+
+def _approach_pass(tape: GradientTape, points: FloatArray, qp: StepQP,
+                   tight: np.ndarray) -> ApproachPass:
+    """The pass to differentiate for ``qp``'s ``tight`` rows (``velocity``: its view)."""
+    if not _corner_space(tape):
+        return points, qp, tight
+    normal, _ = cone_rows(qp, True)
+    view = approach_view(tape.model, points, qp, float(getattr(tape.formulation, "push_speed",
+                                                              1.0)), tape.dt)
+    return points, view, np.unique(normal[tight])
 
 
 def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
@@ -220,14 +248,21 @@ def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
     With closest-approach rows the step's passes are chained (:func:`_about_rule`): pass
     ``q``'s rows depend on its linearisation point, the target for the first pass, the first
     answer for the second, the mean of the last answer and the last point after that.
+    ``velocity``'s unknowns are corner velocities: its advance, rods, rows and objective go
+    through the fit of :mod:`~wuerfel_cvx.gradients.velocity`.
     """
-    dt, n = tape.dt, tape.model.n_boxes
+    dt = tape.dt
     closest = _closest_approach(tape)
     chain = _chain(record)
+    fit = CornerFit.of(tape.model, points) if _corner_space(tape) else None
     a_x = np.concatenate([dt * adjoints.center + adjoints.velocity,
                           (dt * adjoints.angle + adjoints.angular_velocity)[:, None]],
                          axis=1).ravel()
-    a_target, a_weights, carried = np.zeros(3 * n), np.zeros(3 * n), np.zeros(3 * n)
+    if fit is not None:  # the advance by the motion the corner velocities describe
+        adjoints.angle += fit.turns(a_x[2::3], record.solution.x)
+        a_x = fit.to_corners(a_x)
+    size = record.qp.n_variables
+    a_target, a_weights, carried = np.zeros(size), np.zeros(size), np.zeros(size)
     weak, switches = 0, 0
     for index in range(len(chain) - 1, -1, -1):
         qp, solution = chain[index]
@@ -237,19 +272,41 @@ def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
         weak, switches = weak + flagged, switches + _switches(tape, qp, active)
         a_target += adjoint.target
         a_weights += adjoint.weights
-        about = carried + (_rows_back(tape, qp, solution.x, points, adjoint, adjoints,
-                                      approach[index])
-                           if adjoint.rows.size else 0.0)
+        about = carried + _pass_rows_back(tape, fit, qp, solution.x, points, adjoint,
+                                          adjoints, approach[index])
         if friction is not None:
-            _slips_back(tape, record, points, friction, adjoint.unknowns_adjoint, adjoints)
+            _slips_back(tape, record, points, friction, adjoint.unknowns_adjoint, adjoints,
+                        fit is not None)
+        if fit is not None:
+            adjoints.angle += rods_back(tape.model, points, solution.x, adjoint)
         if not closest:
             continue
         if index == 0:  # the first pass is linearised about the target
             a_target += about
         elif index + 1 < FIRST_DAMPED_PASS:  # the next ones about the last answer
-            a_x, carried = about, np.zeros(3 * n)
+            a_x, carried = about, np.zeros(size)
         else:  # later ones about the mean of the last answer and the last point
             a_x, carried = 0.5 * about, 0.5 * about
+    _objective_back(tape, record, fit, a_target, a_weights, adjoints)
+    return weak, switches
+
+
+def _corner_space(tape: GradientTape) -> bool:
+    """Whether the run's unknowns are corner velocities held by rods (``velocity``)."""
+    return bool(getattr(tape.formulation, "rods", False))
+
+
+def _objective_back(tape: GradientTape, record: StepTape, fit: CornerFit | None,
+                    a_target: FloatArray, a_weights: FloatArray, adjoints: _Adjoints) -> None:
+    """The target's and weights' adjoints to the start velocities, gravity and masses."""
+    dt, n = tape.dt, tape.model.n_boxes
+    if fit is not None:
+        part = objective_back(fit, tape.model, record.qp, a_target, a_weights, dt)
+        adjoints.velocity, adjoints.angular_velocity = part.velocity, part.angular_velocity
+        adjoints.angle += part.angle
+        adjoints.gravity += part.gravity
+        adjoints.mass += part.mass
+        return
     target = a_target.reshape(n, 3)
     adjoints.velocity = target[:, :2].copy()
     adjoints.angular_velocity = target[:, 2].copy()
@@ -257,7 +314,57 @@ def _step_back(tape: GradientTape, record: StepTape, points: FloatArray,
     weights = a_weights.reshape(n, 3)
     inertia_per_mass = record.qp.weights[2::3] / record.qp.weights[0::3]
     adjoints.mass += weights[:, 0] + weights[:, 1] + weights[:, 2] * inertia_per_mass
-    return weak, switches
+
+
+def _pass_rows_back(tape: GradientTape, fit: CornerFit | None, qp: StepQP, x: FloatArray,
+                    points: FloatArray, adjoint: QPAdjoint, adjoints: _Adjoints,
+                    approach: ContactRows | None) -> FloatArray:
+    """A pass's tight rows to ``adjoints``; the adjoint of its linearisation point.
+
+    In the pass's unknowns (zeros for rows at the step's start or no tight row).
+    """
+    if not adjoint.rows.size:
+        return np.zeros(qp.n_variables)
+    if fit is None:
+        return _rows_back(tape, qp, x, points, adjoint, adjoints, approach)
+    return _corner_rows_back(tape, fit, qp, x, points, adjoint, adjoints, approach)
+
+
+def _corner_rows_back(tape: GradientTape, fit: CornerFit, qp: StepQP, x: FloatArray,
+                      points: FloatArray, adjoint: QPAdjoint, adjoints: _Adjoints,
+                      approach: ContactRows | None) -> FloatArray:
+    """``velocity``'s tight rows (:mod:`~wuerfel_cvx.gradients.velocity`).
+
+    Start rows: three corner blocks each.  Closest-approach rows: rigid's rows ``N``
+    (``approach``, of :func:`~wuerfel_cvx.gradients.velocity.approach_view`) through the
+    fit, plus the cones' slip blocks; returns the linearisation point's adjoint in corner
+    velocities.
+    """
+    model, contacts = tape.model, qp.contacts
+    closest = _closest_approach(tape)
+    if closest and approach is None:
+        raise GradientError("a closest-approach pass's tight rows were not differentiated")
+    normal, sign = cone_rows(qp, closest)
+    contact = normal % max(len(contacts), 1)
+    rate = None if closest else np.where(contacts.distance > 0.0, 1.0 / tape.dt,
+                                         float(getattr(tape.formulation, "beta", 0.2))
+                                         / tape.dt)
+    rows = corner_rows(model, points, contacts, contact, sign, rate)
+    check_rows(model, qp, fit, approach, normal, rows)
+    tight = adjoint.rows
+    bodies = (contacts.edge_body[contact[tight]], contacts.point_body[contact[tight]])
+    _scatter(model, *bodies, corner_local(model, rows, tight, adjoint.row_multiplier,
+                                          adjoint.row_adjoint, adjoint.unknowns_adjoint, x),
+             adjoints)
+    if approach is None:
+        return np.zeros(qp.n_variables)
+    seen = dataclasses.replace(adjoint, rows=normal[tight],
+                               unknowns_adjoint=fit.to_bodies(adjoint.unknowns_adjoint))
+    about = _rows_back(tape, qp, fit.to_bodies(x), points, seen, adjoints, approach)
+    adjoints.angle += fit_turns(model, fit, approach, normal[tight], bodies, adjoint, x)
+    assert qp.linearised_about is not None
+    adjoints.angle += fit.turns(about[2::3], qp.linearised_about)
+    return fit.to_corners(about)
 
 
 ABOUT_CHECK = 1e-9
@@ -304,9 +411,10 @@ def _pass_adjoint(record: StepTape, qp: StepQP, solution: StepSolution, a_x: Flo
     if last and record.forces is not None and qp.cones is not None:  # the fixed point
         adjoint, friction, weak = coulomb_adjoint(
             qp, unshifted_target(qp, record.forces), solution.x, solution.ineq_dual, active,
-            record.forces, a_x, record.step)
+            record.forces, a_x, record.step, solution.eq_dual)
     else:
-        adjoint = qp_adjoint(qp, solution.x, solution.ineq_dual, active, a_x, record.step)
+        adjoint = qp_adjoint(qp, solution.x, solution.ineq_dual, active, a_x, record.step,
+                             solution.eq_dual)
     return (adjoint, friction,
             weak_rows(qp, solution.x, solution.ineq_dual, active) + int(guessed) + weak, active)
 
@@ -369,16 +477,25 @@ def _rows_back(tape: GradientTape, qp: StepQP, x: FloatArray, points: FloatArray
 
 def _slips_back(tape: GradientTape, record: StepTape, points: FloatArray,
                 friction: FrictionAdjoint, unknowns_adjoint: FloatArray,
-                adjoints: _Adjoints) -> None:
+                adjoints: _Adjoints, corners: bool = False) -> None:
     """A ``coulomb`` step's slip rows and coefficients (:mod:`~wuerfel_cvx.gradients.adjoint`).
 
     ``dL/dS_c = slip_unknowns_c a_x - slip_solution_c x`` and ``dL/dmu_c``, carried to the
-    contacts' local inputs by the slip rows' derivatives.
+    contacts' local inputs by the slip rows' derivatives: in body columns (``rigid``) or,
+    with ``corners``, in corner columns (``velocity``).
     """
     model, qp, x = tape.model, record.qp, record.solution.x
     involved = np.flatnonzero((friction.slip_unknowns != 0.0) | (friction.slip_solution != 0.0)
                               | (friction.mu != 0.0))
     if not involved.size:
+        return
+    if corners:
+        blocks, mu = corner_slips(model, points, qp.contacts)
+        local = friction.mu[involved, None] * mu.grad[involved] + corner_local(
+            model, blocks, involved, friction.slip_unknowns[involved],
+            friction.slip_solution[involved], unknowns_adjoint, x)
+        _scatter(model, qp.contacts.edge_body[involved], qp.contacts.point_body[involved],
+                 local, adjoints)
         return
     rows = slip_rows(model, points, qp.contacts)
     local = friction.mu[involved, None] * rows.mu.grad[involved]

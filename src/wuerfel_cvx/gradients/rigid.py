@@ -263,6 +263,70 @@ def slip_rows(model: Model, points: FloatArray, contacts: Contacts) -> SlipRows:
                     geometry.mu)
 
 
+@dataclass(frozen=True)
+class CornerRows:
+    """Inequality rows in corner columns (``velocity``), with derivatives (:data:`LOCAL`).
+
+    Each row has three blocks: on the edge's ends ``i``, ``j`` and the point ``k`` (the
+    corners' indices among all points; a table's are not unknowns).
+    """
+
+    corners: tuple[IntArray, IntArray, IntArray]
+    blocks: tuple[Vector, Vector, Vector]
+    """Each block's entries ``(x, y)`` (1)."""
+    rhs: Tangent
+    """``h`` (m/s); zero for the friction part alone."""
+
+
+def corner_rows(model: Model, points: FloatArray, contacts: Contacts, contact: IntArray,
+                sign: FloatArray, rate: FloatArray | None) -> CornerRows:
+    """Rows of contacts ``contact`` (cone edge ``sign``) in the corner velocities.
+
+    With the contacts' rates (1/s, one per contact) the start rows ``(g + sign mu s) . v >=
+    -rate gap`` (the module docstring's blocks, before the corner map); without
+    (``None``) the friction part ``sign mu s`` alone, the rest of a closest-approach row
+    being rigid's rows times the fit (:mod:`wuerfel_cvx.gradients.velocity`).
+    """
+    geometry = _geometry(model, points, contacts)
+    factor = _take(geometry.mu, contact) * sign
+    blocks = []
+    for side, slip in zip(geometry.side, geometry.slip, strict=True):
+        block = (_take(slip[0], contact) * factor, _take(slip[1], contact) * factor)
+        if rate is not None:
+            block = (block[0] + _take(side[0], contact), block[1] + _take(side[1], contact))
+        blocks.append(block)
+    rhs = (_constant(np.zeros(len(contact))) if rate is None
+           else _take(geometry.gap * (-rate), contact))
+    return CornerRows((contacts.edge_i[contact], contacts.edge_j[contact],
+                       contacts.point[contact]), (blocks[0], blocks[1], blocks[2]), rhs)
+
+
+def corner_slips(model: Model, points: FloatArray, contacts: Contacts,
+                 ) -> tuple[CornerRows, Tangent]:
+    """Every contact's slip row ``s`` in corner columns and its coefficient ``mu``.
+
+    With derivatives (:data:`LOCAL`): what a ``velocity`` step's ``coulomb`` friction
+    depends on (the rows' right sides are zero).
+    """
+    geometry = _geometry(model, points, contacts)
+    every = np.arange(len(contacts), dtype=np.int64)
+    blocks = [(_take(slip[0], every), _take(slip[1], every)) for slip in geometry.slip]
+    return (CornerRows((contacts.edge_i, contacts.edge_j, contacts.point),
+                       (blocks[0], blocks[1], blocks[2]), _constant(np.zeros(len(contacts)))),
+            geometry.mu)
+
+
+def cone_rows(qp: StepQP, closest: bool) -> tuple[IntArray, FloatArray]:
+    """Each inequality row's normal row and cone edge (+1, -1, 0), ``rigid`` or ``velocity``.
+
+    Start rows have one normal row per contact (its index is the contact's);
+    closest-approach rows a rate row and a closest-approach row per contact, or the rate
+    rows alone (:func:`_normal_rows`).
+    """
+    return (_normal_rows(qp, len(qp.contacts)) if closest
+            else _row_signs(qp, len(qp.contacts)))
+
+
 def row_contacts(qp: StepQP) -> IntArray:
     """The contact of each inequality row of a ``rigid`` step QP."""
     return _row_signs(qp, len(qp.contacts))[0]
@@ -506,7 +570,7 @@ def _ramp_margins(gaps: np.ndarray, lines: np.ndarray, past: np.ndarray,
 
 def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
              hold_closest: bool, forced: FloatArray | None = None,
-             corners: tuple[np.ndarray, ...] | None = None,
+             corners: tuple[np.ndarray, ...] | None = None, ramps: FloatArray | None = None,
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
     """``tau*`` (s), ``psi(tau*)`` (m), the rows' right sides' rates (m/s) of each contact.
 
@@ -518,6 +582,7 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
     forward pass's own ``tau*``, whose choice between a sample and the refined time (and
     which sample) is taken where the two are within round-off of each other.  ``corners``:
     :func:`_approach_corners` at ``(0, held.tau)`` ``(m, 2)`` where ``tau*`` is held.
+    ``ramps``: the forward pass's rows' ramps' rates ``(m, 2)`` (:func:`_forward_ramps`).
     """
     m, samples, dt = x.shape[0], SAMPLES, inputs.dt
     grid = np.linspace(0.0, dt, samples + 1)
@@ -525,7 +590,7 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
         assert held is not None
         return _held_closest(x, inputs, held, corners)
     if held is None and forced is not None and np.all(np.isin(forced, grid)):
-        return _held_closest(x, inputs, _sampled_choices(x, inputs, grid, forced))
+        return _held_closest(x, inputs, _sampled_choices(x, inputs, grid, forced, ramps))
     gaps, lines, *grid_faces = _face_gaps(x, inputs, np.broadcast_to(grid, (m, samples + 1)),
                                           None if held is None else held.grid_faces)
     start, line_start = gaps[:, 0], lines[:, 0]
@@ -576,6 +641,8 @@ def _closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None,
     else:
         flat = held.flat
     tau = np.where(flat | hold_closest, tau.real + 0.0 * tau, tau)
+    if held is None and ramps is not None:
+        grid_line, refined_line = _forward_ramps(grid_line, refined_line, best, take, starts, ramps)
     choices = dict(grid_faces=tuple(grid_faces), refined_faces=tuple(refined_faces),
                    pushed=pushed, best=best, curved=curved, shift_clip=shift_clip,
                    tau_clip=tau_clip, take=take, grid_line=grid_line,
@@ -615,7 +682,7 @@ def _psi_at(x: np.ndarray, inputs: _ApproachInputs, tau: np.ndarray,
 
 
 def _sampled_choices(x: np.ndarray, inputs: _ApproachInputs, grid: FloatArray,
-                     forced: FloatArray) -> _Held:
+                     forced: FloatArray, ramps: FloatArray | None = None) -> _Held:
     """The choices of a pass whose every ``tau*`` is a sample (``forced``, the forward's).
 
     Only the gaps at the start and at ``tau*`` are needed then (the faces' choices there,
@@ -642,10 +709,34 @@ def _sampled_choices(x: np.ndarray, inputs: _ApproachInputs, grid: FloatArray,
         grid_line[rows, column] = _ramp_margins(gaps, lines, past, inputs, tau[:, None],
                                                 starts, None)[1][:, 0]
     none, false = np.zeros(m), np.zeros(m, dtype=bool)
+    if ramps is not None:
+        grid_line, _ = _forward_ramps(grid_line, false[:, None], best, false, starts, ramps)
     return _Held(grid_faces=grid_faces, refined_faces=(false[:, None], false[:, None]),
                  pushed=pushed, best=best, curved=false, shift_clip=none, tau_clip=none,
                  take=false, grid_line=grid_line, refined_line=false[:, None],
                  at_rate=false, flat=~false, tau=np.asarray(forced, dtype=np.float64))
+
+
+def _forward_ramps(grid_line: np.ndarray, refined_line: np.ndarray, best: IntArray,
+                   take: np.ndarray, starts: tuple[np.ndarray, ...], ramps: FloatArray,
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The ramps' choices (``on_line``) of the rate row and at ``tau*``, as the forward's.
+
+    A point past its face's end whose gap sits on the face's ramp (``psi`` 0 to round-off)
+    is at a tie between the face's ramp and its line's; this arithmetic and the forward
+    pass's compiled loops may break it differently.  Where the two ramps' rates differ,
+    each row takes the ramp whose rate is nearer the forward pass's ``ramps`` ``(m, 2)``
+    (the rate row's right side and the closest row's cap, m/s): the side the run took.
+    """
+    rate, line_rate = starts[2].real, starts[3].real
+    differ = rate != line_rate
+    nearer = np.abs(ramps - line_rate[:, None]) < np.abs(ramps - rate[:, None])
+    grid_line, refined_line = grid_line.copy(), refined_line.copy()
+    rows = np.arange(grid_line.shape[0])
+    grid_line[:, 1] = np.where(differ, nearer[:, 0], grid_line[:, 1])
+    grid_line[rows, best] = np.where(differ & ~take, nearer[:, 1], grid_line[rows, best])
+    refined_line[:, 0] = np.where(differ & take, nearer[:, 1], refined_line[:, 0])
+    return grid_line, refined_line
 
 
 def _held_closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
@@ -679,7 +770,7 @@ def _all_held(held: _Held | None, hold_closest: bool) -> bool:
 
 def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArray, FloatArray],
                      held: _Held | None, hold_closest: bool, forced: FloatArray | None = None,
-                     ) -> tuple[np.ndarray, np.ndarray, _Held]:
+                     ramps: FloatArray | None = None) -> tuple[np.ndarray, np.ndarray, _Held]:
     """Each QP row's six body-column entries ``(r, 6)`` and right side ``(r,)``, the choices.
 
     ``x`` ``(m, 14)`` per contact (:data:`APPROACH_LOCAL`, real or complex), ``rows`` each
@@ -688,7 +779,8 @@ def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArra
     columns at ``tau = 0`` and ``tau = tau*``: ``(g_i + g_j, g_i . rot90(o_i) + g_j . rot90(o_j))``
     for the edge body and ``(g_k, g_k . rot90(o_k))`` for the point body, ``g`` the side
     gradients of the corners at ``tau`` over the edge's length, ``o`` the corners' offsets
-    at ``tau``; plus ``sign mu s`` with the slip row ``s`` at the start.
+    at ``tau``; plus ``sign mu s`` with the slip row ``s`` at the start.  ``forced`` and
+    ``ramps``: the forward pass's ``tau*`` and ramps (:func:`_closest`).
     """
     m = x.shape[0]
     corners = None
@@ -696,7 +788,7 @@ def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArra
         assert held is not None and held.tau is not None
         corners = _approach_corners(x, inputs, np.stack([0.0 * held.tau, held.tau], axis=1))
     tau, psi, rate, closest_rate, choices = _closest(x, inputs, held, hold_closest, forced,
-                                                     corners)
+                                                     corners, ramps)
     if corners is None:
         times = np.stack([0.0 * tau, tau], axis=1)  # (m, 2): the rate row, the closest row
         corners = _approach_corners(x, inputs, times)
@@ -741,7 +833,7 @@ class _Part:
 
     ``x`` ``(m, 14)`` (:data:`APPROACH_LOCAL`), the contacts' fixed inputs, the QP rows (each
     one's normal row and cone edge, :func:`_normal_rows`), the held choices (or ``None``:
-    made) and the forward pass's ``tau*`` (s).
+    made), the forward pass's ``tau*`` (s) and its rows' ramps' rates ``(m, 2)`` (m/s).
     """
 
     x: np.ndarray
@@ -749,6 +841,7 @@ class _Part:
     rows: tuple[IntArray, FloatArray]
     held: _Held | None = None
     forced: FloatArray | None = None
+    ramps: FloatArray | None = None
 
 
 def _stacked(parts: list[_Part]) -> _Part:
@@ -775,7 +868,8 @@ def _stacked(parts: list[_Part]) -> _Part:
                  (np.concatenate(normal).astype(np.int64),
                   np.concatenate([part.rows[1] for part in parts])),
                  held, None if first.forced is None
-                 else np.concatenate([part.forced for part in parts]))
+                 else np.concatenate([part.forced for part in parts]),
+                 None if first.ramps is None else np.concatenate([part.ramps for part in parts]))
 
 
 def _grouped(parts: list[_Part], key: Any, evaluate: Any) -> list[tuple[Any, ...]]:
@@ -813,13 +907,18 @@ def _grouped(parts: list[_Part], key: Any, evaluate: Any) -> list[tuple[Any, ...
 
 def _approach_part(model: Model, points: FloatArray, contacts: Contacts, qp: StepQP,
                    push_speed: float, dt: float) -> _Part:
-    """A closest-approach pass's contacts as :func:`_approach_values` takes them."""
+    """A closest-approach pass's contacts as :func:`_approach_values` takes them.
+
+    ``qp.linearised_about``: body velocities ``(u_x, u_y, omega)`` per body (``rigid``) or
+    corner velocities (``velocity``'s rows seen in body columns, :func:`~wuerfel_cvx.
+    gradients.velocity.approach_view`), followed by the motion they describe.
+    """
     about = qp.linearised_about
     if about is None:
         raise GradientError("a closest-approach pass without its linearisation point")
-    forward = closest_approach(model, points, contacts,
-                               corner_velocities(points, about.reshape(-1, 3)).ravel(), dt,
-                               push_speed)
+    if about.size == 3 * model.n_boxes:  # rigid's body velocities, else velocity's corners
+        about = corner_velocities(points, about.reshape(-1, 3)).ravel()
+    forward = closest_approach(model, points, contacts, about, dt, push_speed)
     motion = forward.motion
     edge, point = contacts.edge_body, contacts.point_body
     x = np.concatenate([motion.center[edge], motion.angle[edge, None],
@@ -832,7 +931,8 @@ def _approach_part(model: Model, points: FloatArray, contacts: Contacts, qp: Ste
     inputs = _ApproachInputs(motion.reference[edge, contacts.edge_i % 4],
                              motion.reference[edge, contacts.edge_j % 4],
                              motion.reference[point, contacts.point % 4], beyond, dt, push_speed)
-    return _Part(x, inputs, _normal_rows(qp, len(contacts)), None, forward.closest)
+    return _Part(x, inputs, _normal_rows(qp, len(contacts)), None, forward.closest,
+                 np.stack([forward.rate, forward.closest_rate], axis=1))
 
 
 ApproachPass = tuple[FloatArray, StepQP, "IntArray | None"]
@@ -873,7 +973,8 @@ def approach_rows_of(model: Model, passes: Sequence[ApproachPass], push_speed: f
              for points, qp, _ in passes]
     values = _grouped(parts, lambda part: bool(np.all(np.isin(part.forced, grid))),
                       lambda part: _approach_values(part.x.astype(np.complex128), part.inputs,
-                                                    part.rows, None, hold_closest, part.forced))
+                                                    part.rows, None, hold_closest, part.forced,
+                                                    part.ramps))
     subs, stepped = [], []
     for (_, _, needed), part, (_, _, held) in zip(passes, parts, values, strict=True):
         rows = part.rows

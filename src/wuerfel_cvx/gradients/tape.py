@@ -26,7 +26,7 @@ in the scene) its initial ``center`` ``(n, 2)`` (m), ``angle`` ``(n,)`` (rad), `
 ``(n, 2)`` (m/s), ``angular_velocity`` ``(n,)`` (rad/s), ``friction`` coefficient ``(n,)``
 (1) and ``mass`` ``(n,)`` (kg); and the scene's ``gravity`` ``(2,)`` (m/s^2)."""
 
-SUPPORTED_FORMULATIONS = ("rigid",)
+SUPPORTED_FORMULATIONS = ("rigid", "rigid-baumgarte", "velocity", "velocity-baumgarte")
 """Formulations a gradient can be taken through, with either linearisation (the module
 docstring of :mod:`wuerfel_cvx.gradients` says why the others are not yet)."""
 
@@ -83,7 +83,8 @@ class GradientTape:
 
 
 def check_supported(formulation: Formulation, friction_model: str | None, *,
-                    islands: bool, sleep: Any, polish: bool) -> None:
+                    islands: bool, sleep: Any, polish: bool,
+                    table_mass: float | None = None) -> None:
     """Refuse a run whose gradient the backward pass cannot take.
 
     Raises :class:`GradientError` (an :class:`InputError` on the field ``gradients``).
@@ -93,14 +94,18 @@ def check_supported(formulation: Formulation, friction_model: str | None, *,
 
     if formulation.name not in SUPPORTED_FORMULATIONS:
         refuse(f"gradients are implemented for the {', '.join(SUPPORTED_FORMULATIONS)} "
-               f"formulation only (either linearisation), not '{formulation.name}' (its "
-               f"corner-velocity unknowns and rods are not differentiated yet)")
-    model = (friction_model or (formulation.friction.friction_model
-                                if formulation.friction is not None else "ccp"))
-    if str(model).strip().lower() not in SUPPORTED_FRICTION_MODELS:
+               f"formulations only, not '{formulation.name}'")
+    model = str(friction_model or (formulation.friction.friction_model
+                                   if formulation.friction is not None else "ccp"))
+    if model.strip().lower() not in SUPPORTED_FRICTION_MODELS:
         refuse(f"gradients are implemented for friction_model "
                f"{', '.join(SUPPORTED_FRICTION_MODELS)} (and frictionless contacts) only, "
                f"not '{model}'")
+    corners = bool(getattr(formulation, "rods", False))
+    if corners and getattr(formulation, "position_update", "rigid") != "rigid":
+        refuse("gradients through 'velocity' need its rigid position update")
+    if corners and table_mass is not None:
+        refuse("gradients through 'velocity' need fixed tables (no table_mass)")
     if islands or sleep is not None:
         refuse("gradients need one QP per step over every body: islands and sleep off")
     if not polish:

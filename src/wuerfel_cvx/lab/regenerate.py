@@ -71,6 +71,27 @@ JOBS = (
     suite_job("polish", 20, jobs=2),
     suite_job("islands", 10),
     suite_job("friction", 600, jobs=2),
+    Job("hard-targets", (
+        ("wuerfel-cvx", "bench", "--suite", "hard-targets", "--out", "bench-results/hard-targets",
+         "--jobs", "2", "--no-progress"),
+        ("cp", "bench-results/hard-targets/results.csv", "reports/hard/targets-after.csv"),
+        ("cp", "bench-results/hard-targets/provenance.json",
+         "reports/hard/targets-after-provenance.json"),
+        (sys.executable, "-m", "wuerfel_cvx.lab.bench.targets", "sweep", "--scenes", "800",
+         "--seed", "0", "--out", "reports/hard/generated-energy-after.csv"),
+        (sys.executable, "-m", "wuerfel_cvx.lab.bench.targets", "report",
+         "--before", "reports/hard/targets-before.csv",
+         "--before-generated", "reports/hard/generated-energy-before.csv",
+         "--after", "reports/hard/targets-after.csv",
+         "--after-generated", "reports/hard/generated-energy-after.csv",
+         "--after-provenance", "reports/hard/targets-after-provenance.json",
+         "--out", "reports/hard/targets.md")), 15, report="reports/hard/targets.md"),
+    Job("friction-targets", (
+        (sys.executable, "-m", "wuerfel_cvx.lab.bench.friction_targets", "measure",
+         "--out", "reports/friction"),
+        (sys.executable, "-m", "wuerfel_cvx.lab.bench.friction_targets", "report",
+         "reports/friction/targets.csv", "--out", "reports/friction/targets.md")), 120,
+        report="reports/friction/targets.md"),
     Job("robustness", (("wuerfel-cvx", "robustness", "--scenes", "200", "--fuzz", "2000",
                         "--report"),), 30, report="reports/robustness.md"),
     Job("gradients", ((sys.executable, "-m", "wuerfel_cvx.lab.bench.report_gradients",
@@ -115,7 +136,12 @@ def run_job(job: Job, scale: float = 1.0) -> bool:
     deadline = time.monotonic() + 60.0 * job.budget_minutes * scale
     for command in job.commands:
         print(f"{job.name}: {' '.join(command)}", file=sys.stderr, flush=True)
-        status = _run_until(command, deadline)
+        try:
+            status = _run_until(command, deadline)
+        except FileNotFoundError:
+            print(f"{job.name}: command '{command[0]}' not found (is the package's "
+                  "environment active?)", file=sys.stderr)
+            return False
         if status == INTERRUPTED:
             print(f"{job.name}: budget spent; finished rows are kept, run again to resume",
                   file=sys.stderr)

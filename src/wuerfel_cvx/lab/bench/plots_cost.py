@@ -28,12 +28,14 @@ def plot_scaling(results: pd.DataFrame, out_dir: str | Path,
                  stem: str = "scaling") -> list[Path]:
     """Median wall time per step (s) against the number of squares, log-log.
 
-    One line per solver (colour) and formulation (marker and line style); the legend,
+    One line per solver (colour) and formulation (marker and line style), and one more,
+    dotted with hollow markers, where a solver also ran reusing active sets; the legend,
     below each panel, gives the fitted exponent ``k`` of ``t ~ n^k`` (:func:`fitted_exponent`).
     Nothing is drawn unless some line has at least two distinct numbers of squares.
     """
     table = scaling_table(results)
-    groups = [(key, group) for key, group in table.groupby(["family", "formulation", "solver"])
+    groups = [(key, group) for key, group in
+              table.groupby(["family", "formulation", "solver", "reuse"])
               if group["n_squares"].nunique() >= 2]
     families = sorted({str(key[0]) for key, _ in groups})
     if not groups:
@@ -44,13 +46,15 @@ def plot_scaling(results: pd.DataFrame, out_dir: str | Path,
     for axis, family in zip(axes, families, strict=True):
         mine = [item for item in groups if item[0][0] == family]
         mine.sort(key=lambda item: (item[0][1] == "peer", item[0]))
-        for (_, formulation, solver), group in mine:
+        for (_, formulation, solver, reuse), group in mine:
             style = series_style(str(solver), str(formulation))
             exponent = fitted_exponent(group["n_squares"], group["wall_time_per_step_median"])
             axis.plot(group["n_squares"], group["wall_time_per_step_median"],
-                      color=style.colour, marker=style.marker, linestyle=style.linestyle,
-                      label=f"{series_label(str(solver), str(formulation), many)}: "
-                            f"k = {exponent:.2f}")
+                      color=style.colour, marker=style.marker,
+                      linestyle=":" if reuse else style.linestyle,
+                      markerfacecolor="none" if reuse else style.colour,
+                      label=f"{series_label(str(solver), str(formulation), many)}"
+                            f"{', reusing active sets' if reuse else ''}: k = {exponent:.2f}")
         axis.set_xscale("log")
         axis.set_yscale("log")
         plain_log_ticks(axis)

@@ -125,6 +125,11 @@ def report_fingerprint(readme: str) -> str | None:
     return None
 
 
+def provenance_line_of(path: Path) -> str:
+    """The fingerprint line of rows whose provenance file (``record_provenance``) is ``path``."""
+    return _provenance_line(_read_provenance(path))
+
+
 def current_provenance_line() -> str:
     """The fingerprint line of a report made now, by this code (not from a sweep's rows)."""
     from ...versions import code_version

@@ -9,14 +9,14 @@ measurement and writes the Markdown (a few minutes on two cores):
   stack, for CLARABEL, OSQP and PIQP and both friction models (the inputs and losses of
   ``tests/test_gradients.py``);
 * one step's adjoint against cvxpy's own derivative (``Problem.backward``, which needs the
-  optional package diffcp; the row says so when it is missing);
+  package diffcp, of the `gradients` extra; the row says so when it is missing);
 * the cost of a gradient: the backward pass's time over the recorded run's, on stack-10 and
   20-body piles, alternated repeats (min and median);
 * the same differences with rigid's closest-approach rows, and on landings that take two
   Gauss-Newton passes; what the closest-approach time tau* contributes (its derivative and
   the envelope theorem, measured);
-* why the ``velocity`` formulations are not covered: how many of their steps take more than
-  one Gauss-Newton pass.
+* the ``velocity`` formulations: the same differences through their corner-space steps,
+  and their gradients against ``rigid``'s of the same runs.
 """
 
 from __future__ import annotations
@@ -58,13 +58,13 @@ Loss = Callable[[np.ndarray], np.ndarray]
 
 
 def formulation(model: str, coulomb_tolerance: float | None = None,
-                linearisation: str = "start") -> Formulation:
-    """``rigid`` with friction model ``model``, rows linearised at ``linearisation``.
+                linearisation: str = "start", name: str = "rigid") -> Formulation:
+    """``rigid`` (or ``name``) with friction model ``model``, rows linearised at ``linearisation``.
 
     The fixed point's tolerance ``coulomb_tolerance`` where given.
     """
     extra = {} if coulomb_tolerance is None else {"coulomb_tolerance": coulomb_tolerance}
-    return dataclasses.replace(get_formulation("rigid"),  # type: ignore[type-var]
+    return dataclasses.replace(get_formulation(name),  # type: ignore[type-var]
                                friction_model=model, linearisation=linearisation, **extra)
 
 
@@ -132,11 +132,14 @@ def fd_cases() -> list[tuple[str, Scene, Loss, list[Input], int]]:
 
 
 def fd_agreement(scene: Scene, loss: Loss, inputs: list[Input], steps: int, solver: str,
-                 model: str, linearisation: str = "start", dt: float = DT,
+                 model: str, linearisation: str = "start", dt: float = DT, name: str = "rigid",
                  ) -> tuple[float, str, int]:
-    """The worst relative disagreement over ``inputs``, its input, and the one-sided steps."""
+    """The worst relative disagreement over ``inputs``, its input, and the one-sided steps.
+
+    Through formulation ``name`` (``rigid`` or ``velocity``).
+    """
     form = formulation(model, FD_COULOMB_TOLERANCE if model == "coulomb" else None,
-                       linearisation)
+                       linearisation, name)
 
     def run(changed: Scene, gradients: bool = False) -> Trajectory:
         return simulate(changed, dt=dt, steps=steps, solver=solver, formulation=form,
@@ -181,7 +184,7 @@ def analytic_rows() -> list[list[str]]:
 def cvxpy_row() -> list[str]:
     """One slide step's adjoint against ``Problem.backward`` (largest relative difference)."""
     try:
-        import diffcp  # type: ignore[import-not-found]  # noqa: F401
+        import diffcp  # type: ignore[import-not-found, import-untyped, unused-ignore]  # noqa: F401
     except ImportError:
         return ["not run: diffcp (cvxpy's derivative backend) is not installed", "", ""]
     import cvxpy as cp
@@ -219,27 +222,32 @@ def cvxpy_row() -> list[str]:
 def cost_rows(repeats: int) -> list[list[str]]:
     """Backward time over the recorded run's time (dt 1/60, 200 steps), alternated repeats."""
     closest = "closest-approach"
-    cases = [("stack-10", "ccp", "start"), ("rain-20", "ccp", "start"),
-             ("spinning-pile-20", "ccp", "start"), ("field-pyramid-5", "ccp", "start"),
-             ("field-pyramid-5", "coulomb", "start"), ("stack-10", "ccp", closest),
-             ("rain-20", "ccp", closest), ("spinning-pile-20", "ccp", closest)]
-    timings: dict[tuple[str, str, str], list[tuple[float, float]]] = {case: [] for case in cases}
+    cases = [("stack-10", "ccp", "start", "rigid"), ("rain-20", "ccp", "start", "rigid"),
+             ("spinning-pile-20", "ccp", "start", "rigid"),
+             ("field-pyramid-5", "ccp", "start", "rigid"),
+             ("field-pyramid-5", "coulomb", "start", "rigid"),
+             ("stack-10", "ccp", closest, "rigid"), ("rain-20", "ccp", closest, "rigid"),
+             ("spinning-pile-20", "ccp", closest, "rigid"),
+             ("stack-10", "ccp", closest, "velocity"), ("rain-20", "ccp", closest, "velocity")]
+    timings: dict[tuple[str, str, str, str], list[tuple[float, float]]] = {
+        case: [] for case in cases}
     for _ in range(repeats):
-        for scene, model, linearisation in cases:
+        for scene, model, linearisation, name in cases:
             started = time.perf_counter()
             trajectory = simulate(scene, dt=1 / 60, steps=200,
-                                  formulation=formulation(model, None, linearisation),
+                                  formulation=formulation(model, None, linearisation, name),
                                   gradients=True)
             ran = time.perf_counter() - started
             loss = np.zeros_like(trajectory.points)
             loss[-1, :, 1] = 1.0
             started = time.perf_counter()
             trajectory.gradient(loss, ("center", "velocity", "friction", "mass"))
-            timings[(scene, model, linearisation)].append((ran, time.perf_counter() - started))
+            timings[(scene, model, linearisation, name)].append(
+                (ran, time.perf_counter() - started))
     rows = []
-    for (scene, model, linearisation), pairs in timings.items():
+    for (scene, model, linearisation, name), pairs in timings.items():
         ratios = [back / run for run, back in pairs]
-        rows.append([scene, model, linearisation,
+        rows.append([scene, name, model, linearisation,
                      f"{statistics.median(run for run, _ in pairs):.2f}",
                      f"{statistics.median(back for _, back in pairs):.2f}",
                      f"{min(ratios):.2f}", f"{statistics.median(ratios):.2f}",
@@ -248,14 +256,56 @@ def cost_rows(repeats: int) -> list[list[str]]:
 
 
 def velocity_rows() -> list[list[str]]:
-    """Steps of the ``velocity`` formulation that take more than one pass (dt 1/240)."""
+    """:func:`fd_agreement` through ``velocity``, and against ``rigid``'s gradient of the run.
+
+    ``ccp`` (rain-4 is frictionless) with closest-approach rows for every solver and start
+    rows (``velocity-baumgarte``) for CLARABEL; ``coulomb`` with closest-approach rows for
+    CLARABEL on the drop and the slide.
+    """
+    cases = [(name, scene, loss, inputs, steps, DT, "ccp")
+             for name, scene, loss, inputs, steps in fd_cases()]
+    cases.append(("spinning rain-4, dt 0.01 (64 steps)", spinning_rain(), _spinning_rain_loss,
+                  RAIN_INPUTS, 64, 0.01, "frictionless"))
+    cases += [(name, scene, loss, inputs, steps, DT, "coulomb")
+              for name, scene, loss, inputs, steps in fd_cases()[:2]]
     rows = []
-    for name, scene, _, _, steps in fd_cases():
-        metrics = simulate(scene, dt=DT, steps=steps, formulation="velocity").metrics
-        passes = metrics["passes"].to_numpy()
-        rows.append([name, f"{int(np.sum(passes > 1))} of {len(passes)}",
-                     f"{int(np.max(passes))}"])
+    for name, scene, loss, inputs, steps, dt, model in cases:
+        friction = "coulomb" if model == "coulomb" else "ccp"
+        for linearisation, solvers in (("closest-approach", SOLVERS), ("start", SOLVERS[:1])):
+            for solver in solvers:
+                if model == "coulomb" and (linearisation == "start" or solver != "CLARABEL"):
+                    continue
+                passes, against = against_rigid(scene, loss, steps, dt, solver, linearisation,
+                                                friction)
+                worst, where, crossings = fd_agreement(scene, loss, inputs, steps, solver,
+                                                       friction, linearisation, dt, "velocity")
+                rows.append([name, model, linearisation, solver, passes, f"{worst:.1e}", where,
+                             str(crossings), f"{against:.1e}",
+                             "yes" if max(worst, against) <= 1e-5 else "no"])
     return rows
+
+
+def against_rigid(scene: Scene, loss: Loss, steps: int, dt: float, solver: str,
+                  linearisation: str, model: str = "ccp") -> tuple[str, float]:
+    """Steps with passes of the ``velocity`` run, and its gradient against ``rigid``'s.
+
+    Every input of :data:`~wuerfel_cvx.gradients.tape.WRT_NAMES`, as
+    ``|velocity - rigid| / max(|rigid|, FLOOR_SCALE)``, the worst.
+    """
+    from ...gradients import WRT_NAMES
+    tolerance = FD_COULOMB_TOLERANCE if model == "coulomb" else None
+    gradients = []
+    for name in ("velocity", "rigid"):
+        trajectory = simulate(scene, dt=dt, steps=steps, solver=solver, gradients=True,
+                              formulation=formulation(model, tolerance, linearisation, name))
+        gradients.append(trajectory.gradient(loss(trajectory.points), WRT_NAMES))
+        if name == "velocity":
+            assert trajectory.tape is not None
+            passes = sum(bool(record.passes) for record in trajectory.tape.steps)
+    worst = max(float(np.max(np.abs(gradients[0][name] - gradients[1][name])
+                             / np.maximum(np.abs(gradients[1][name]), FLOOR_SCALE)))
+                for name in WRT_NAMES)
+    return f"{passes} of {steps}", worst
 
 
 def fd_rows() -> list[list[str]]:
@@ -419,8 +469,9 @@ def write_report(out: Path, repeats: int) -> Path:
              markdown_table(["step", "largest relative difference", "compared"], [cvxpy_row()],
                             "lrl"),
              _TEXT["cost"],
-             markdown_table(["scene", "model", "rows", "run (s)", "backward (s)", "ratio min",
-                             "ratio median", "<= 2x"], cost_rows(repeats), "lllrrrrl"),
+             markdown_table(["scene", "formulation", "model", "rows", "run (s)", "backward (s)",
+                             "ratio min", "ratio median", "<= 2x"], cost_rows(repeats),
+                            "llllrrrrl"),
              _TEXT["closest"],
              markdown_table(["case", "model", "solver", "steps with passes", "worst relative",
                              "at", "one-sided steps", "<= 1e-5"], closest_rows(), "lllrlrrl"),
@@ -429,8 +480,9 @@ def write_report(out: Path, repeats: int) -> Path:
                              "d(psi/tau*) (m/s)", "tau* held"], closest_time_rows(),
                             "lrrrrrrr"),
              _TEXT["velocity"],
-             markdown_table(["case", "steps with more than one pass", "most passes"],
-                            velocity_rows(), "lrr")]
+             markdown_table(["case", "model", "rows", "solver", "steps with passes",
+                             "worst relative", "at", "one-sided steps", "against rigid",
+                             "<= 1e-5"], velocity_rows(), "lllllrlrrl")]
     out.mkdir(parents=True, exist_ok=True)
     path = out / "README.md"
     path.write_text("\n\n".join(part.strip("\n") for part in parts) + "\n")
@@ -464,13 +516,13 @@ not the adjoint's.""",
 One step QP of the slide, declared as a DPP problem in cvxpy and differentiated by
 `Problem.backward` (diffcp on SCS's conic form), against the hand-derived adjoint of
 `wuerfel_cvx.gradients.adjoint.qp_adjoint`; relative to the largest entry of dL/dt.
-diffcp is not among the package's dependencies or extras: for this report it was installed
-beside them (`pip install diffcp`); without it the row says it was not run.""",
+diffcp comes with the `gradients` extra (`pip install .[gradients]`, and with `test`);
+without it the row says it was not run.""",
     "cost": """## Cost
 
 Time of `Trajectory.gradient` (centre, velocity, friction, mass) over the time of the run
 that recorded it (`simulate(..., gradients=True)`, dt 1/60, 200 steps, CLARABEL, `rigid`
-with its rows linearised at the start or at closest approach),
+with its rows linearised at the start or at closest approach, and `velocity`),
 repeats alternated over the scenes; times are medians, the ratio's min and median over the
 repeats.  The target is a gradient at most 2x the run.  With closest-approach rows each pass's
 tight rows are differentiated by complex steps (14 local inputs); the rows depend on the
@@ -510,17 +562,24 @@ but not for the rows: psi itself, the closest-approach row's right side G v0 - p
 its matrix G(tau*) depend on tau* to first order.  Measured on a corner of a square spinning
 at -200 rad/s past a table's edge, its gap concave at the start (dt 1/240), against central
 differences (step 1e-7) of the formulation's own `approach_along`:""",
-    "velocity": """## Why the `velocity` formulation is not covered
+    "velocity": """## The `velocity` formulation
 
-`simulate(..., formulation="velocity", gradients=True)` raises a `GradientError` naming
-`rigid` as the formulation covered.  Rigid's closest-approach rows (above) are velocity's
-rows times the corner map, and the chain through the passes is written; what a backward
-pass through `velocity` still needs: its unknowns are corner
-velocities held together by rod equalities (with their Baumgarte right sides, functions of
-the corners), its contact rows in corner space, and the advance of the corners by the rigid
-motion the corner velocities describe, so `gradients/rigid.py`'s rows (in three columns per
-body) would need a corner-space counterpart, with the rods' rows and the advance.  How often
-velocity's steps take more than one pass on the cases above (dt 1/240):""",
+`velocity` poses its step in the corner velocities (eight unknowns per box) held by rods
+(equalities with Baumgarte right sides), its contact rows in corner columns, and advances
+the corners by the rigid motion the corner velocities describe.  Its states are rigid, so
+the backward pass carries the same state adjoint as `rigid`'s and differentiates the
+corner-space step through the fit J (a box's corner velocities to its centre velocity and
+spin, least squares): the advance is J, the objective's target the rigid state's corner
+velocities, the rods' rows turn with the body (their right sides stay 0 under rigid
+changes), start rows are three corner blocks each, and a closest-approach row is rigid's
+row times J plus its cone's slip blocks (`wuerfel_cvx.gradients.velocity`).  The QP's
+adjoint is the same reduced KKT solve, now with the rods' equalities; `coulomb`'s fixed
+point the same conditions with the rods among them and its slip rows in corner columns.
+Heavy tables and the linear position update are refused.  Central differences as above (the
+last case as in the closest-approach table), and the largest relative difference of every
+input's derivative (all of `WRT_NAMES`) from `rigid`'s gradient of the same run (the same
+formulation family, `rigid` or `rigid-baumgarte`: on these scenes the two pose the same QP
+in different unknowns, and their trajectories agree to round-off):""",
 }
 
 

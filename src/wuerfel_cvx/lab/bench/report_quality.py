@@ -147,19 +147,21 @@ def scaling_section(results: pd.DataFrame, images: dict[str, list[Path]],
         return ""
     table = plots.scaling_table(results)
     rows = []
-    for (family, formulation, solver), group in table.groupby(
-            ["family", "formulation", "solver"]):
+    for (family, formulation, solver, reuse), group in table.groupby(
+            ["family", "formulation", "solver", "reuse"]):
         if group["n_squares"].nunique() >= 2:
             exponent = plots.fitted_exponent(group["n_squares"],
                                              group["wall_time_per_step_median"])
-            rows.append((f"{family}-N", str(formulation), str(solver),
+            rows.append((f"{family}-N", f"{formulation}{', reusing' if reuse else ''}",
+                         str(solver),
                          f"{group['n_squares'].min():g}–{group['n_squares'].max():g}",
                          f"{exponent:.2f}"))
     rows.sort(key=lambda row: (row[0], row[1] == "peer", row[1], row[2]))
     return "\n\n".join([
         "## Time per step against size", image,
         "Median (over grid points) of the median wall time per step against the number of "
-        "squares, status ok, tol default (peers: native), fixed tables and five rods; k is "
+        "squares, status ok, tol default (peers: native), fixed tables and five rods "
+        "(*reusing*: the same runs with `reuse_active_sets`, dotted in the plot); k is "
         "the least-squares slope in log-log (t ~ n^k).",
         markdown_table(["scenes", "formulation", "solver", "squares", "k"], rows,
                        align="lllrr")])

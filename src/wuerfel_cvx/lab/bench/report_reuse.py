@@ -41,7 +41,7 @@ def reuse_pairs(results: pd.DataFrame) -> pd.DataFrame:
     plain = ok[~flags & otherwise_plain]
     columns = ["call_wall_time_per_step", "wall_time_per_step_median",
                "solver_time_per_step_mean", "solve_time_per_step", "reused_fraction",
-               "n_squares"]
+               "n_squares", "kkt_factor_time"]
     pairs = ok[flags & otherwise_plain][_TWIN_KEY + columns].merge(
         plain[_TWIN_KEY + columns[:4]], on=_TWIN_KEY, suffixes=("", "_solved"))
     return pairs.sort_values(["n_squares", "scene", "solver"]).reset_index(drop=True)
@@ -53,7 +53,7 @@ def reuse_table(pairs: pd.DataFrame) -> str:
         ["scene", "bodies", "formulation", "solver", "solved: call (ms)",
          "solved: median step (ms)", "solved: solver's own (ms)", "reuse: call (ms)",
          "reuse: median step (ms)", "reuse: solve stage (ms)", "steps reused",
-         "median step, solved / reuse"],
+         "median step, solved / reuse", "one KKT factorization (ms)"],
         ([row.scene, format_number(row.n_squares), row.formulation, row.solver,
           format_ms(row.call_wall_time_per_step_solved),
           format_ms(row.wall_time_per_step_median_solved),
@@ -62,9 +62,10 @@ def reuse_table(pairs: pd.DataFrame) -> str:
           format_ms(row.solve_time_per_step),
           f"{100 * plots.as_float(row.reused_fraction):.0f} %",
           format_number(plots.as_float(row.wall_time_per_step_median_solved)
-                        / plots.as_float(row.wall_time_per_step_median)) + "×"]
+                        / plots.as_float(row.wall_time_per_step_median)) + "×",
+          format_ms(row.kkt_factor_time)]
          for row in pairs.itertuples()),
-        align="lrll" + "r" * 8)
+        align="lrll" + "r" * 9)
 
 
 def pile_verdict(pairs: pd.DataFrame) -> str:
@@ -81,7 +82,9 @@ def pile_verdict(pairs: pd.DataFrame) -> str:
             f"{format_ms(PILE_BAR_S)} ms): {verdict}.  The call per step, with its first "
             f"step solved, {format_ms(best['call_wall_time_per_step'])} ms; the solve stage "
             f"(its mean per step, the first step's solver included) "
-            f"{format_ms(best['solve_time_per_step'])} ms; Box2D's published step "
+            f"{format_ms(best['solve_time_per_step'])} ms; one numeric factorization of "
+            f"its QP's KKT matrix with every row (the floor of an exact second-order step) "
+            f"{format_ms(best['kkt_factor_time'])} ms; Box2D's published step "
             f"{format_ms(BOX2D_LARGE_PYRAMID_S)} ms (ours "
             f"{format_number(step / BOX2D_LARGE_PYRAMID_S)}×).")
 
@@ -102,5 +105,8 @@ def reuse_section(results: pd.DataFrame) -> str:
         "solver runs (always on a run's first step).  *Call*: the wall time of the whole "
         "`simulate()` call per step; *median step*: the median step's wall time; *solve "
         "stage*: the solve calls' mean time per step (the first step's solver included); "
-        "*steps reused*: the fraction of the steps whose every QP was reused.",
+        "*steps reused*: the fraction of the steps whose every QP was reused; *one KKT "
+        "factorization*: the floor of any exact second-order step, one numeric "
+        "factorization of the last QP's KKT matrix with every row in OSQP's form by QDLDL "
+        "(its ordering, found once per pattern, left out; `lab/bench/floors.py`).",
         reuse_table(pairs), "Target (issue 25):", pile_verdict(pairs)])

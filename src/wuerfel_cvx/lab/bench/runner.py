@@ -33,6 +33,7 @@ from ...versions import package_version
 from ..peers import peer_version, simulate_peer
 from . import schema
 from .bare_call import bare_calls
+from .floors import kkt_factorization_seconds
 from .friction_summary import column_max, friction_summary
 from .suite import (
     DEFAULT_FRICTION_MODEL,
@@ -155,11 +156,12 @@ def measure_point(point: GridPoint, reference: Reference | None,
         scene = resolve_scene(point.scene_input if scene is None else scene)  # loaded once
         base["n_squares"] = scene.n_boxes
         started = time.perf_counter()
-        trajectory, failure, disagreement = _simulate(point, scene)
+        trajectory, failure, disagreement, last_qp = _simulate(point, scene)
         call_seconds = time.perf_counter() - started
     except Exception as exc:  # any configuration error becomes an error row
         return PointResult(error_row(point, exc, base), None)
     row = {**base, **_outcome(trajectory, failure), **_timing(trajectory, point),
+           "kkt_factor_time": None if last_qp is None else kkt_factorization_seconds(last_qp),
            **_call_timing(trajectory, call_seconds),
            **_accuracy(trajectory, point, reference),
            **friction_summary(trajectory, peer=point.engine != "wuerfel_cvx"),
@@ -186,17 +188,21 @@ def write_series(result: PointResult, series_dir: Path) -> None:
     result.series.to_csv(path, index=False)
 
 
-def _simulate(point: GridPoint,
-              scene: Scene) -> tuple[Trajectory, StepFailure | None, float | None]:
+def _simulate(point: GridPoint, scene: Scene
+              ) -> tuple[Trajectory, StepFailure | None, float | None, StepQP | None]:
     """Run the point on ``scene``, its loaded scene.
 
-    A failed step returns the partial trajectory and the failure.
+    Returns the trajectory, the failure (a failed step returns the partial trajectory), the
+    largest disagreement with the reference solver, and the last QP solved (``None`` for a
+    peer).
     """
     worst = [0.0]
     compared = [0]
+    last: list[StepQP | None] = [None]
     started = time.perf_counter()
 
     def compare(step: int, qp: StepQP, solution: StepSolution) -> None:
+        last[0] = qp
         if time.perf_counter() - started > point.time_limit:
             raise StepFailure(step, point.solver, "time_limit",
                               f"grid point stopped after {point.time_limit:g} s of wall time")
@@ -217,8 +223,8 @@ def _simulate(point: GridPoint,
     except StepFailure as failure:
         if failure.trajectory is None:
             raise
-        return failure.trajectory, failure, worst[0] if compared[0] else None
-    return trajectory, None, worst[0] if compared[0] else None
+        return failure.trajectory, failure, worst[0] if compared[0] else None, last[0]
+    return trajectory, None, worst[0] if compared[0] else None, last[0]
 
 
 def _configuration(point: GridPoint) -> dict[str, Any]:

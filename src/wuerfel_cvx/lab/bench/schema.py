@@ -24,7 +24,7 @@ import pandas as pd
 from ...errors import InputError
 from ...formulations import FORMULATIONS
 
-SCHEMA_VERSION = 11
+SCHEMA_VERSION = 12
 
 PROVENANCE_FILE = "provenance.json"
 """Beside a results CSV: the physics fingerprint its rows were measured on and the code
@@ -70,7 +70,8 @@ ADDED_COLUMNS: dict[int, dict[str, Any]] = {
         "polish_rejections": None, "max_push_at_distance": None, "max_push_gap_product": None},
     9: dict.fromkeys(STAGE_TIME_COLUMNS),
     10: {"reuse_active_sets": False, "reused_fraction": None},
-    11: {"bare_call_time_per_step": None, "bare_call_over_solver": None},
+    11: {"kkt_factor_time": None},
+    12: {"bare_call_time_per_step": None, "bare_call_over_solver": None},
 }
 """Per schema version, the columns it added and their value in the rows of older files:
 a constant, ``None`` (not measured then: missing), or a function of the older frame giving
@@ -82,8 +83,8 @@ structures on a direct path that no longer exists: left empty) and did not time 
 ``simulate`` call; version 7 did not polish (``polish`` false) nor measure pushes at a
 distance row by row (``polish`` left empty: the plots take such rows as plain, not as the
 unpolished variant of a newer run); version 8 did not split a step's time into stages;
-version 9 did not reuse active sets (its runs solved every QP); version 10 did not replay
-a run's solver calls bare."""
+version 9 did not reuse active sets (its runs solved every QP); version 10 did not factor
+the last QP's KKT matrix; version 11 did not replay a run's solver calls bare."""
 
 ColumnType = Literal["str", "int", "float", "bool"]
 
@@ -191,6 +192,10 @@ COLUMNS: tuple[Column, ...] = (
        "median over steps of (whole step time / solver's own time): the modelling layer's "
        "cost as a multiple of the solver; 1 would be free modelling (over the steps whose "
        "solver ran: not a reused one)"),
+    _c("kkt_factor_time", "float", "s",
+       "one numeric factorization of the last QP's KKT matrix with every row, OSQP's form, "
+       "by QDLDL (median of 3; the floor of an exact second-order step, lab/bench/floors.py); "
+       "empty for a peer"),
     _c("wall_time_per_simulated_second", "float", "1",
        "total step wall time divided by the simulated time (s per s)"),
     _c("total_wall_time", "float", "s", "sum of step wall times"),

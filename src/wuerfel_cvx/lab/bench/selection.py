@@ -98,11 +98,16 @@ def plain_variant(results: pd.DataFrame) -> pd.Series:
     the default solve path (or none recorded), polished answers (or a peer's), every QP
     given to its solver (no active set reused).
     """
+    return plain_but_reuse(results) & ~reusing(results)
+
+
+def plain_but_reuse(results: pd.DataFrame) -> pd.Series:
+    """Mask of rows without a variant other than reusing active sets (``reuse_active_sets``)."""
     return (results["table_mass"].isna() & ~results["extra_rod"].fillna(False).astype(bool)
             & ~results["sleep"].fillna(False).astype(bool)
             & ~results["islands"].fillna(False).astype(bool)
             & ~_other_friction_model(results) & ~_other_solve_path(results)
-            & ~_unpolished(results) & ~reusing(results))
+            & ~_unpolished(results))
 
 
 def _unpolished(results: pd.DataFrame) -> pd.Series:
@@ -236,21 +241,22 @@ def series_points(results: pd.DataFrame, series_dir: str | Path) -> pd.DataFrame
 
 
 def scaling_table(results: pd.DataFrame) -> pd.DataFrame:
-    """Median wall time per step (s) per scene family, formulation, solver and ``n_squares``.
+    """Median wall time per step (s) per family, formulation, solver, reuse, ``n_squares``.
 
     The family is the scene name without its number (``stack-20`` -> ``stack``), so stacks
-    and pyramids get lines of their own.  Over rows with status ok, the plain variant and
+    and pyramids get lines of their own.  Over rows with status ok, the plain variant (or
+    the plain variant reusing active sets: ``reuse`` true, a line of its own) and
     tolerance default/native; the median is over the grid points of each number of squares.
     """
-    rows = results[is_value(results["status"], "ok") & plain_variant(results)
+    rows = results[is_value(results["status"], "ok") & plain_but_reuse(results)
                    & results["n_squares"].notna()
                    & results["wall_time_per_step_median"].gt(0).fillna(False).astype(bool)]
     rows = preferred_tolerance(rows)
     table = rows.assign(n_squares=rows["n_squares"].astype(float),
                         family=rows["scene"].astype(str).str.replace(r"-\d+$", "", regex=True),
                         formulation=rows["formulation"].astype(str),
-                        solver=rows["solver"].astype(str))
-    return (table.groupby(["family", "formulation", "solver", "n_squares"])
+                        solver=rows["solver"].astype(str), reuse=reusing(rows))
+    return (table.groupby(["family", "formulation", "solver", "reuse", "n_squares"])
             ["wall_time_per_step_median"].median().reset_index())
 
 

@@ -37,6 +37,7 @@ from ...trajectory import Trajectory
 from ..robustness.properties import random_scene
 from . import schema
 from .markdown import MISSING, format_number, markdown_table
+from .report import provenance_line_of
 
 
 @dataclass(frozen=True)
@@ -288,6 +289,7 @@ report with both:
 ```sh
 wuerfel-cvx bench --suite benchmarks/hard-targets.toml --out bench-results/hard-targets
 cp bench-results/hard-targets/results.csv reports/hard/targets-after.csv
+cp bench-results/hard-targets/provenance.json reports/hard/targets-after-provenance.json
 python -m wuerfel_cvx.lab.bench.targets sweep --scenes {scenes} --seed {seed} \\
     --out reports/hard/generated-energy-after.csv
 python -m wuerfel_cvx.lab.bench.targets report \\
@@ -295,20 +297,26 @@ python -m wuerfel_cvx.lab.bench.targets report \\
     --before-generated reports/hard/generated-energy-before.csv \\
     --after reports/hard/targets-after.csv \\
     --after-generated reports/hard/generated-energy-after.csv \\
+    --after-provenance reports/hard/targets-after-provenance.json \\
     --out reports/hard/targets.md
 ```"""
 
 
 def render(before: pd.DataFrame, generated_before: pd.DataFrame,
            after: pd.DataFrame | None = None, generated_after: pd.DataFrame | None = None,
-           seed: int = 0) -> str:
-    """The Markdown of ``targets.md`` from results tables and generated-energy tables."""
+           seed: int = 0, provenance: str = "") -> str:
+    """The Markdown of ``targets.md`` from results tables and generated-energy tables.
+
+    ``provenance``: the fingerprint line of the after rows (the physics they describe).
+    """
     rows_before = target_rows(before)
     rows_after = target_rows(after) if after is not None else None
     parts = [REPORT_INTRO, "", "## The measurements", "",
              f"- **Before:** {_provenance(before)}"]
     if after is not None:
         parts.append(f"- **After:** {_provenance(after)}")
+    if provenance:
+        parts.append(provenance)
     parts += ["", "## Targets", "", "Before:", "", *verdicts(rows_before), ""]
     if rows_after is not None:
         parts += ["After:", "", *verdicts(rows_after), ""]
@@ -367,6 +375,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     report.add_argument("--after", type=Path, help="results CSV")
     report.add_argument("--after-generated", type=Path)
     report.add_argument("--seed", type=int, default=0, help="seed of the generated scenes")
+    report.add_argument("--after-provenance", type=Path,
+                        help="the after sweep's provenance.json (its physics fingerprint)")
     report.add_argument("--out", type=Path, required=True, help="Markdown file to write")
     args = parser.parse_args(argv)
     if args.command == "sweep":
@@ -380,7 +390,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     text = render(schema.read_results(args.before), read_generated(args.before_generated),
                   schema.read_results(args.after) if args.after else None,
                   read_generated(args.after_generated) if args.after_generated else None,
-                  seed=args.seed)
+                  seed=args.seed,
+                  provenance=(provenance_line_of(args.after_provenance)
+                              if args.after_provenance else ""))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text, encoding="utf-8")
     print(f"wrote {args.out}")
