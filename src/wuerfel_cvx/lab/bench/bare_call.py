@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...errors import StepFailure
 from ...formulations.qp import StepQP
 from ...scenes.scene import Scene
 from ...settings import Settings
@@ -105,7 +106,7 @@ def captured_calls(scene: Scene, settings: Settings, steps: int) -> tuple[list[S
         for _ in range(steps):
             simulation.step()
             done += 1
-    except Exception:  # a failed step: its calls so far are the run's sequence
+    except StepFailure:  # its calls so far are the run's sequence
         pass
     return path.calls, done
 
