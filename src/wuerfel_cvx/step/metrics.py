@@ -55,7 +55,8 @@ def state_metrics(model: Model, points: FloatArray,
     a run records them at its end instead of in each step.
     """
     i, j = model.rods[:, 0], model.rods[:, 1]
-    lengths = np.linalg.norm(points[:, i] - points[:, j], axis=2)
+    rods = np.take(points, i, axis=1) - np.take(points, j, axis=1)  # gathers: same numbers
+    lengths = np.linalg.norm(rods, axis=2)
     drift = np.max(np.abs(lengths - model.rod_lengths) / model.rod_lengths, axis=1)
     kinetic = 0.5 * np.sum(model.point_masses * np.sum(velocities**2, axis=2), axis=1)
     potential = -np.sum(model.point_masses * (points @ model.gravity), axis=1)
