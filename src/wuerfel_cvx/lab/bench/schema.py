@@ -439,7 +439,8 @@ CLOCK_COLUMNS: frozenset[str] = frozenset({
     "solver_time_per_step_median", "modelling_time_per_step_median",
     "step_over_solver_median", "wall_time_per_simulated_second", "total_wall_time",
     "call_wall_time_per_step", "call_over_solver_mean", "step_time_s", "solver_time_s",
-    "bare_call_time_per_step", "bare_call_over_solver", *STAGE_TIME_COLUMNS})
+    "bare_call_time_per_step", "bare_call_over_solver", "kkt_factor_time",
+    *STAGE_TIME_COLUMNS})
 """The results and series columns read off a clock.  They differ from run to run; the
 others are physics, the same bits on every run of a deterministic solver."""
 
