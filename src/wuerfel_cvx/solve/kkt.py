@@ -557,10 +557,10 @@ def _elimination_graph(matrix: sp.csc_matrix, n: int) -> sp.csr_array:
     Structural, as :func:`~wuerfel_cvx._sparse.ldl_factor` works: every stored entry of
     ``A`` counts (a stored zero too), and ``A' A`` is the product of the patterns, so
     entries that cancel in its numbers count as well.  A product of the numbers lost both,
-    and the order it gave left such entries to fill in: the friction problem's rows ``S x +
-    s >= 0`` and ``-S x + s >= 0`` of a sticking contact are both tight, their products
-    with the slack ``s`` cancel, and the slip rows of axis-aligned edges store zeros; its
-    factor had nine times the entries (see reports/friction/coulomb-speed.md).
+    and the order it gave left such entries to fill in: the Coulomb friction problem's rows
+    ``S x + s >= 0`` and ``-S x + s >= 0`` of a sticking contact are both tight, their
+    products with the slack ``s`` cancel, and the slip rows of axis-aligned edges store
+    zeros (reports/friction/coulomb-speed.md measures the factors).
     """
     pattern = sp.csc_array((np.ones(matrix.nnz), matrix.indices, matrix.indptr),
                            shape=matrix.shape)
