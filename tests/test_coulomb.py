@@ -17,7 +17,7 @@ import scipy.sparse as sp
 from oracles import declared_friction
 from wuerfel_cvx import simulate
 from wuerfel_cvx.errors import StepFailure
-from wuerfel_cvx.formulations import VelocityFormulation, get_formulation
+from wuerfel_cvx.formulations import StepQP, VelocityFormulation, get_formulation
 from wuerfel_cvx.friction.coulomb import (
     CoulombNotConverged,
     CoulombSettings,
@@ -40,6 +40,7 @@ from wuerfel_cvx.solve.paths import (
     SOLVE_PATHS,
     VERIFY_FACTOR,
     SolvePath,
+    StepSolution,
     solve_step_qp,
     solve_with_fallback,
 )
@@ -137,7 +138,10 @@ def test_the_fixed_impulse_enters_the_contact_qp_as_its_work() -> None:
 def solver_of(*solvers: str, step: int = 1, path: SolvePath | None = None,
               tol: str = "default") -> QPSolve:
     """A run's solve function: ``solvers`` (then fallbacks) at tolerance ``tol``."""
-    return lambda qp: solve_with_fallback(qp, solvers, tol, step, path)
+    def solve(qp: StepQP, *, repeated: bool = False) -> tuple[StepSolution, str]:
+        return solve_with_fallback(qp, solvers, tol, step, path, repeated=repeated)
+
+    return solve
 
 
 def solved_friction_problem(solver: str = "CLARABEL"):  # type: ignore[no-untyped-def]
@@ -223,13 +227,14 @@ def test_the_friction_check_catches_a_wrong_answer(perturb: str) -> None:
 def test_a_friction_problem_repeated_on_a_solve_path_gives_the_same_answer(
         path_name: str) -> None:
     # one structure three times: set up, then updated in place (native); declared, then
-    # compiled on its second sighting (compiled); declared each time (declared)
+    # compiled on its second sighting (compiled); declared each time (declared).  Each in
+    # a step of its own: a step's repeated structure is answered on its active set first
     problem, answer = solved_friction_problem()
     path = SolvePath(path_name)
-    first = solve_friction(problem, solver_of("CLARABEL", path=path), "default")
+    first = solve_friction(problem, solver_of("CLARABEL", path=path, step=1), "default")
     other = FrictionProblem(problem.qp, problem.target, 0.5 * problem.bound)
-    updated = solve_friction(other, solver_of("CLARABEL", path=path), "default")
-    again = solve_friction(problem, solver_of("CLARABEL", path=path), "default")
+    updated = solve_friction(other, solver_of("CLARABEL", path=path, step=2), "default")
+    again = solve_friction(problem, solver_of("CLARABEL", path=path, step=3), "default")
     counts = {"native": (1, 2, 0), "compiled": (0, 0, 1), "declared": (0, 0, 0)}[path_name]
     assert (path.native_setups, path.native_updates, path.compiled.compiled) == counts
     np.testing.assert_allclose(first.friction, answer.friction, rtol=1e-5,
@@ -238,6 +243,25 @@ def test_a_friction_problem_repeated_on_a_solve_path_gives_the_same_answer(
     np.testing.assert_allclose(again.friction, answer.friction, rtol=1e-5,
                                atol=CHECK * np.max(problem.bound))
     assert first.verified and updated.verified and again.verified
+
+
+def test_a_friction_problem_repeated_in_its_step_is_answered_on_its_active_set() -> None:
+    # the fixed point's second friction problem of a step, its bounds changed a little (the
+    # normal impulses of the next contact QP): no solver runs, and the answer is the one a
+    # solver gives, to the check's accuracy
+    problem, answer = solved_friction_problem()
+    path = SolvePath()
+    solve = solver_of("CLARABEL", path=path, step=4)
+    first = solve_friction(problem, solve, "default")
+    nearby = FrictionProblem(problem.qp, problem.target, 1.01 * problem.bound)
+    repeated = solve_friction(nearby, solve, "default")
+    assert (path.native_setups, path.native_updates, path.reused_active_sets) == (1, 0, 1)
+    assert repeated.status == "optimal" and repeated.iterations == 0 and repeated.verified
+    solved = solve_friction(nearby, solver_of("CLARABEL"), "default")
+    np.testing.assert_allclose(repeated.friction, solved.friction, rtol=1e-5,
+                               atol=CHECK * np.max(problem.bound))
+    np.testing.assert_allclose(first.friction, answer.friction, rtol=1e-5,
+                               atol=CHECK * np.max(problem.bound))
 
 
 def test_a_failed_friction_problem_names_its_step_and_every_solver() -> None:

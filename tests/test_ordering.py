@@ -110,3 +110,24 @@ def test_a_large_resting_pile_refines_on_its_last_factor(
     assert (metrics["polish"].iloc[1:] == kkt.REUSED).all()
     assert metrics["verified"].all()
     assert len(factorizations) == first  # no new factorization on the last four steps
+
+
+def test_the_order_sees_the_entries_the_factor_fills_on() -> None:
+    """A sticking contact of the friction problem: ``S x + s >= 0`` and ``-S x + s >= 0``.
+
+    Both rows tight: their products with the slack ``s`` cancel in ``A' A``, and ``S``
+    stores a zero (an axis-aligned edge's slip has no ``y`` part).  The factorization fills
+    on the stored pattern, so the order's graph must hold those entries too.
+    """
+    x, y, s = 0, 1, 2
+    slip = sp.csr_array((np.array([1.0, 0.0, 1.0, -1.0, 0.0, 1.0]),
+                         np.array([x, y, s, x, y, s]), np.array([0, 3, 6])), shape=(2, 3))
+    hessian = sp.diags_array([2.0, 2.0, 0.0])
+    matrix = sp.csc_array(sp.block_array([[hessian, slip.T], [slip, None]]))
+    assert np.count_nonzero(matrix.data == 0.0) >= 4  # S's zeros, stored (both ways)
+    coupling = matrix[3:, :3]
+    by_numbers = sp.csr_array(coupling.T @ coupling)
+    assert by_numbers[x, s] == 0.0 and by_numbers[y, s] == 0.0  # what was ordered before
+    graph = kkt._elimination_graph(matrix, 3)
+    edges = {(int(i), int(j)) for i, j in zip(*graph.nonzero(), strict=True)}
+    assert {(x, s), (s, x), (y, s), (x, y)} <= edges

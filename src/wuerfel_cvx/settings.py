@@ -72,7 +72,9 @@ class Settings:
     """With ``polish``: try each QP first on the last polished active set of its structure
     (:func:`wuerfel_cvx.solve.kkt.reuse_active_set`), so a resting pile skips the solver.
     Off by default: a study of solvers wants every QP solved by its solver (and its faults,
-    iterations and times seen); on, a resting pile costs one factorization a step."""
+    iterations and times seen); on, a resting pile costs one factorization a step.  Within a
+    step, the Coulomb fixed point's repeated QPs try their step's last active set either way
+    (:func:`~wuerfel_cvx.solve.paths.solve_step_qp`'s ``repeated``)."""
     gradients: bool = False
     """Record what a gradient through the run needs (each step's QP and polished answer),
     for :meth:`Trajectory.gradient <wuerfel_cvx.trajectory.Trajectory.gradient>`; the run

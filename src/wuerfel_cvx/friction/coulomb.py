@@ -153,7 +153,7 @@ def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP
     linearisations, converged = 1, False  # passes since the friction impulse last changed
     while True:
         contact_qp = with_friction_impulse(base, friction)
-        solved.append(solve(contact_qp))
+        solved.append(solve(contact_qp, repeated=True))
         solution = solved[-1][0]
         refined = formulation.refine(model, state, contact_qp, solution.x, dt, linearisations)
         if contact_qp.cones is None:  # no contact with friction left: frictionless passes

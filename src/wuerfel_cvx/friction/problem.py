@@ -22,8 +22,8 @@ scaling, KKT check and fallback (:func:`wuerfel_cvx.solve.paths.solve_with_fallb
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -36,9 +36,17 @@ from ..scenes.geometry import FloatArray
 from ..solve.paths import VERIFY_FACTOR, StepSolution
 from ..solve.registry import tolerance_value
 
-QPSolve = Callable[[StepQP], tuple[StepSolution, str]]
-"""Solves a step QP: its solution and the run's own solver's status on it (raising
-:class:`StepFailure` when no solver can)."""
+
+class QPSolve(Protocol):
+    """Solves a step QP: its solution and the run's own solver's status on it.
+
+    Raises :class:`StepFailure` when no solver can.  ``repeated``: the QP may repeat the
+    structure of an earlier QP of the step, whose polished active set is then tried first
+    (:func:`~wuerfel_cvx.solve.paths.solve_step_qp`'s ``repeated``).
+    """
+
+    def __call__(self, qp: StepQP, /, *, repeated: bool = False) -> tuple[StepSolution, str]:
+        """The solution of ``qp`` and the run's own solver's status on it."""
 
 
 @dataclass(frozen=True)
@@ -222,7 +230,7 @@ def solve_friction(problem: FrictionProblem, solve: QPSolve,
     ``solve`` raises names the friction problem.
     """
     try:
-        solution, _ = solve(friction_qp(problem, tolerance_value(tol)))
+        solution, _ = solve(friction_qp(problem, tolerance_value(tol)), repeated=True)
     except StepFailure as failure:
         raise StepFailure(failure.step, failure.solver, failure.status,
                           f"friction problem: {failure.detail}" if failure.detail

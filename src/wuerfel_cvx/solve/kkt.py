@@ -544,13 +544,28 @@ def _remembered(matrix: sp.csc_matrix, n: int) -> _LargeSystem | None:
     key = digest.digest()
     known = _LARGE_SYSTEMS.pop(key, None)
     if known is None:
-        coupling = matrix[n:, :n]
-        known = _LargeSystem(fill_reducing_order(
-            sp.csr_array(matrix[:n, :n] + coupling.T @ coupling)))
+        known = _LargeSystem(fill_reducing_order(_elimination_graph(matrix, n)))
     _LARGE_SYSTEMS[key] = known  # the most recently used last
     while len(_LARGE_SYSTEMS) > LARGE_SYSTEMS_KEPT:
         _LARGE_SYSTEMS.pop(next(iter(_LARGE_SYSTEMS)))
     return known
+
+
+def _elimination_graph(matrix: sp.csc_matrix, n: int) -> sp.csr_array:
+    """The pattern of the unknowns' block ``P + A' A`` that factoring the rows first leaves.
+
+    Structural, as :func:`~wuerfel_cvx._sparse.ldl_factor` works: every stored entry of
+    ``A`` counts (a stored zero too), and ``A' A`` is the product of the patterns, so
+    entries that cancel in its numbers count as well.  A product of the numbers lost both,
+    and the order it gave left such entries to fill in: the Coulomb friction problem's rows
+    ``S x + s >= 0`` and ``-S x + s >= 0`` of a sticking contact are both tight, their
+    products with the slack ``s`` cancel, and the slip rows of axis-aligned edges store
+    zeros (reports/friction/coulomb-speed.md measures the factors).
+    """
+    pattern = sp.csc_array((np.ones(matrix.nnz), matrix.indices, matrix.indptr),
+                           shape=matrix.shape)
+    coupling = pattern[n:, :n]
+    return sp.csr_array(pattern[:n, :n] + coupling.T @ coupling)
 
 
 def _largest(values: FloatArray) -> float:

@@ -148,31 +148,42 @@ class SolvePath:
         """Native solves of a structure already set up (its solver updated in place)."""
         self._adapters: OrderedDict[tuple[object, ...], Adapter] = OrderedDict()
         self._active_sets: OrderedDict[tuple[object, ...], tuple[
-            ActiveSet, FloatArray, FloatArray, FloatArray]] = OrderedDict()
+            ActiveSet, FloatArray, FloatArray, FloatArray, int]] = OrderedDict()
         self.reuse_active_sets = reuse_active_sets
         """Whether a polished run first tries each structure's last active set
         (:meth:`reuse_active_set`); off, every QP goes to its solver."""
         self.reused_active_sets = 0
         """QPs answered on the last polished answer's active set, without a solver."""
 
-    def reuse_active_set(self, qp: StepQP) -> Polish | None:
+    def reuse_active_set(self, qp: StepQP, step: int | None = None) -> Polish | None:
         """``qp``'s exact answer on its structure's last polished active set, or ``None``.
 
-        See :func:`~wuerfel_cvx.solve.kkt.reuse_active_set`.
+        With :attr:`reuse_active_sets` any remembered set is tried; without, only one
+        remembered in step ``step`` (``None``: none), for a QP that repeats the structure of
+        an earlier QP of its step (:func:`solve_step_qp`'s ``repeated``).  See
+        :func:`~wuerfel_cvx.solve.kkt.reuse_active_set`.
         """
-        remembered = (self._active_sets.get(structure_key(qp)) if self.reuse_active_sets
-                      else None)
-        if remembered is None:
+        if not self.reuse_active_sets and step is None:
             return None
-        reused = reuse_active_set(qp, *remembered)
+        remembered = self._active_sets.get(structure_key(qp))
+        if remembered is None or not (self.reuse_active_sets or remembered[-1] == step):
+            return None
+        reused = reuse_active_set(qp, *remembered[:-1])
         self.reused_active_sets += reused is not None
         return reused
 
-    def remember_active_set(self, qp: StepQP, polished: Polish) -> None:
-        """Keep ``polished``'s active set and point for the next QP of ``qp``'s structure."""
+    def remember_active_set(self, qp: StepQP, polished: Polish, step: int = 0) -> None:
+        """Keep ``polished``'s active set and point for the next QP of ``qp``'s structure.
+
+        ``step``: the step they belong to; without :attr:`reuse_active_sets` the other
+        steps' are forgotten (only a step's own are tried then).
+        """
+        if not self.reuse_active_sets:
+            for other in [key for key, kept in self._active_sets.items() if kept[-1] != step]:
+                del self._active_sets[other]
         key = structure_key(qp)
         self._active_sets[key] = (polished.active, polished.x, polished.eq_dual,
-                                  polished.ineq_dual)
+                                  polished.ineq_dual, step)
         self._active_sets.move_to_end(key)
         if len(self._active_sets) > self.capacity:
             self._active_sets.popitem(last=False)
@@ -224,7 +235,7 @@ class SolvePath:
 
 def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "default",
                   *, step: int = 0, path: SolvePath | None = None,
-                  polishing: bool = True) -> StepSolution:
+                  polishing: bool = True, repeated: bool = False) -> StepSolution:
     """Solve ``qp`` with ``solver`` at tolerance ``tol``, polish and verify the result.
 
     The solver sees ``qp`` in units that keep its data at most
@@ -233,7 +244,12 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     itself for ordinary data); the solution and multipliers are mapped back, polished on
     their active set (``polishing``; :func:`wuerfel_cvx.solve.kkt.polish`) and checked on
     ``qp``.  ``path`` (:class:`SolvePath`, kept across a run's steps) says how the QP reaches
-    the solver; without one, a fresh ``native`` path.
+    the solver; without one, a fresh ``native`` path.  ``repeated``: ``qp`` may repeat the
+    structure of an earlier QP of step ``step`` with nearby numbers (the Coulomb fixed
+    point's contact QPs and friction problems): with ``polishing``, the step's last polished
+    active set of that structure is tried first (:meth:`SolvePath.reuse_active_set`; no
+    solver runs if it gives the exact answer) and this QP's is remembered, whatever the
+    path's ``reuse_active_sets`` (which governs reuse across steps).
 
     Raises :class:`StepFailure` (with ``step``) if the QP's data is not finite (status
     ``invalid_data``, before any solver runs), if the solver raises, reports a status
@@ -249,7 +265,7 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     started = time.perf_counter()
     seen = scaled_qp(qp, scale, weight_scale)
     answer, taken, reused = _solve_or_reuse(seen, spec, eps, path, warm_starts, scale, step,
-                                            polishing)  # reused: the active set's point
+                                            polishing, repeated)  # reused: its point
     wall = time.perf_counter() - started
     outcome, reason, active = KEPT, "", None
     if reused is not None:
@@ -260,8 +276,8 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
         active = polished.active if outcome == POLISHED else None
         answer = dataclasses.replace(answer, x=polished.x, eq_dual=polished.eq_dual,
                                      ineq_dual=polished.ineq_dual)
-        if outcome == POLISHED and path.reuse_active_sets:
-            path.remember_active_set(seen, polished)
+        if outcome == POLISHED and (path.reuse_active_sets or repeated):
+            path.remember_active_set(seen, polished, step)
     x, eq_dual, ineq_dual = _answer_on_qp(answer, step, spec.name, scale, scale / weight_scale)
     # checked on the original QP, whatever units the solver saw; a polish of the QP itself
     # (ordinary data: the solver saw ``qp``) checked these very numbers already
@@ -286,13 +302,13 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
 
 def _solve_or_reuse(seen: StepQP, spec: SolverSpec, eps: float, path: SolvePath,
                     warm_starts: WarmStarts | None, scale: float, step: int,
-                    polishing: bool) -> tuple[Answer, str, Polish | None]:
+                    polishing: bool, repeated: bool) -> tuple[Answer, str, Polish | None]:
     """The answer to ``seen`` (in the solver's units), the path taken, and whether reused.
 
     Reused: with ``polishing``, the last polished answer's active set gave ``seen``'s exact
     answer, and no solver ran.  Raises :class:`StepFailure` for a solver that raises.
     """
-    reused = path.reuse_active_set(seen) if polishing else None
+    reused = path.reuse_active_set(seen, step if repeated else None) if polishing else None
     if reused is not None:
         return Answer(x=reused.x, eq_dual=reused.eq_dual, ineq_dual=reused.ineq_dual,
                       status=cp.OPTIMAL, reported_time=0.0, iterations=0,
@@ -403,7 +419,7 @@ def _non_finite_data(qp: StepQP) -> str:
 
 def solve_with_fallback(qp: StepQP, solvers: Sequence[str], tol: str | float, step: int,
                         path: SolvePath | None, *, polishing: bool = True,
-                        ) -> tuple[StepSolution, str]:
+                        repeated: bool = False) -> tuple[StepSolution, str]:
     """Solve with ``solvers[0]``, on failure with the next; the solution and first status.
 
     The first status is that of ``solvers[0]`` (the solution's own when it succeeded).
@@ -414,7 +430,8 @@ def solve_with_fallback(qp: StepQP, solvers: Sequence[str], tol: str | float, st
     for name in solvers:
         presses = relayed_presses()
         try:
-            solution = solve_step_qp(qp, name, tol, step=step, path=path, polishing=polishing)
+            solution = solve_step_qp(qp, name, tol, step=step, path=path, polishing=polishing,
+                                     repeated=repeated)
         except StepFailure as failure:
             if presses is not None and relayed_presses() != presses:
                 # a solver that checks for signals took the command line's Ctrl-C and

@@ -255,10 +255,10 @@ class Simulation:
         and between the solve calls (building the passes' QPs) is its ``build`` stage, the
         solve calls its ``solve`` stage.
         """
-        def solve(pass_qp: StepQP) -> tuple[StepSolution, str]:
+        def solve(pass_qp: StepQP, *, repeated: bool = False) -> tuple[StepSolution, str]:
             clock.lap("build")
             solved = solve_with_fallback(pass_qp, self.solvers, self.tol, step, self.path,
-                                         polishing=self.settings.polish)
+                                         polishing=self.settings.polish, repeated=repeated)
             clock.lap("solve")
             return solved
 
