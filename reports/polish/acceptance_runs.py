@@ -3,7 +3,8 @@
 Run with the package to measure on the path (``PYTHONPATH=src``); prints one JSON line per
 run: the scene and settings of the friction suite's row, the count of each per-step
 ``polish`` status in the trajectory's metrics, and the run's polish and step times (s).
-``python reports/polish/acceptance_runs.py [NAME ...]`` runs the named scenes only.
+``python reports/polish/acceptance_runs.py [NAME ...]`` runs the named scenes only
+(``rain-50``, of the hard suite, only when named).
 """
 
 from __future__ import annotations
@@ -33,15 +34,22 @@ RUNS = [  # scene, solver, friction model, steps: the friction suite's rows (dt 
     ("overlap-recovery-friction", "CLARABEL", "ccp", 240),
     ("overlap-recovery-friction", "OSQP", "ccp", 240),
 ]
+HARD_RUNS = [  # the hard suite's rain-50 (dt 0.01, 800 steps, velocity, ccp)
+    ("rain-50", "CLARABEL", "ccp", 800),
+    ("rain-50", "OSQP", "ccp", 800),
+    ("rain-50", "PIQP", "ccp", 800),
+]
+DT = {"rain-50": 0.01}
+"""Time step (s) of a scene's runs where it is not 1/60."""
 
 
 def main(names: list[str]) -> None:
-    """Run the RUNS whose scene is in ``names`` (all if empty), one JSON line each."""
-    for scene, solver, model, steps in RUNS:
-        if names and scene not in names:
+    """Run the runs whose scene is in ``names`` (all RUNS if empty), one JSON line each."""
+    for scene, solver, model, steps in RUNS + HARD_RUNS:
+        if (names and scene not in names) or (not names and scene in DT):
             continue
         started = time.perf_counter()
-        trajectory = simulate(scene, dt=1 / 60, steps=steps, solver=solver,
+        trajectory = simulate(scene, dt=DT.get(scene, 1 / 60), steps=steps, solver=solver,
                               formulation="velocity", friction_model=model)
         metrics = trajectory.metrics
         print(json.dumps({
