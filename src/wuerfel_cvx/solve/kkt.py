@@ -371,8 +371,9 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     The polished point is returned as :data:`POLISHED` only if it is feasible and
     sign-consistent to :data:`ROUND_OFF` and its residuals are no worse than ``residuals``;
     else the same is tried once more from a stricter guess (:data:`CLEAR_MARGIN`: only rows
-    whose multiplier clearly exceeds their slack), and if that too fails, :data:`REJECTED`
-    with the first attempt's reason.
+    whose multiplier clearly exceeds their slack), then from each guess with its parallel
+    rows merged (:func:`merge_parallel_rows`, at most :data:`MERGED_REPAIRS` repairs), and
+    if all fail, :data:`REJECTED` with the first attempt's reason.
     """
     checked, scales = _checked(qp, x, eq_dual, ineq_dual)
     residuals = checked if residuals is None else residuals
