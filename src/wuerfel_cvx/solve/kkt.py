@@ -234,7 +234,8 @@ class Polish:
     reason: str
     """Why a polish was rejected (``""`` when polished): ``singular`` (the reduced KKT
     matrix did not factor), ``active set`` (no sign-consistent, feasible active set within
-    :data:`REPAIRS` corrections) or ``worse`` (residuals above the answer's)."""
+    :data:`REPAIRS` corrections, nor :data:`MERGED_REPAIRS` after merging parallel rows)
+    or ``worse`` (residuals above the answer's)."""
     x: FloatArray
     eq_dual: FloatArray
     ineq_dual: FloatArray
