@@ -96,6 +96,11 @@ determine the unknowns many times over (high-mass-ratio-1 after an OSQP answer) 
 to about 25 (reports/polish/acceptance.md).  An attempt stops early when a correction
 returns to an active set it has already solved."""
 
+DIVERGED = 1e6
+"""Largest multiplier (relative to the answer's dual scale, 1) of a point solved in a merged
+attempt: beyond it the tight rows contradict each other (the card house's leaning cards,
+whose repairs then free and add rows in turn without end), and the attempt ends."""
+
 PARALLEL_GRID = 2.0**30
 """Resolution (1) at which :func:`merge_parallel_rows` compares rows: two tight rows are
 merged when their entries, each divided by the row's Euclidean norm, and their bounds,
@@ -425,6 +430,8 @@ def _polished_on(qp: StepQP, active: ActiveSet,
         if point is None:
             return _rejected("singular", x, eq_dual, ineq_dual, residuals, active)
         x_new, y_new, z_new = point  # z_new is zero off the active set; the next start
+        if repairs is not None and not _largest(z_new) <= DIVERGED * scales.dual:
+            return _rejected("active set", x, eq_dual, ineq_dual, residuals, active)
         repaired = _repaired(qp, active, x_new, z_new, scales)
         if repaired is None:
             break
