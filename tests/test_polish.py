@@ -112,6 +112,7 @@ def test_a_wrong_guess_is_repaired() -> None:
 
 def test_a_wrong_guess_without_repairs_is_rejected(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(kkt, "REPAIRS", 0)
+    monkeypatch.setattr(kkt, "MERGED_REPAIRS", 0)
     qp = _qp([1, 1], [0, 0], [[1, 1], [1, 0]], [2, 1 - 1e-6])
     # a claimed multiplier 1e6 times the slack: both guesses take the second row as tight
     answer = (np.array([1.0, 1.0]), np.zeros(0), np.array([2.0, 1.0]))
@@ -128,6 +129,66 @@ def test_the_second_guess_leaves_an_ambiguous_row_free(monkeypatch: pytest.Monke
     assert 1e-3 / 1e-6 < kkt.CLEAR_MARGIN
     result = _check_exact(qp, np.array([1.0, 1.0]), answer)
     assert list(result.active.lower) == [0]
+
+
+PARALLEL_OFFSET = 1e-13
+"""How far (1) the second row's direction is from the first's in the parallel-row tests: a
+velocity QP's rate and closest-approach rows of a resting contact differ about this much."""
+
+BOUND_OFFSET = 1e-9
+"""How much (1) higher the second row's bound is: the rows, tight together, are
+inconsistent by far more than round-off and less than :data:`kkt.PARALLEL_GRID`'s
+resolution (1 / 2^30 of the primal scale 3)."""
+
+ANSWER_ERROR = 1e-11
+"""How far (1) the answer is from the exact point (an accurate solver's)."""
+
+
+def _parallel_rows_qp() -> tuple[StepQP, np.ndarray, np.ndarray]:
+    """``min x0^2 + x1^2`` over two nearly parallel rows, and its exact ``x`` and ``z``.
+
+    ``x0 + x1 >= 2`` and ``x0 + (1 + e) x1 >= 2 + b`` (``e``: PARALLEL_OFFSET, ``b``:
+    BOUND_OFFSET); the second one binds: ``x = (2 + b) g / |g|^2``, ``2 x = z g``.  Tight
+    together, the rows' exact multipliers are about ``+-b / e``.
+    """
+    tilted = np.array([1.0, 1.0 + PARALLEL_OFFSET])
+    qp = _qp([1, 1], [0, 0], [[1, 1], list(tilted), [1, 0]], [2, 2 + BOUND_OFFSET, -5])
+    load = 2.0 * (2 + BOUND_OFFSET) / (tilted @ tilted)
+    return qp, 0.5 * load * tilted, np.array([0.0, load, 0.0])
+
+
+def test_parallel_rows_are_merged_into_the_most_binding_one() -> None:
+    qp, x_exact, _ = _parallel_rows_qp()
+    z = np.array([1.5, 0.5, 0.0])
+    _, scales = kkt._checked(qp, x_exact, np.zeros(0), z)
+    guessed = kkt.guess_active_set(qp, x_exact, z, scales)
+    assert list(guessed.lower) == [0, 1]
+    merged, start = kkt.merge_parallel_rows(qp, guessed, z, scales)
+    assert list(merged.lower) == [1] and not merged.upper.size  # the higher bound
+    norms = np.sqrt([2.0, 1.0 + (1.0 + PARALLEL_OFFSET) ** 2])
+    np.testing.assert_allclose(start, [0.0, (z[:2] @ norms) / norms[1], 0.0], rtol=1e-15)
+
+
+def test_a_wrong_guess_of_parallel_rows_is_polished_exactly(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # both guesses keep the two rows tight; solved together, the first row's multiplier
+    # comes out negative, and without repairs (REPAIRS 0, as after the first attempts'
+    # corrections are used up on a pile) both first attempts are rejected; the merged
+    # attempt keeps only the binding row and polishes exactly
+    monkeypatch.setattr(kkt, "REPAIRS", 0)
+    qp, x_exact, z_exact = _parallel_rows_qp()
+    # the load shared, a little of it on the first row (slack by BOUND_OFFSET at x_exact)
+    split = np.array([1e-3, z_exact[1] - 1e-3, 0.0])
+    answer = _interior(qp, x_exact, np.zeros(0), split, ANSWER_ERROR)
+    _, scales = kkt._checked(qp, *answer)
+    guessed = kkt.guess_active_set(qp, answer[0], answer[2], scales)
+    assert kkt._same(guessed, kkt.guess_active_set(qp, answer[0], answer[2], scales,
+                                                   kkt.CLEAR_MARGIN))
+    first = kkt._polished_on(qp, guessed, answer, scales, kkt_residuals(qp, *answer))
+    assert (first.outcome, first.reason) == (REJECTED, "active set")
+    result = _check_exact(qp, x_exact, answer)
+    np.testing.assert_allclose(result.ineq_dual, z_exact, rtol=0, atol=ROUND_OFF)
+    assert list(result.active.lower) == [1]
 
 
 def test_a_polish_that_makes_things_worse_is_rejected(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -48,7 +48,7 @@ from ..scenes.geometry import FloatArray
 from . import residual_kernel
 
 __all__ = ["POLISH_OUTCOMES", "ActiveSet", "Polish", "Residuals", "guess_active_set",
-           "kkt_residuals", "polish", "reduced_kkt", "solve_reduced"]
+           "kkt_residuals", "merge_parallel_rows", "polish", "reduced_kkt", "solve_reduced"]
 
 POLISHED, KEPT, REJECTED, REUSED = "polished", "kept", "rejected", "reused"
 POLISH_OUTCOMES = (KEPT, REUSED, POLISHED, REJECTED)
@@ -86,6 +86,28 @@ small (on the card house's degenerate contacts 1e-6 and 1e-5 of the scales), the
 free, and a repair tightens those the exact point violates; rows that carry load exceed
 their slack by far more (1e8 there).  Guessed tight with the first rule they make the
 reduced system inconsistent (more independent tight rows than the unknowns allow)."""
+
+MERGED_REPAIRS = 30
+"""Most corrections of :func:`polish`'s last attempts, made when both first attempts are
+rejected, each from a guess whose parallel rows are merged (:func:`merge_parallel_rows`).
+Merged, a resting pile's guess converges in one to four corrections where its duplicate
+rows are the trouble (the card house's, field-pyramid-10's); where the rows nearly
+determine the unknowns many times over (high-mass-ratio-1 after an OSQP answer) it takes up
+to about 25 (reports/polish/acceptance.md).  An attempt stops early when a correction
+returns to an active set it has already solved."""
+
+DIVERGED = 1e6
+"""Largest multiplier (relative to the answer's dual scale, 1) of a point solved in a merged
+attempt: beyond it the tight rows contradict each other (the card house's leaning cards,
+whose repairs then free and add rows in turn without end), and the attempt ends."""
+
+PARALLEL_GRID = 2.0**30
+"""Resolution (1) at which :func:`merge_parallel_rows` compares rows: two tight rows are
+merged when their entries, each divided by the row's Euclidean norm, and their bounds,
+divided by the norm and by the primal scale, agree after rounding to multiples of
+``1 / PARALLEL_GRID`` (about 1e-9).  A velocity QP's rate and closest-approach rows of a
+resting contact, and the two contacts of two aligned corners, differ in the 12th digit."""
+
 
 @dataclass(frozen=True)
 class Residuals:
@@ -197,6 +219,11 @@ class ActiveSet:
         """Number of tight rows."""
         return int(self.lower.size + self.upper.size)
 
+    @property
+    def key(self) -> bytes:
+        """The set as bytes (equal for equal sets)."""
+        return self.lower.size.to_bytes(8, "little") + self.rows.tobytes()
+
     @cached_property
     def rows(self) -> np.ndarray:
         """The tight rows, those on their lower bounds first: the reduced KKT system's order."""
@@ -212,7 +239,8 @@ class Polish:
     reason: str
     """Why a polish was rejected (``""`` when polished): ``singular`` (the reduced KKT
     matrix did not factor), ``active set`` (no sign-consistent, feasible active set within
-    :data:`REPAIRS` corrections) or ``worse`` (residuals above the answer's)."""
+    :data:`REPAIRS` corrections, nor :data:`MERGED_REPAIRS` after merging parallel rows)
+    or ``worse`` (residuals above the answer's)."""
     x: FloatArray
     eq_dual: FloatArray
     ineq_dual: FloatArray
@@ -265,6 +293,61 @@ def _upper_bounds(qp: StepQP) -> FloatArray:
     return _NO_BOUNDS if qp.ineq_upper is None else qp.ineq_upper
 
 
+def merge_parallel_rows(qp: StepQP, active: ActiveSet, ineq_dual: FloatArray,
+                        scales: _Scales) -> tuple[ActiveSet, FloatArray]:
+    """``active`` with one row of each group of parallel tight rows, and its multipliers.
+
+    Rows on the same side with the same unit normal and the same bound (to
+    :data:`PARALLEL_GRID`) are one constraint posed several times: their multipliers' split
+    is any, and solved together, the rows' differences in the last digits decide it, so that
+    the exact multipliers of the set have either sign.  Kept: the row of each group with
+    the largest bound over its norm (the smallest on an upper bound), the one that holds
+    the others at its point to about ``1 / PARALLEL_GRID``; the others are left free and
+    checked like any free row.  The returned multipliers ``ineq_dual`` give each kept row
+    its group's total (``sum z_i |g_i| / |g_kept|``), the others nothing: the same force.
+    """
+    start = np.array(ineq_dual, dtype=np.float64)
+    lower = _kept_rows(qp.ineq_matrix, qp.ineq_rhs, active.lower, start, scales.primal, 1.0)
+    upper = active.upper
+    if upper.size:
+        upper = _kept_rows(qp.ineq_matrix, _upper_bounds(qp), upper, start, scales.primal, -1.0)
+    return ActiveSet(lower=lower, upper=upper), start
+
+
+def _kept_rows(matrix: sp.csr_array, bounds: FloatArray, tight: np.ndarray,
+               multipliers: FloatArray, primal_scale: float, side: float) -> np.ndarray:
+    """:func:`merge_parallel_rows` on one side (``side`` 1 lower, -1 upper bounds).
+
+    ``multipliers`` are moved onto the kept rows in place.  Sorted row indices (int64).
+    """
+    if not tight.size:
+        return tight
+    starts, lengths = matrix.indptr[tight], matrix.indptr[tight + 1] - matrix.indptr[tight]
+    offsets = np.cumsum(lengths) - lengths
+    entries = np.repeat(starts - offsets, lengths) + np.arange(int(lengths.sum()))
+    values = matrix.data[entries]
+    norms = np.sqrt(np.add.reduceat(values**2, offsets)) if values.size else np.ones(0)
+    norms[lengths == 0] = 1.0  # reduceat's value for an empty row is not its sum
+    # + 0.0: rounding leaves -0.0, whose bytes are not 0.0's
+    quantised = np.rint(values * np.repeat(PARALLEL_GRID / norms, lengths)) + 0.0
+    levels = side * bounds[tight] / norms
+    bound = np.rint(levels * (PARALLEL_GRID / primal_scale)) + 0.0
+    columns = matrix.indices[entries]
+    groups: dict[bytes, int] = {}
+    for k in range(tight.size):
+        span = slice(offsets[k], offsets[k] + lengths[k])
+        key = columns[span].tobytes() + quantised[span].tobytes() + bound[k].tobytes()
+        kept = groups.setdefault(key, k)
+        if kept == k:
+            continue
+        total = multipliers[tight[kept]] * norms[kept] + multipliers[tight[k]] * norms[k]
+        multipliers[tight[kept]] = multipliers[tight[k]] = 0.0
+        if levels[k] > levels[kept]:  # the more binding row holds the other
+            groups[key] = kept = k
+        multipliers[tight[kept]] = total / norms[kept]
+    return np.sort(tight[np.fromiter(groups.values(), dtype=np.int64, count=len(groups))])
+
+
 def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray,
            residuals: Residuals | None = None) -> Polish:
     """The answer ``(x, y, z)`` with residuals ``residuals``, made exact on its active set.
@@ -294,36 +377,68 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     The polished point is returned as :data:`POLISHED` only if it is feasible and
     sign-consistent to :data:`ROUND_OFF` and its residuals are no worse than ``residuals``;
     else the same is tried once more from a stricter guess (:data:`CLEAR_MARGIN`: only rows
-    whose multiplier clearly exceeds their slack), and if that too fails, :data:`REJECTED`
-    with the first attempt's reason.
+    whose multiplier clearly exceeds their slack), then from each guess with its parallel
+    rows merged (:func:`merge_parallel_rows`, at most :data:`MERGED_REPAIRS` repairs), and
+    if all fail, :data:`REJECTED` with the first attempt's reason.
     """
     checked, scales = _checked(qp, x, eq_dual, ineq_dual)
     residuals = checked if residuals is None else residuals
+    answer = (x, eq_dual, ineq_dual)
     active = guess_active_set(qp, x, ineq_dual, scales)
-    first = _polished_on(qp, active, (x, eq_dual, ineq_dual), scales, residuals)
+    first = _polished_on(qp, active, answer, scales, residuals)
     if first.outcome == POLISHED or first.reason == "singular":
         return first
     strict = guess_active_set(qp, x, ineq_dual, scales, CLEAR_MARGIN)
-    if np.array_equal(strict.lower, active.lower) and np.array_equal(strict.upper, active.upper):
-        return first
-    second = _polished_on(qp, strict, (x, eq_dual, ineq_dual), scales, residuals)
-    return second if second.outcome == POLISHED else first
+    guesses = [active]
+    if not _same(strict, active):
+        second = _polished_on(qp, strict, answer, scales, residuals)
+        if second.outcome == POLISHED:
+            return second
+        guesses.append(strict)
+    tried: list[ActiveSet] = []
+    for guess in guesses:
+        merged, start = merge_parallel_rows(qp, guess, ineq_dual, scales)
+        if MERGED_REPAIRS and not any(_same(merged, other) for other in tried):
+            tried.append(merged)
+            last = _polished_on(qp, merged, answer, scales, residuals, MERGED_REPAIRS, start)
+            if last.outcome == POLISHED:
+                return last
+    return first
+
+
+def _same(active: ActiveSet, other: ActiveSet) -> bool:
+    return bool(np.array_equal(active.lower, other.lower)
+                and np.array_equal(active.upper, other.upper))
 
 
 def _polished_on(qp: StepQP, active: ActiveSet,
                  answer: tuple[FloatArray, FloatArray, FloatArray], scales: _Scales,
-                 residuals: Residuals) -> Polish:
-    """:func:`polish` from the guess ``active``: solves, repairs, and the acceptance check."""
+                 residuals: Residuals, repairs: int | None = None,
+                 start: FloatArray | None = None) -> Polish:
+    """:func:`polish` from the guess ``active``: solves, repairs, and the acceptance check.
+
+    At most ``repairs`` corrections (:data:`REPAIRS` if ``None``); the first solve starts
+    from ``answer`` with the inequality multipliers ``start`` in place of the answer's if
+    given.  With ``repairs`` given, an active set met a second time ends the attempt.
+    """
     x, eq_dual, ineq_dual = answer
-    x_new, y_new, z_new = answer  # each solve starts from the last point
-    for _ in range(REPAIRS + 1):
-        point = _solve_on(qp, active, x_new, y_new, z_new)
+    x_new, y_new, z_new = x, eq_dual, ineq_dual if start is None else start
+    seen: set[bytes] = set()
+    order = None if repairs is None else _unknowns_order(qp, active)
+    for _ in range((REPAIRS if repairs is None else repairs) + 1):
+        point = _solve_on(qp, active, x_new, y_new, z_new, order)
         if point is None:
             return _rejected("singular", x, eq_dual, ineq_dual, residuals, active)
-        x_new, y_new, z_new = point  # z_new is zero off the active set
+        x_new, y_new, z_new = point  # z_new is zero off the active set; the next start
+        if repairs is not None and not _largest(z_new) <= DIVERGED * scales.dual:
+            return _rejected("active set", x, eq_dual, ineq_dual, residuals, active)
         repaired = _repaired(qp, active, x_new, z_new, scales)
         if repaired is None:
             break
+        if repairs is not None:
+            seen.add(active.key)
+            if repaired.key in seen:  # a cycle: the corrections would go round it again
+                return _rejected("active set", x, eq_dual, ineq_dual, residuals, repaired)
         active = repaired
     else:
         return _rejected("active set", x, eq_dual, ineq_dual, residuals, active)
@@ -331,6 +446,19 @@ def _polished_on(qp: StepQP, active: ActiveSet,
     if not polished.worst() <= max(residuals.worst(), ROUND_OFF):
         return _rejected("worse", x, eq_dual, ineq_dual, residuals, active)
     return Polish(POLISHED, "", x_new, y_new, z_new, polished, active)
+
+
+def _unknowns_order(qp: StepQP, active: ActiveSet) -> np.ndarray | None:
+    """The fill-reducing order of the unknowns of ``active``'s reduced system, if large.
+
+    ``None`` below :data:`~wuerfel_cvx._sparse.DISSECTION_MIN_UNKNOWNS` unknowns.  Any
+    order of the unknowns factors any active set's system; the corrections of one attempt
+    keep the first one's (finding an order costs several factorizations of such a system).
+    """
+    if qp.n_variables < DISSECTION_MIN_UNKNOWNS:
+        return None
+    remembered = _remembered(reduced_kkt(qp, active)[0], qp.n_variables)
+    return None if remembered is None else remembered.order
 
 
 def _rejected(reason: str, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray,
@@ -401,15 +529,19 @@ def solve_reduced(matrix: sp.csc_matrix, n: int, rhs: FloatArray) -> FloatArray 
 
 
 def _solve_on(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,
-              ineq_dual: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+              ineq_dual: FloatArray, order: np.ndarray | None = None
+              ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
     """The KKT point of ``qp`` with ``active`` rows tight, refined from ``(x, y, z)``.
 
-    ``None`` if the regularised matrix does not factor.  See :func:`polish`.
+    ``None`` if the regularised matrix does not factor.  See :func:`polish`.  ``order``:
+    the unknowns' elimination order of a large system (:func:`_unknowns_order`), found
+    afresh for its pattern if ``None``.
     """
     n, n_eq = qp.n_variables, qp.n_equalities
     matrix, rhs = reduced_kkt(qp, active)
     tight = active.rows
-    best = _refined_solution(matrix, n, rhs, np.concatenate([x, eq_dual, -ineq_dual[tight]]))
+    best = _refined_solution(matrix, n, rhs, np.concatenate([x, eq_dual, -ineq_dual[tight]]),
+                             order)
     if best is None or not np.isfinite(best).all():
         return None
     z = np.zeros(qp.n_inequalities)
@@ -418,15 +550,22 @@ def _solve_on(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,
 
 
 def _refined_solution(matrix: sp.csc_matrix, n: int, rhs: FloatArray,
-                      start: FloatArray) -> FloatArray | None:
+                      start: FloatArray, order: np.ndarray | None = None) -> FloatArray | None:
     """``matrix @ point = rhs`` solved from ``start``: equilibrated, factored, refined.
 
     The system is solved as ``(S K S) (S^-1 point) = S rhs`` with the power-of-two scales
     ``S`` of :func:`_equilibration`, so that the regularisation is small against every
     unknown's weight and every row, however far apart the weights are (a heavy table's
     corners of 1e6 kg beside 0.25 kg corners); powers of two change no bit of the data.
-    ``None`` if the regularised matrix does not factor.
+    ``None`` if the regularised matrix does not factor.  With ``order`` (the unknowns'),
+    factored afresh in it, nothing remembered.
     """
+    if order is not None:
+        scale = _equilibration(matrix, n)
+        scaled = _scaled(matrix, scale)
+        fresh = _regularised_factor(scaled, n, order)
+        return None if fresh is None else scale * fresh.refined(scaled, scale * rhs,
+                                                                  start / scale)
     remembered = _remembered(matrix, n)
     if remembered is not None and remembered.factor is not None:
         point = remembered.refined(matrix, rhs, start)
