@@ -72,3 +72,14 @@ def test_a_highs_solve_past_its_time_limit_is_a_failed_step(
     with pytest.raises(StepFailure) as failure:
         simulate("stack-5", dt=0.01, steps=3, solver="HIGHS")
     assert failure.value.status == "user_limit" and failure.value.step == 1  # the first
+
+
+def test_clarabel_runs_on_one_thread_so_that_forked_workers_do_not_hang() -> None:
+    """CLARABEL is set to one thread, as every other solver here runs.
+
+    Clarabel's default thread pool, started in a process that then forks (a sweep's
+    ``--jobs`` workers), left a worker's parallel factorization waiting forever for the
+    pool's threads (the friction suite's 5050-box pyramid).  One thread starts no pool.
+    """
+    assert all(SOLVERS["CLARABEL"].options(eps)["max_threads"] == 1
+               for eps in (1e-4, 1e-7, 1e-9))

@@ -154,9 +154,14 @@ def _quiet_highs() -> dict[str, Any]:
 SOLVERS: dict[str, SolverSpec] = {
     spec.name: spec
     for spec in (
+        # One thread, as every other solver here runs: Clarabel's default (all cores) starts
+        # a thread pool (rayon, for faer's parallel LDL) at its first solve, and a process
+        # forked after it (a sweep's --jobs worker) inherits the pool without its threads:
+        # its first factorization large enough to go parallel waited forever (the friction
+        # suite's 5050-box pyramid hung a --jobs 2 sweep at 0 % CPU).
         SolverSpec("CLARABEL", "CLARABEL", lambda eps: {
             "tol_gap_abs": eps, "tol_gap_rel": eps, "tol_feas": eps, "tol_ktratio": eps,
-            "max_iter": 200}, "interior-point", "clarabel", ("#1f77b4", "o"),
+            "max_iter": 200, "max_threads": 1}, "interior-point", "clarabel", ("#1f77b4", "o"),
             Timing(note="its solve_time reads above the wall time of the call it times"),
             adapter="clarabel"),
         # OSQP re-estimates its step size rho every 50 iterations from the ratio of its
