@@ -9,7 +9,7 @@ import pytest
 
 from wuerfel_cvx import simulate
 from wuerfel_cvx.lab.bench import runner
-from wuerfel_cvx.lab.bench.bare_call import bare_calls, captured_calls, replay
+from wuerfel_cvx.lab.bench.floors import bare_calls, captured_calls, replay
 from wuerfel_cvx.lab.bench.suite import Suite
 from wuerfel_cvx.scenes.scene import Scene
 from wuerfel_cvx.settings import Settings

@@ -25,8 +25,6 @@ tolerance is five decades above that and far below any modelling difference.
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
@@ -41,7 +39,7 @@ from test_gradients import (
 )
 from test_gradients_closest import (
     STACK_INPUTS,
-    _moved,
+    assert_chained_passes_match_differences,
     final_state,
     resting_stack,
     spinning_rain,
@@ -145,27 +143,9 @@ def test_velocity_gradient_with_the_sixth_rod_matches_rigid_gradient() -> None:
 
 def test_velocity_gradient_chains_through_the_gauss_newton_passes() -> None:
     """Frictionless spinning rain: a landing whose step takes two passes."""
-    scene, steps = spinning_rain(), 64
-    trajectory = simulate(scene, dt=0.01, steps=steps, solver="CLARABEL",
-                          formulation="velocity", gradients=True)
-    assert trajectory.tape is not None
-    assert any(record.passes for record in trajectory.tape.steps)
-    gradient = trajectory.gradient(final_state(trajectory.points),
-                                   ("center", "angle", "angular_velocity", "mass"))
-    for body, name, component in [(0, "center", 1), (0, "angle", 0), (3, "angular_velocity", 0),
-                                  (3, "mass", 0)]:
-        value = gradient[name][body]
-        adjoint = float(value[component] if np.ndim(value) else value)
-        values = []
-        for sign in (1.0, -1.0):
-            changed = dataclasses.replace(scene, squares=tuple(
-                _moved(square, name, component, sign * 1e-6) if index == body else square
-                for index, square in enumerate(scene.squares)))
-            points = simulate(changed, dt=0.01, steps=steps, solver="CLARABEL",
-                              formulation="velocity").points
-            values.append(float(np.sum(final_state(points) * points)))
-        expected = (values[0] - values[1]) / 2e-6
-        assert adjoint == pytest.approx(expected, rel=1e-6, abs=1e-8), (name, body)
+    assert_chained_passes_match_differences(
+        "velocity", [(0, "center", 1), (0, "angle", 0), (3, "angular_velocity", 0),
+                     (3, "mass", 0)])
 
 
 @pytest.mark.unit

@@ -560,20 +560,14 @@ def _refined_solution(matrix: sp.csc_matrix, n: int, rhs: FloatArray,
     ``None`` if the regularised matrix does not factor.  With ``order`` (the unknowns'),
     factored afresh in it, nothing remembered.
     """
-    if order is not None:
-        scale = _equilibration(matrix, n)
-        scaled = _scaled(matrix, scale)
-        fresh = _regularised_factor(scaled, n, order)
-        return None if fresh is None else scale * fresh.refined(scaled, scale * rhs,
-                                                                  start / scale)
-    remembered = _remembered(matrix, n)
+    remembered = None if order is not None else _remembered(matrix, n)
     if remembered is not None and remembered.factor is not None:
         point = remembered.refined(matrix, rhs, start)
         if point is not None:
             return point
     scale = _equilibration(matrix, n)
     scaled = _scaled(matrix, scale)
-    factor = _regularised_factor(scaled, n, None if remembered is None else remembered.order)
+    factor = _regularised_factor(scaled, n, order if remembered is None else remembered.order)
     if factor is None:
         return None
     if remembered is not None:

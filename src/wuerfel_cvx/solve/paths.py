@@ -17,6 +17,7 @@ import warnings
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import cvxpy as cp
 import numpy as np
@@ -117,6 +118,17 @@ class StepSolution:
     (:mod:`wuerfel_cvx.gradients`)."""
 
 
+class _KeptActiveSet(NamedTuple):
+    """A structure's last polished answer, for its next QP (:meth:`SolvePath.reuse_active_set`)."""
+
+    active: ActiveSet
+    x: FloatArray
+    eq_dual: FloatArray
+    ineq_dual: FloatArray
+    step: int
+    """The step it was polished in."""
+
+
 class SolvePath:
     """How a run's QPs reach their solvers: one of :data:`SOLVE_PATHS`, with its caches.
 
@@ -147,8 +159,7 @@ class SolvePath:
         self.native_updates = 0
         """Native solves of a structure already set up (its solver updated in place)."""
         self._adapters: OrderedDict[tuple[object, ...], Adapter] = OrderedDict()
-        self._active_sets: OrderedDict[tuple[object, ...], tuple[
-            ActiveSet, FloatArray, FloatArray, FloatArray, int]] = OrderedDict()
+        self._active_sets: OrderedDict[tuple[object, ...], _KeptActiveSet] = OrderedDict()
         self.reuse_active_sets = reuse_active_sets
         """Whether a polished run first tries each structure's last active set
         (:meth:`reuse_active_set`); off, every QP goes to its solver."""
@@ -166,9 +177,10 @@ class SolvePath:
         if not self.reuse_active_sets and step is None:
             return None
         remembered = self._active_sets.get(structure_key(qp))
-        if remembered is None or not (self.reuse_active_sets or remembered[-1] == step):
+        if remembered is None or not (self.reuse_active_sets or remembered.step == step):
             return None
-        reused = reuse_active_set(qp, *remembered[:-1])
+        reused = reuse_active_set(qp, remembered.active, remembered.x, remembered.eq_dual,
+                                  remembered.ineq_dual)
         self.reused_active_sets += reused is not None
         return reused
 
@@ -179,11 +191,11 @@ class SolvePath:
         steps' are forgotten (only a step's own are tried then).
         """
         if not self.reuse_active_sets:
-            for other in [key for key, kept in self._active_sets.items() if kept[-1] != step]:
+            for other in [key for key, kept in self._active_sets.items() if kept.step != step]:
                 del self._active_sets[other]
         key = structure_key(qp)
-        self._active_sets[key] = (polished.active, polished.x, polished.eq_dual,
-                                  polished.ineq_dual, step)
+        self._active_sets[key] = _KeptActiveSet(polished.active, polished.x, polished.eq_dual,
+                                                polished.ineq_dual, step)
         self._active_sets.move_to_end(key)
         if len(self._active_sets) > self.capacity:
             self._active_sets.popitem(last=False)

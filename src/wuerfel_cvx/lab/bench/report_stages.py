@@ -41,7 +41,7 @@ def stage_table(rows: pd.DataFrame) -> str:
     """Markdown: per default grid point, the call's time per step and its stages (ms).
 
     Beside the call / solver ratio, its floor: the bare solver calls over the solver's own
-    time (:mod:`.bare_call`; empty where the suite did not measure it).
+    time (:func:`.floors.bare_calls`; empty where the suite did not measure it).
     """
     return markdown_table(
         ["scene", "solver", "call (ms)", *(f"{name} (ms)" for name, _ in STAGE_CELLS),
@@ -121,7 +121,7 @@ def stage_section(results: pd.DataFrame, images: dict[str, list[Path]], out_dir:
         "update and solve on a persistent solver: no build, polish, check or recording) "
         "over the solver's own time in them, each call's least of three replays; no "
         "Python loop calling the solver gets below it, so a target below it cannot be met "
-        "by cutting the loop (`wuerfel_cvx.lab.bench.bare_call`).",
+        "by cutting the loop (`wuerfel_cvx.lab.bench.floors`).",
         stage_table(rows), "Targets (issue 25):", "\n".join(verdicts(rows, results))]
     image = image_link(images, "stage-breakdown", out_dir,
                        "the default run's time per step by stage")

@@ -32,8 +32,7 @@ from ...trajectory import Trajectory
 from ...versions import package_version
 from ..peers import peer_version, simulate_peer
 from . import schema
-from .bare_call import bare_calls
-from .floors import kkt_factorization_seconds
+from .floors import bare_calls, kkt_factorization_seconds
 from .friction_summary import column_max, friction_summary
 from .suite import (
     DEFAULT_FRICTION_MODEL,
@@ -315,7 +314,7 @@ def _call_timing(trajectory: Trajectory, seconds: float) -> dict[str, Any]:
 
 def _bare_call_floor(point: GridPoint, scene: Scene,
                      failure: StepFailure | None) -> dict[str, Any]:
-    """The floor under the call / solver ratio (:mod:`.bare_call`), if the point asks for it.
+    """The floor under the call / solver ratio (:func:`.floors.bare_calls`), if asked for.
 
     Only for a completed point run with the default settings (its row is in the report's
     table of the default run).

@@ -180,7 +180,7 @@ COLUMNS: tuple[Column, ...] = (
        "call_wall_time_per_step minus the mean step: set-up and the loop around the steps"),
     _c("bare_call_time_per_step", "float", "s",
        "the run's solver calls replayed bare (the adapters' update and solve calls alone, "
-       "wuerfel_cvx.lab.bench.bare_call), per step; empty unless the suite asked for it"),
+       "wuerfel_cvx.lab.bench.floors), per step; empty unless the suite asked for it"),
     _c("bare_call_over_solver", "float", "1",
        "bare_call_time_per_step over the solver's own time in the same calls: the floor "
        "under call_over_solver_mean of any Python loop calling this solver"),

@@ -27,7 +27,7 @@ Cartesian product of its lists::
     compare_every = 1                   # steps between re-solves by the reference solver
     time_limit = 600.0                  # wall seconds per grid point before it is stopped
     bare_call_floor = false             # true: default-settings points also replay their
-                                        # solver calls bare (wuerfel_cvx.lab.bench.bare_call)
+                                        # solver calls bare (wuerfel_cvx.lab.bench.floors)
 
     [[grid]]
     scenes = ["tilted-drop", "stack-3"]
@@ -144,7 +144,7 @@ class GridPoint:
     bare_call_floor: bool = False
     """Measure the floor under the call / solver ratio when the point runs the default
     settings (:attr:`runs_defaults`): its solver calls replayed bare
-    (:mod:`wuerfel_cvx.lab.bench.bare_call`).  A measurement, not a setting: not in the id."""
+    (:mod:`wuerfel_cvx.lab.bench.floors`).  A measurement, not a setting: not in the id."""
 
     def settings(self) -> Settings:
         """The run's :class:`~wuerfel_cvx.settings.Settings` (not for a peer point)."""
