@@ -59,6 +59,11 @@ def _floor(row: pd.Series) -> float:
     return plots.as_float(row.get("bare_call_over_solver", math.nan))
 
 
+def _bare_call_time(row: pd.Series) -> float:
+    """The row's bare solver calls' time per step in s (NaN when not measured)."""
+    return plots.as_float(row.get("bare_call_time_per_step", math.nan))
+
+
 def verdicts(rows: pd.DataFrame, results: pd.DataFrame) -> list[str]:
     """One line per target: the measured ratio, met or not (missing: not measured)."""
     lines = []
@@ -80,7 +85,8 @@ def verdicts(rows: pd.DataFrame, results: pd.DataFrame) -> list[str]:
     if len(peer) and len(ours):
         engine = plots.as_float(peer["solver_time_per_step_mean"].iloc[0])
         cells = [f"{row['solver']} "
-                 + _judged(plots.as_float(row["call_wall_time_per_step"]) / engine, PEER_FACTOR)
+                 + _judged(plots.as_float(row["call_wall_time_per_step"]) / engine, PEER_FACTOR,
+                           _bare_call_time(row) / engine)
                  for _, row in ours.iterrows() if row["solver"] in TARGET_SOLVERS]
         lines.append(f"- {PEER_SCENE}: call within {PEER_FACTOR:g}× {PEER_ENGINE}'s step "
                      f"({format_ms(engine)} ms, its own stepping function): "
