@@ -747,20 +747,29 @@ def _held_closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
     The same numbers without the sampled search (which then moves nothing).  Returns the
     choices too (``held``'s fields but ``at_rate``).  ``corners`` as :func:`_closest`'s.
     """
-    gaps, lines, *_ = _face_gaps(x, inputs, np.zeros((x.shape[0], 1)),
-                                 (held.grid_faces[0][:, :1], held.grid_faces[1][:, :1]),
-                                 None if corners is None else tuple(c[:, :1] for c in corners))
-    start, line_start = gaps[:, 0], lines[:, 0]
-    starts = (start, line_start, _ramp_rate(start, held.pushed, inputs),
-              _ramp_rate(line_start, line_start.real + inputs.dt * inputs.push_speed < 0.0,
-                         inputs))
+    starts = _held_starts(x, inputs, held,
+                          None if corners is None else tuple(c[:, :1] for c in corners))
     assert held.tau is not None
-    tau = held.tau + 0.0 * start
+    tau = held.tau + 0.0 * starts[0]
     choices = {name: getattr(held, name) for name in held.__dataclass_fields__
                if name != "at_rate"}
     return (tau, *_psi_at(x, inputs, tau, starts, _closest_choices(choices),
                           None if corners is None else tuple(c[:, 1:] for c in corners)),
             choices)
+
+
+def _held_starts(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
+                 corners: tuple[np.ndarray, ...] | None = None) -> tuple[np.ndarray, ...]:
+    """The start gaps and line distances (m) and their ramps' rates (m/s), choices held.
+
+    ``corners``: :func:`_approach_corners` at ``tau = 0`` ``(m, 1)`` where already found.
+    """
+    gaps, lines, *_ = _face_gaps(x, inputs, np.zeros((x.shape[0], 1)),
+                                 (held.grid_faces[0][:, :1], held.grid_faces[1][:, :1]), corners)
+    start, line_start = gaps[:, 0], lines[:, 0]
+    return (start, line_start, _ramp_rate(start, held.pushed, inputs),
+            _ramp_rate(line_start, line_start.real + inputs.dt * inputs.push_speed < 0.0,
+                       inputs))
 
 
 def _all_held(held: _Held | None, hold_closest: bool, contacts: IntArray | None = None,
@@ -789,27 +798,14 @@ def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArra
     ``ramps``: the forward pass's ``tau*`` and ramps (:func:`_closest`).
     """
     m = x.shape[0]
-    corners = None
-    if _all_held(held, hold_closest):  # the corners at the start and at tau*, found once
-        assert held is not None and held.tau is not None
-        corners = _approach_corners(x, inputs, np.stack([0.0 * held.tau, held.tau], axis=1))
-    tau, psi, rate, closest_rate, choices = _closest(x, inputs, held, hold_closest, forced,
-                                                     corners, ramps)
-    if corners is None:
-        times = np.stack([0.0 * tau, tau], axis=1)  # (m, 2): the rate row, the closest row
-        corners = _approach_corners(x, inputs, times)
+    normal_row, sign = rows
+    if held is not None and not np.any(normal_row >= m):  # the rate rows alone: at tau = 0
+        corners = _approach_corners(x, inputs, np.zeros((m, 1)))
+        starts = _held_starts(x, inputs, held, corners)
+        normal, rhs = _normals(corners), np.where(held.grid_line[:, 1], starts[3], starts[2])
+    else:
+        corners, normal, rhs, held = _both_rows(x, inputs, held, hold_closest, forced, ramps)
     p_i, p_j, p_k, o_i, o_j, o_k = corners
-    g_i, g_j, g_k = _rot(p_k - p_j), _rot(p_i - p_k), _rot(p_j - p_i)
-    scale = 1.0 / np.sqrt(_dot2(g_k, g_k))
-    normal = np.concatenate([(g_i + g_j) * scale[..., None],
-                             ((_dot2(g_i, _rot(o_i)) + _dot2(g_j, _rot(o_j))) * scale)[..., None],
-                             g_k * scale[..., None], (_dot2(g_k, _rot(o_k)) * scale)[..., None]],
-                            axis=-1)  # (m, 2, 6)
-    along = np.sum(normal[:, 1, :3] * x[:, 8:11], axis=1) + np.sum(normal[:, 1, 3:]
-                                                                   * x[:, 11:14], axis=1)
-    closest = along - psi / tau
-    at_rate = closest_rate.real < closest.real if held is None else held.at_rate
-    rhs = np.concatenate([rate, np.where(at_rate, closest_rate, closest)])
     edge = p_j[:, 0] - p_i[:, 0]
     length = np.sqrt(_dot2(edge, edge))
     tangent = edge / length[:, None]
@@ -820,11 +816,50 @@ def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArra
     product = x[:, 6] * x[:, 7]
     rough = product.real > 0.0
     mu = np.where(rough, np.sqrt(np.where(rough, product, 1.0)), 0.0)
-    normal_row, sign = rows
     contact = normal_row % max(m, 1)
-    entries = (np.concatenate([normal[:, 0], normal[:, 1]])[normal_row]
+    entries = (normal.swapaxes(0, 1).reshape(-1, 6)[normal_row]
                + (sign * mu[contact])[:, None] * slip[contact])
-    return entries, rhs[normal_row], held or _Held(at_rate=at_rate, **choices)
+    return entries, rhs[normal_row], held
+
+
+def _both_rows(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None, hold_closest: bool,
+               forced: FloatArray | None, ramps: FloatArray | None,
+               ) -> tuple[tuple[np.ndarray, ...], np.ndarray, np.ndarray, _Held]:
+    """The corners at ``(0, tau*)``, the normal rows ``(m, 2, 6)`` and right sides ``(2 m,)``.
+
+    Of the rate rows and the closest-approach rows, with the choices (:func:`_approach_values`).
+    """
+    corners = None
+    if _all_held(held, hold_closest):  # the corners at the start and at tau*, found once
+        assert held is not None and held.tau is not None
+        corners = _approach_corners(x, inputs, np.stack([0.0 * held.tau, held.tau], axis=1))
+    tau, psi, rate, closest_rate, choices = _closest(x, inputs, held, hold_closest, forced,
+                                                     corners, ramps)
+    if corners is None:
+        times = np.stack([0.0 * tau, tau], axis=1)  # (m, 2): the rate row, the closest row
+        corners = _approach_corners(x, inputs, times)
+    normal = _normals(corners)
+    along = np.sum(normal[:, 1, :3] * x[:, 8:11], axis=1) + np.sum(normal[:, 1, 3:]
+                                                                   * x[:, 11:14], axis=1)
+    closest = along - psi / tau
+    at_rate = closest_rate.real < closest.real if held is None else held.at_rate
+    rhs = np.concatenate([rate, np.where(at_rate, closest_rate, closest)])
+    return corners, normal, rhs, held or _Held(at_rate=at_rate, **choices)
+
+
+def _normals(corners: tuple[np.ndarray, ...]) -> np.ndarray:
+    """The normal rows' six body-column entries ``(m, K, 6)`` at the corners' ``K`` times.
+
+    ``(g_i + g_j, g_i . rot90(o_i) + g_j . rot90(o_j))`` and ``(g_k, g_k . rot90(o_k))``, ``g``
+    the side gradients over the edge's length (:func:`_approach_values`).
+    """
+    p_i, p_j, p_k, o_i, o_j, o_k = corners
+    g_i, g_j, g_k = _rot(p_k - p_j), _rot(p_i - p_k), _rot(p_j - p_i)
+    scale = 1.0 / np.sqrt(_dot2(g_k, g_k))
+    return np.concatenate([(g_i + g_j) * scale[..., None],
+                           ((_dot2(g_i, _rot(o_i)) + _dot2(g_j, _rot(o_j))) * scale)[..., None],
+                           g_k * scale[..., None], (_dot2(g_k, _rot(o_k)) * scale)[..., None]],
+                          axis=-1)
 
 
 STACKED_CONTACTS = 1024
@@ -1008,7 +1043,8 @@ def approach_rows_of(model: Model, passes: Sequence[ApproachPass], push_speed: f
             contacts=begin + sub))
     derivatives, _, _ = _grouped(
         [part for part, wanted in zip(stepped, subs, strict=True) if wanted.size],
-        lambda part: _all_held(held, hold_closest, part.contacts),
+        lambda part: ("rate rows" if np.all(part.rows[0] < part.x.shape[0])
+                      else _all_held(held, hold_closest, part.contacts)),
         lambda part: _complex_steps(part.x, part.inputs, part.rows,
                                     _held_at(held, part.contacts), hold_closest))
     taken = iter(derivatives)
