@@ -383,15 +383,26 @@ def _joined(parts: list[Tangent], order: np.ndarray) -> Tangent:
                    np.concatenate([p.grad for p in parts])[order])
 
 
+def body_columns(model: Model, edge_bodies: IntArray, point_bodies: IntArray,
+                 ) -> tuple[np.ndarray, IntArray]:
+    """Where each row's six body-column entries go: ``(r, 6)`` masks of moving bodies, columns.
+
+    The edge body's ``(u_x, u_y, omega)`` then the point body's (:class:`ContactRows`); a
+    table's entries are masked, their columns 0..2.
+    """
+    bodies = np.repeat(np.stack([edge_bodies, point_bodies], axis=1), 3, axis=1)
+    moving = bodies < model.n_boxes
+    return moving, 3 * np.where(moving, bodies, 0) + np.tile(np.arange(3), 2)
+
+
 def _check(model: Model, rows: ContactRows, qp: StepQP, contacts: Contacts) -> None:
     """Refuse a step whose recomputed rows are not the recorded QP's (:data:`ROW_CHECK`)."""
     dense = np.zeros((len(rows.contact), qp.n_variables))
-    edge_body = contacts.edge_body[rows.contact]
-    point_body = contacts.point_body[rows.contact]
-    for bodies, entries in ((edge_body, rows.edge_entries), (point_body, rows.point_entries)):
-        moving = np.flatnonzero(bodies < model.n_boxes)
-        for axis, entry in enumerate(entries):
-            np.add.at(dense, (moving, 3 * bodies[moving] + axis), entry.value[moving])
+    moving, columns = body_columns(model, contacts.edge_body[rows.contact],
+                                   contacts.point_body[rows.contact])
+    values = np.stack([entry.value for entry in rows.edge_entries + rows.point_entries], axis=1)
+    row = np.broadcast_to(np.arange(len(rows.contact))[:, None], columns.shape)
+    np.add.at(dense, (row[moving], columns[moving]), values[moving])
     recorded = qp.ineq_matrix.toarray()
     scale = 1.0 + float(np.max(np.abs(recorded))) if recorded.size else 1.0
     rhs_scale = 1.0 + float(np.max(np.abs(qp.ineq_rhs))) if qp.ineq_rhs.size else 1.0
