@@ -198,7 +198,8 @@ class VelocityFormulation(FrictionSettings):
         ineq_matrix, ineq_rhs, cones = self._cones(model, points, contacts, ineq_matrix,
                                                    ineq_rhs)
         return declare_qp(weights, target.ravel(), eq_matrix, eq_rhs, ineq_matrix, ineq_rhs,
-                          contacts, linearised_about=target.ravel(), cones=cones)
+                          contacts, linearised_about=target.ravel(), cones=cones,
+                          approach=None if self.linearisation == "start" else approach)
 
     def _cones(self, model: Model, points: FloatArray, contacts: Contacts,
                normal: sp.csr_array, rhs: FloatArray,
@@ -243,7 +244,7 @@ class VelocityFormulation(FrictionSettings):
         matrix, rhs, cones = self._cones(model, state.points, contacts, rows.matrix, rows.rhs)
         return declare_qp(previous.weights, previous.target, previous.eq_matrix,
                           previous.eq_rhs, matrix, rhs, contacts,
-                          linearised_about=approach.about, cones=cones)
+                          linearised_about=approach.about, cones=cones, approach=approach)
 
     def _reached_contacts(self, model: Model, state: State, contacts: Contacts,
                           solution: FloatArray, dt: float) -> Contacts:

@@ -977,9 +977,11 @@ def _approach_part(model: Model, points: FloatArray, contacts: Contacts, qp: Ste
     about = qp.linearised_about
     if about is None:
         raise GradientError("a closest-approach pass without its linearisation point")
-    if about.size == 3 * model.n_boxes:  # rigid's body velocities, else velocity's corners
-        about = corner_velocities(points, about.reshape(-1, 3)).ravel()
-    forward = closest_approach(model, points, contacts, about, dt, push_speed)
+    forward = qp.approach  # as the forward pass found it, else found again
+    if forward is None:
+        if about.size == 3 * model.n_boxes:  # rigid's body velocities, else velocity's corners
+            about = corner_velocities(points, about.reshape(-1, 3)).ravel()
+        forward = closest_approach(model, points, contacts, about, dt, push_speed)
     motion = forward.motion
     edge, point = contacts.edge_body, contacts.point_body
     x = np.concatenate([motion.center[edge], motion.angle[edge, None],
@@ -1010,7 +1012,7 @@ def approach_rows(model: Model, points: FloatArray, contacts: Contacts, qp: Step
     ``qp`` a closest-approach pass of ``rigid``, ``contacts`` its contacts.
     """
     if contacts is not qp.contacts:
-        qp = dataclasses.replace(qp, contacts=contacts)
+        qp = dataclasses.replace(qp, contacts=contacts, approach=None)
     return approach_rows_of(model, [(points, qp, needed)], push_speed, dt,
                             hold_closest=hold_closest)[0]
 
