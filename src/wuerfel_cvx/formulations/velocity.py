@@ -187,6 +187,7 @@ class VelocityFormulation(FrictionSettings):
         eq_rhs = np.concatenate([-(self.beta / dt) * rod_error,
                                  np.zeros(held_matrix.shape[0] if held_matrix is not None else 0)])
 
+        approach: Approach | None = None
         if self.linearisation == "start":
             ineq_matrix, ineq_rhs = self.contact_rows(model, model.all_points(points),
                                                       contacts, dt)
@@ -199,7 +200,7 @@ class VelocityFormulation(FrictionSettings):
                                                    ineq_rhs)
         return declare_qp(weights, target.ravel(), eq_matrix, eq_rhs, ineq_matrix, ineq_rhs,
                           contacts, linearised_about=target.ravel(), cones=cones,
-                          approach=None if self.linearisation == "start" else approach)
+                          approach=approach)
 
     def _cones(self, model: Model, points: FloatArray, contacts: Contacts,
                normal: sp.csr_array, rhs: FloatArray,
