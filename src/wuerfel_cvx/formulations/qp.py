@@ -40,7 +40,7 @@ update (the formulations by name: :mod:`wuerfel_cvx.formulations`).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -51,6 +51,7 @@ from ..step.contacts import Contacts
 
 if TYPE_CHECKING:
     from .cone import ConeRows
+    from .velocity import Approach
 from typing import Literal, Protocol
 
 from ..step.model import Model, State
@@ -84,6 +85,11 @@ class StepQP:
     linear: FloatArray | None = None
     """The linear cost ``l`` of the objective's term ``l' x`` (objective units per unit of
     the unknown; ``None``: none).  An unknown may then have weight 0."""
+    approach: Approach | None = field(default=None, compare=False, repr=False)
+    """Closest-approach rows: each contact's closest approach along the motion of
+    :attr:`linearised_about`, the one the rows were built from
+    (:func:`~wuerfel_cvx.formulations.velocity.closest_approach`); a gradient differentiates
+    the same arithmetic from it (``None``: not recorded, found again)."""
 
     @property
     def n_variables(self) -> int:
@@ -210,12 +216,14 @@ def declare_qp(
     linearised_about: FloatArray | None = None,
     cones: ConeRows | None = None,
     linear: FloatArray | None = None,
+    approach: Approach | None = None,
 ) -> StepQP:
     """The QP ``min sum w (x - t)^2 + |F (x - t)|^2 + l' x  s.t.  E x == e, h <= G x <= u``.
 
     ``ineq_rhs`` is ``h``; ``ineq_upper`` (``u``, ``+inf`` entries for one-sided rows),
     ``cost_factor`` (``F``) and ``linear`` (``l``) are optional, as is ``linearised_about``
-    (the unknowns the rows were linearised about, for further passes) and ``cones`` (where
+    (the unknowns the rows were linearised about, for further passes, and the closest
+    approach along their motion) and ``cones`` (where
     the friction cones' rows are).  ``E``, ``G`` and
     ``F`` are stored in canonical CSR form (sorted indices, no duplicates), so equal
     sparsity patterns have equal index arrays.  Raises ``ValueError`` if ``ineq_upper`` does
@@ -237,7 +245,8 @@ def declare_qp(
                   ineq_upper=None if ineq_upper is None else np.asarray(ineq_upper, float),
                   cost_factor=None if cost_factor is None else _canonical(cost_factor),
                   linearised_about=linearised_about, cones=cones,
-                  linear=None if linear is None else np.asarray(linear, dtype=np.float64))
+                  linear=None if linear is None else np.asarray(linear, dtype=np.float64),
+                  approach=approach)
 
 
 def _canonical(matrix: sp.csr_array) -> sp.csr_array:

@@ -36,7 +36,13 @@ from .cone import ConeRows, contact_cones
 from .motion import rigid_step
 from .qp import FrictionSettings, RowUnits, StepQP, declare_qp, velocity_rows
 from .rows import body_rows
-from .velocity import FIRST_DAMPED_PASS, VelocityFormulation, closest_approach, rows_along
+from .velocity import (
+    FIRST_DAMPED_PASS,
+    Approach,
+    VelocityFormulation,
+    closest_approach,
+    rows_along,
+)
 
 
 @dataclass(frozen=True)
@@ -138,19 +144,19 @@ class RigidFormulation(FrictionSettings):
         matrix, rhs, cones = self._velocity._cones(model, state.points, contacts, rows.matrix,
                                                   rows.rhs)
         return self._declared(weights, target, state.points, matrix, rhs, contacts, cones,
-                              linearised_about=about)
+                              linearised_about=about, approach=approach)
 
     @staticmethod
     def _declared(weights: FloatArray, target: FloatArray, points: FloatArray,
                   corner_rows: sp.csr_array, rhs: FloatArray, contacts: Contacts,
                   cones: ConeRows | None, linearised_about: FloatArray | None = None,
-                  ) -> StepQP:
+                  approach: Approach | None = None) -> StepQP:
         """The step QP of contact rows in the corner velocities, mapped to the bodies'."""
         if cones is not None:
             cones = replace(cones, slip=body_rows(cones.slip, points))
         return declare_qp(weights, target, empty_rows(weights.shape[0]), np.zeros(0),
                           body_rows(corner_rows, points), rhs, contacts, cones=cones,
-                          linearised_about=linearised_about)
+                          linearised_about=linearised_about, approach=approach)
 
     def row_units(self, dt: float) -> RowUnits:
         """A contact row's multiplier and slack in impulse (N s) and gap (m)."""

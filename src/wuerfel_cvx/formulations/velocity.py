@@ -187,6 +187,7 @@ class VelocityFormulation(FrictionSettings):
         eq_rhs = np.concatenate([-(self.beta / dt) * rod_error,
                                  np.zeros(held_matrix.shape[0] if held_matrix is not None else 0)])
 
+        approach: Approach | None = None
         if self.linearisation == "start":
             ineq_matrix, ineq_rhs = self.contact_rows(model, model.all_points(points),
                                                       contacts, dt)
@@ -198,7 +199,8 @@ class VelocityFormulation(FrictionSettings):
         ineq_matrix, ineq_rhs, cones = self._cones(model, points, contacts, ineq_matrix,
                                                    ineq_rhs)
         return declare_qp(weights, target.ravel(), eq_matrix, eq_rhs, ineq_matrix, ineq_rhs,
-                          contacts, linearised_about=target.ravel(), cones=cones)
+                          contacts, linearised_about=target.ravel(), cones=cones,
+                          approach=approach)
 
     def _cones(self, model: Model, points: FloatArray, contacts: Contacts,
                normal: sp.csr_array, rhs: FloatArray,
@@ -243,7 +245,7 @@ class VelocityFormulation(FrictionSettings):
         matrix, rhs, cones = self._cones(model, state.points, contacts, rows.matrix, rows.rhs)
         return declare_qp(previous.weights, previous.target, previous.eq_matrix,
                           previous.eq_rhs, matrix, rhs, contacts,
-                          linearised_about=approach.about, cones=cones)
+                          linearised_about=approach.about, cones=cones, approach=approach)
 
     def _reached_contacts(self, model: Model, state: State, contacts: Contacts,
                           solution: FloatArray, dt: float) -> Contacts:

@@ -55,6 +55,7 @@ from .rigid import (
     ContactRows,
     approach_contacts,
     approach_rows_of,
+    body_columns,
     cone_rows,
     contact_rows,
     corner_rows,
@@ -456,22 +457,16 @@ def _rows_back(tape: GradientTape, qp: StepQP, x: FloatArray, points: FloatArray
         beta = float(getattr(tape.formulation, "beta", 0.2))
         rows = contact_rows(model, points, qp.contacts, qp, tape.dt, beta)
     contact = rows.contact[tight]
-    local = row_adjoint[:, None] * rows.rhs.grad[tight]
-    for bodies, entries in ((qp.contacts.edge_body[contact], rows.edge_entries),
-                            (qp.contacts.point_body[contact], rows.point_entries)):
-        moving = bodies < model.n_boxes
-        column = 3 * np.where(moving, bodies, 0)
-        for axis, entry in enumerate(entries):
-            coefficient = np.where(moving, multiplier * adjoint.unknowns_adjoint[column + axis]
-                                   - row_adjoint * x[column + axis], 0.0)
-            local += coefficient[:, None] * entry.grad[tight]
     edge_bodies, point_bodies = qp.contacts.edge_body[contact], qp.contacts.point_body[contact]
+    moving, columns = body_columns(model, edge_bodies, point_bodies)
+    coefficient = np.where(moving, multiplier[:, None] * adjoint.unknowns_adjoint[columns]
+                           - row_adjoint[:, None] * x[columns], 0.0)
+    local = row_adjoint[:, None] * rows.rhs.grad[tight]
+    for column, entry in enumerate(rows.edge_entries + rows.point_entries):
+        local += coefficient[:, column, None] * entry.grad[tight]
     _scatter(model, edge_bodies, point_bodies, local[:, :len(LOCAL)], adjoints)
-    if local.shape[1] > len(LOCAL):  # the linearisation point's columns
-        for bodies, first in ((edge_bodies, len(LOCAL)), (point_bodies, len(LOCAL) + 3)):
-            moving = np.flatnonzero(bodies < model.n_boxes)
-            for axis in range(3):
-                np.add.at(about, 3 * bodies[moving] + axis, local[moving, first + axis])
+    if local.shape[1] > len(LOCAL):  # the linearisation point's columns, edge's then point's
+        np.add.at(about, columns.T[moving.T], local[:, len(LOCAL):].T[moving.T])
     return about
 
 
@@ -515,14 +510,15 @@ def _slips_back(tape: GradientTape, record: StepTape, points: FloatArray,
 def _scatter(model: Model, edge_bodies: IntArray, point_bodies: IntArray,
              local: FloatArray, adjoints: _Adjoints) -> None:
     """Add per-contact derivatives ``(m, len(LOCAL))`` to the moving bodies' adjoints."""
-    for bodies, first, friction in ((edge_bodies, 0, LOCAL.index("edge_friction")),
-                                    (point_bodies, 3, LOCAL.index("point_friction"))):
-        moving = np.flatnonzero(bodies < model.n_boxes)
-        body = bodies[moving]
-        np.add.at(adjoints.center[:, 0], body, local[moving, first])  # views: in place
-        np.add.at(adjoints.center[:, 1], body, local[moving, first + 1])
-        np.add.at(adjoints.angle, body, local[moving, first + 2])
-        np.add.at(adjoints.friction, body, local[moving, friction])
+    edge, point = (np.flatnonzero(bodies < model.n_boxes) for bodies in (edge_bodies,
+                                                                          point_bodies))
+    body = np.concatenate([edge_bodies[edge], point_bodies[point]])  # the edges' first
+    for target, edge_column, point_column in (
+            (adjoints.center[:, 0], 0, 3), (adjoints.center[:, 1], 1, 4),  # views: in place
+            (adjoints.angle, 2, 5),
+            (adjoints.friction, LOCAL.index("edge_friction"), LOCAL.index("point_friction"))):
+        np.add.at(target, body, np.concatenate([local[edge, edge_column],
+                                                local[point, point_column]]))
 
 
 __all__ = ["GradientError", "checked_names", "gradient"]

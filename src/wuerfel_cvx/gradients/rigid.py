@@ -383,15 +383,26 @@ def _joined(parts: list[Tangent], order: np.ndarray) -> Tangent:
                    np.concatenate([p.grad for p in parts])[order])
 
 
+def body_columns(model: Model, edge_bodies: IntArray, point_bodies: IntArray,
+                 ) -> tuple[np.ndarray, IntArray]:
+    """Where each row's six body-column entries go: ``(r, 6)`` masks of moving bodies, columns.
+
+    The edge body's ``(u_x, u_y, omega)`` then the point body's (:class:`ContactRows`); a
+    table's entries are masked, their columns 0..2.
+    """
+    bodies = np.repeat(np.stack([edge_bodies, point_bodies], axis=1), 3, axis=1)
+    moving = bodies < model.n_boxes
+    return moving, 3 * np.where(moving, bodies, 0) + np.tile(np.arange(3), 2)
+
+
 def _check(model: Model, rows: ContactRows, qp: StepQP, contacts: Contacts) -> None:
     """Refuse a step whose recomputed rows are not the recorded QP's (:data:`ROW_CHECK`)."""
     dense = np.zeros((len(rows.contact), qp.n_variables))
-    edge_body = contacts.edge_body[rows.contact]
-    point_body = contacts.point_body[rows.contact]
-    for bodies, entries in ((edge_body, rows.edge_entries), (point_body, rows.point_entries)):
-        moving = np.flatnonzero(bodies < model.n_boxes)
-        for axis, entry in enumerate(entries):
-            np.add.at(dense, (moving, 3 * bodies[moving] + axis), entry.value[moving])
+    moving, columns = body_columns(model, contacts.edge_body[rows.contact],
+                                   contacts.point_body[rows.contact])
+    values = np.stack([entry.value for entry in rows.edge_entries + rows.point_entries], axis=1)
+    row = np.broadcast_to(np.arange(len(rows.contact))[:, None], columns.shape)
+    np.add.at(dense, (row[moving], columns[moving]), values[moving])
     recorded = qp.ineq_matrix.toarray()
     scale = 1.0 + float(np.max(np.abs(recorded))) if recorded.size else 1.0
     rhs_scale = 1.0 + float(np.max(np.abs(qp.ineq_rhs))) if qp.ineq_rhs.size else 1.0
@@ -747,15 +758,10 @@ def _held_closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
     The same numbers without the sampled search (which then moves nothing).  Returns the
     choices too (``held``'s fields but ``at_rate``).  ``corners`` as :func:`_closest`'s.
     """
-    gaps, lines, *_ = _face_gaps(x, inputs, np.zeros((x.shape[0], 1)),
-                                 (held.grid_faces[0][:, :1], held.grid_faces[1][:, :1]),
-                                 None if corners is None else tuple(c[:, :1] for c in corners))
-    start, line_start = gaps[:, 0], lines[:, 0]
-    starts = (start, line_start, _ramp_rate(start, held.pushed, inputs),
-              _ramp_rate(line_start, line_start.real + inputs.dt * inputs.push_speed < 0.0,
-                         inputs))
+    starts = _held_starts(x, inputs, held,
+                          None if corners is None else tuple(c[:, :1] for c in corners))
     assert held.tau is not None
-    tau = held.tau + 0.0 * start
+    tau = held.tau + 0.0 * starts[0]
     choices = {name: getattr(held, name) for name in held.__dataclass_fields__
                if name != "at_rate"}
     return (tau, *_psi_at(x, inputs, tau, starts, _closest_choices(choices),
@@ -763,9 +769,29 @@ def _held_closest(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
             choices)
 
 
-def _all_held(held: _Held | None, hold_closest: bool) -> bool:
-    """Whether every ``tau*`` of an evaluation is held (:func:`_held_closest` then)."""
-    return bool(held is not None and held.tau is not None and np.all(held.flat | hold_closest))
+def _held_starts(x: np.ndarray, inputs: _ApproachInputs, held: _Held,
+                 corners: tuple[np.ndarray, ...] | None = None) -> tuple[np.ndarray, ...]:
+    """The start gaps and line distances (m) and their ramps' rates (m/s), choices held.
+
+    ``corners``: :func:`_approach_corners` at ``tau = 0`` ``(m, 1)`` where already found.
+    """
+    gaps, lines, *_ = _face_gaps(x, inputs, np.zeros((x.shape[0], 1)),
+                                 (held.grid_faces[0][:, :1], held.grid_faces[1][:, :1]), corners)
+    start, line_start = gaps[:, 0], lines[:, 0]
+    return (start, line_start, _ramp_rate(start, held.pushed, inputs),
+            _ramp_rate(line_start, line_start.real + inputs.dt * inputs.push_speed < 0.0,
+                       inputs))
+
+
+def _all_held(held: _Held | None, hold_closest: bool, contacts: IntArray | None = None,
+              ) -> bool:
+    """Whether every ``tau*`` of an evaluation is held (:func:`_held_closest` then).
+
+    Of the ``contacts`` of ``held`` where given.
+    """
+    return bool(held is not None and held.tau is not None
+                and np.all((held.flat if contacts is None else held.flat[contacts])
+                           | hold_closest))
 
 
 def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArray, FloatArray],
@@ -783,27 +809,14 @@ def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArra
     ``ramps``: the forward pass's ``tau*`` and ramps (:func:`_closest`).
     """
     m = x.shape[0]
-    corners = None
-    if _all_held(held, hold_closest):  # the corners at the start and at tau*, found once
-        assert held is not None and held.tau is not None
-        corners = _approach_corners(x, inputs, np.stack([0.0 * held.tau, held.tau], axis=1))
-    tau, psi, rate, closest_rate, choices = _closest(x, inputs, held, hold_closest, forced,
-                                                     corners, ramps)
-    if corners is None:
-        times = np.stack([0.0 * tau, tau], axis=1)  # (m, 2): the rate row, the closest row
-        corners = _approach_corners(x, inputs, times)
+    normal_row, sign = rows
+    if held is not None and not np.any(normal_row >= m):  # the rate rows alone: at tau = 0
+        corners = _approach_corners(x, inputs, np.zeros((m, 1)))
+        starts = _held_starts(x, inputs, held, corners)
+        normal, rhs = _normals(corners), np.where(held.grid_line[:, 1], starts[3], starts[2])
+    else:
+        corners, normal, rhs, held = _both_rows(x, inputs, held, hold_closest, forced, ramps)
     p_i, p_j, p_k, o_i, o_j, o_k = corners
-    g_i, g_j, g_k = _rot(p_k - p_j), _rot(p_i - p_k), _rot(p_j - p_i)
-    scale = 1.0 / np.sqrt(_dot2(g_k, g_k))
-    normal = np.concatenate([(g_i + g_j) * scale[..., None],
-                             ((_dot2(g_i, _rot(o_i)) + _dot2(g_j, _rot(o_j))) * scale)[..., None],
-                             g_k * scale[..., None], (_dot2(g_k, _rot(o_k)) * scale)[..., None]],
-                            axis=-1)  # (m, 2, 6)
-    along = np.sum(normal[:, 1, :3] * x[:, 8:11], axis=1) + np.sum(normal[:, 1, 3:]
-                                                                   * x[:, 11:14], axis=1)
-    closest = along - psi / tau
-    at_rate = closest_rate.real < closest.real if held is None else held.at_rate
-    rhs = np.concatenate([rate, np.where(at_rate, closest_rate, closest)])
     edge = p_j[:, 0] - p_i[:, 0]
     length = np.sqrt(_dot2(edge, edge))
     tangent = edge / length[:, None]
@@ -814,11 +827,50 @@ def _approach_values(x: np.ndarray, inputs: _ApproachInputs, rows: tuple[IntArra
     product = x[:, 6] * x[:, 7]
     rough = product.real > 0.0
     mu = np.where(rough, np.sqrt(np.where(rough, product, 1.0)), 0.0)
-    normal_row, sign = rows
     contact = normal_row % max(m, 1)
-    entries = (np.concatenate([normal[:, 0], normal[:, 1]])[normal_row]
+    entries = (normal.swapaxes(0, 1).reshape(-1, 6)[normal_row]
                + (sign * mu[contact])[:, None] * slip[contact])
-    return entries, rhs[normal_row], held or _Held(at_rate=at_rate, **choices)
+    return entries, rhs[normal_row], held
+
+
+def _both_rows(x: np.ndarray, inputs: _ApproachInputs, held: _Held | None, hold_closest: bool,
+               forced: FloatArray | None, ramps: FloatArray | None,
+               ) -> tuple[tuple[np.ndarray, ...], np.ndarray, np.ndarray, _Held]:
+    """The corners at ``(0, tau*)``, the normal rows ``(m, 2, 6)`` and right sides ``(2 m,)``.
+
+    Of the rate rows and the closest-approach rows, with the choices (:func:`_approach_values`).
+    """
+    corners = None
+    if _all_held(held, hold_closest):  # the corners at the start and at tau*, found once
+        assert held is not None and held.tau is not None
+        corners = _approach_corners(x, inputs, np.stack([0.0 * held.tau, held.tau], axis=1))
+    tau, psi, rate, closest_rate, choices = _closest(x, inputs, held, hold_closest, forced,
+                                                     corners, ramps)
+    if corners is None:
+        times = np.stack([0.0 * tau, tau], axis=1)  # (m, 2): the rate row, the closest row
+        corners = _approach_corners(x, inputs, times)
+    normal = _normals(corners)
+    along = np.sum(normal[:, 1, :3] * x[:, 8:11], axis=1) + np.sum(normal[:, 1, 3:]
+                                                                   * x[:, 11:14], axis=1)
+    closest = along - psi / tau
+    at_rate = closest_rate.real < closest.real if held is None else held.at_rate
+    rhs = np.concatenate([rate, np.where(at_rate, closest_rate, closest)])
+    return corners, normal, rhs, held or _Held(at_rate=at_rate, **choices)
+
+
+def _normals(corners: tuple[np.ndarray, ...]) -> np.ndarray:
+    """The normal rows' six body-column entries ``(m, K, 6)`` at the corners' ``K`` times.
+
+    ``(g_i + g_j, g_i . rot90(o_i) + g_j . rot90(o_j))`` and ``(g_k, g_k . rot90(o_k))``, ``g``
+    the side gradients over the edge's length (:func:`_approach_values`).
+    """
+    p_i, p_j, p_k, o_i, o_j, o_k = corners
+    g_i, g_j, g_k = _rot(p_k - p_j), _rot(p_i - p_k), _rot(p_j - p_i)
+    scale = 1.0 / np.sqrt(_dot2(g_k, g_k))
+    return np.concatenate([(g_i + g_j) * scale[..., None],
+                           ((_dot2(g_i, _rot(o_i)) + _dot2(g_j, _rot(o_j))) * scale)[..., None],
+                           g_k * scale[..., None], (_dot2(g_k, _rot(o_k)) * scale)[..., None]],
+                          axis=-1)
 
 
 STACKED_CONTACTS = 1024
@@ -832,16 +884,24 @@ class _Part:
     """One pass's closest-approach contacts as one evaluation takes them.
 
     ``x`` ``(m, 14)`` (:data:`APPROACH_LOCAL`), the contacts' fixed inputs, the QP rows (each
-    one's normal row and cone edge, :func:`_normal_rows`), the held choices (or ``None``:
-    made), the forward pass's ``tau*`` (s) and its rows' ramps' rates ``(m, 2)`` (m/s).
+    one's normal row and cone edge, :func:`_normal_rows`), the forward pass's ``tau*`` (s)
+    and its rows' ramps' rates ``(m, 2)`` (m/s); to differentiate, ``contacts``: where its
+    contacts' held choices are among those :func:`_grouped` returned.
     """
 
     x: np.ndarray
     inputs: _ApproachInputs
     rows: tuple[IntArray, FloatArray]
-    held: _Held | None = None
     forced: FloatArray | None = None
     ramps: FloatArray | None = None
+    contacts: IntArray | None = None
+
+
+def _concatenated(values: list[Any]) -> Any:
+    """Per-contact values (arrays, tuples of them; anything else shared) concatenated."""
+    if isinstance(values[0], tuple):
+        return tuple(_concatenated(list(group)) for group in zip(*values, strict=True))
+    return np.concatenate(values) if isinstance(values[0], np.ndarray) else values[0]
 
 
 def _stacked(parts: list[_Part]) -> _Part:
@@ -855,29 +915,25 @@ def _stacked(parts: list[_Part]) -> _Part:
     normal = [np.where(part.rows[0] < m, first + part.rows[0], total + first + part.rows[0] - m)
               for part, m, first in zip(parts, counts, offsets, strict=True)]
     first = parts[0]
-    def joined(values: list[Any]) -> Any:
-        if isinstance(values[0], tuple):
-            return tuple(joined(list(group)) for group in zip(*values, strict=True))
-        return np.concatenate(values) if isinstance(values[0], np.ndarray) else values[0]
-    inputs = _ApproachInputs(**{name: joined([getattr(part.inputs, name) for part in parts])
+    inputs = _ApproachInputs(**{name: _concatenated([getattr(part.inputs, name) for part in parts])
                                 for name in first.inputs.__dataclass_fields__})
-    held = (None if first.held is None else
-            _Held(**{name: joined([getattr(part.held, name) for part in parts])
-                     for name in first.held.__dataclass_fields__}))
+    def joined(name: str) -> Any:
+        return (None if getattr(first, name) is None
+                else np.concatenate([getattr(part, name) for part in parts]))
     return _Part(np.concatenate([part.x for part in parts]), inputs,
                  (np.concatenate(normal).astype(np.int64),
                   np.concatenate([part.rows[1] for part in parts])),
-                 held, None if first.forced is None
-                 else np.concatenate([part.forced for part in parts]),
-                 None if first.ramps is None else np.concatenate([part.ramps for part in parts]))
+                 joined("forced"), joined("ramps"), joined("contacts"))
 
 
-def _grouped(parts: list[_Part], key: Any, evaluate: Any) -> list[tuple[Any, ...]]:
+def _grouped(parts: list[_Part], key: Any, evaluate: Any,
+             ) -> tuple[list[tuple[Any, ...]], _Held | None, IntArray]:
     """``evaluate`` of each part, the parts with equal ``key`` stacked into one evaluation.
 
     ``key`` is a branch of :func:`_closest` taken for a whole evaluation; the parts are
-    stacked by :func:`_stacked`.  Returns per part its rows' results (row-wise arrays) and,
-    where returned, its contacts' held choices.
+    stacked by :func:`_stacked`.  Returns per part its rows' results (row-wise arrays),
+    the held choices where returned, of every part's contacts at once, and where each
+    part's contacts begin among them.
     """
     results: list[tuple[Any, ...]] = [()] * len(parts)
     keys = [key(part) for part in parts]
@@ -892,17 +948,22 @@ def _grouped(parts: list[_Part], key: Any, evaluate: Any) -> list[tuple[Any, ...
             batch.append(index)
             size += parts[index].x.shape[0]
         batches.append(batch)
+    helds: list[_Held] = []
+    first = np.zeros(len(parts), dtype=np.int64)
+    contact_end = 0
     for members in batches:
         out = evaluate(_stacked([parts[index] for index in members]))
-        row_end, contact_end = 0, 0
+        helds += [item for item in out if isinstance(item, _Held)]
+        row_end = 0
         for index in members:
-            rows, m = len(parts[index].rows[0]), parts[index].x.shape[0]
-            span = slice(row_end, row_end + rows)
-            contacts = np.arange(contact_end, contact_end + m)
-            results[index] = tuple(_held_at(item, contacts) if isinstance(item, _Held)
-                                   else item[span] for item in out)
-            row_end, contact_end = row_end + rows, contact_end + m
-    return results
+            rows = len(parts[index].rows[0])
+            results[index] = tuple(item[row_end:row_end + rows] for item in out
+                                   if not isinstance(item, _Held))
+            first[index] = contact_end
+            row_end, contact_end = row_end + rows, contact_end + parts[index].x.shape[0]
+    held = (_Held(**{name: _concatenated([getattr(found, name) for found in helds])
+                     for name in _Held.__dataclass_fields__}) if helds else None)
+    return results, held, first
 
 
 def _approach_part(model: Model, points: FloatArray, contacts: Contacts, qp: StepQP,
@@ -916,9 +977,11 @@ def _approach_part(model: Model, points: FloatArray, contacts: Contacts, qp: Ste
     about = qp.linearised_about
     if about is None:
         raise GradientError("a closest-approach pass without its linearisation point")
-    if about.size == 3 * model.n_boxes:  # rigid's body velocities, else velocity's corners
-        about = corner_velocities(points, about.reshape(-1, 3)).ravel()
-    forward = closest_approach(model, points, contacts, about, dt, push_speed)
+    forward = qp.approach  # as the forward pass found it, else found again
+    if forward is None:
+        if about.size == 3 * model.n_boxes:  # rigid's body velocities, else velocity's corners
+            about = corner_velocities(points, about.reshape(-1, 3)).ravel()
+        forward = closest_approach(model, points, contacts, about, dt, push_speed)
     motion = forward.motion
     edge, point = contacts.edge_body, contacts.point_body
     x = np.concatenate([motion.center[edge], motion.angle[edge, None],
@@ -931,7 +994,7 @@ def _approach_part(model: Model, points: FloatArray, contacts: Contacts, qp: Ste
     inputs = _ApproachInputs(motion.reference[edge, contacts.edge_i % 4],
                              motion.reference[edge, contacts.edge_j % 4],
                              motion.reference[point, contacts.point % 4], beyond, dt, push_speed)
-    return _Part(x, inputs, _normal_rows(qp, len(contacts)), None, forward.closest,
+    return _Part(x, inputs, _normal_rows(qp, len(contacts)), forward.closest,
                  np.stack([forward.rate, forward.closest_rate], axis=1))
 
 
@@ -949,7 +1012,7 @@ def approach_rows(model: Model, points: FloatArray, contacts: Contacts, qp: Step
     ``qp`` a closest-approach pass of ``rigid``, ``contacts`` its contacts.
     """
     if contacts is not qp.contacts:
-        qp = dataclasses.replace(qp, contacts=contacts)
+        qp = dataclasses.replace(qp, contacts=contacts, approach=None)
     return approach_rows_of(model, [(points, qp, needed)], push_speed, dt,
                             hold_closest=hold_closest)[0]
 
@@ -971,12 +1034,13 @@ def approach_rows_of(model: Model, passes: Sequence[ApproachPass], push_speed: f
     grid = np.linspace(0.0, dt, SAMPLES + 1)
     parts = [_approach_part(model, points, qp.contacts, qp, push_speed, dt)
              for points, qp, _ in passes]
-    values = _grouped(parts, lambda part: bool(np.all(np.isin(part.forced, grid))),
-                      lambda part: _approach_values(part.x.astype(np.complex128), part.inputs,
-                                                    part.rows, None, hold_closest, part.forced,
-                                                    part.ramps))
+    values, held, first = _grouped(
+        parts, lambda part: bool(np.all(np.isin(part.forced, grid))),
+        lambda part: _approach_values(part.x, part.inputs, part.rows, None, hold_closest,
+                                      part.forced, part.ramps))
+    assert held is not None
     subs, stepped = [], []
-    for (_, _, needed), part, (_, _, held) in zip(passes, parts, values, strict=True):
+    for (_, _, needed), part, begin in zip(passes, parts, first, strict=True):
         rows = part.rows
         wanted = np.arange(len(rows[0])) if needed is None else np.asarray(needed, np.int64)
         m = part.x.shape[0]
@@ -989,11 +1053,13 @@ def approach_rows_of(model: Model, passes: Sequence[ApproachPass], push_speed: f
             part.inputs.ref_i[sub], part.inputs.ref_j[sub], part.inputs.ref_k[sub],
             part.inputs.beyond_face[sub], dt, push_speed),
             ((normal // max(m, 1)) * sub.size + place[normal % max(m, 1)], rows[1][wanted]),
-            _held_at(held, sub)))
-    derivatives = _grouped(
+            contacts=begin + sub))
+    derivatives, _, _ = _grouped(
         [part for part, wanted in zip(stepped, subs, strict=True) if wanted.size],
-        lambda part: _all_held(part.held, hold_closest),
-        lambda part: _complex_steps(part.x, part.inputs, part.rows, part.held, hold_closest))
+        lambda part: ("rate rows" if np.all(part.rows[0] < part.x.shape[0])
+                      else _all_held(held, hold_closest, part.contacts)),
+        lambda part: _complex_steps(part.x, part.inputs, part.rows,
+                                    _held_at(held, part.contacts), hold_closest))
     taken = iter(derivatives)
     return [_approach_result(model, qp, part.rows, value[:2], wanted,
                              next(taken) if wanted.size else None)
@@ -1034,36 +1100,51 @@ def _taken(value: Any, sub: IntArray) -> Any:
     return value[sub] if isinstance(value, np.ndarray) else value
 
 
+RATE_ROW_LOCAL = len(LOCAL)
+"""A rate row (the gap's rate at the step's start) depends on the first
+:data:`APPROACH_LOCAL` inputs alone (the start coordinates and the friction coefficients):
+its corners are taken at ``tau = 0``, where the linearisation point's velocities move
+nothing, so its derivatives with respect to them are exactly 0 and not stepped."""
+
+
 def _complex_steps(x: FloatArray, inputs: _ApproachInputs, rows: tuple[IntArray, FloatArray],
                    held: _Held, hold_closest: bool) -> tuple[FloatArray, FloatArray]:
     """The rows' derivatives ``(r, 6, 14)`` and ``(r, 14)``: one complex step per input.
 
-    The 14 stepped copies of the contacts are evaluated at once (stacked, their choices
-    tiled): one evaluation of ``14 m`` contacts instead of 14 of ``m``.
+    The stepped copies of the contacts are evaluated at once (stacked, their choices
+    taken): one evaluation instead of one per input.  A contact whose rows are all rate
+    rows is stepped in its first :data:`RATE_ROW_LOCAL` inputs only (the others' derivatives
+    are 0); every copy's numbers are its contact's own, as in an evaluation of its own.
     """
     m, width = x.shape
-    stepped = np.repeat(x[None].astype(np.complex128), width, axis=0)
-    stepped[np.arange(width), :, np.arange(width)] += 1j * COMPLEX_STEP
-    def tiled(value: Any) -> Any:
-        if value is None or not isinstance(value, (np.ndarray, tuple)):
-            return value
-        if isinstance(value, tuple):
-            return tuple(tiled(part) for part in value)
-        return np.tile(value, (width,) + (1,) * (value.ndim - 1))
-    stacked_held = _Held(**{name: tiled(getattr(held, name))
-                            for name in held.__dataclass_fields__})
-    stacked_inputs = _ApproachInputs(tiled(inputs.ref_i), tiled(inputs.ref_j),
-                                     tiled(inputs.ref_k), tiled(inputs.beyond_face),
-                                     inputs.dt, inputs.push_speed)
     normal, sign = rows
-    block = np.arange(width)[:, None] * m
-    stacked_rows = ((normal // max(m, 1)) * (width * m) + block + normal % max(m, 1)).ravel()
-    entries, rhs, _ = _approach_values(stepped.reshape(width * m, width), stacked_inputs,
-                                       (stacked_rows, np.tile(sign, width)), stacked_held,
-                                       hold_closest)
+    contact, closest = normal % max(m, 1), normal // max(m, 1)
+    stepped_inputs = np.zeros((width, m), dtype=bool)
+    stepped_inputs[:RATE_ROW_LOCAL] = True
+    stepped_inputs[RATE_ROW_LOCAL:, contact[closest > 0]] = True
+    column, copied = np.nonzero(stepped_inputs)  # copies by input, then by contact
+    copies = column.size
+    copy_of = np.full((width, m), -1, dtype=np.int64)
+    copy_of[column, copied] = np.arange(copies)
+    stepped = x[copied].astype(np.complex128)
+    stepped[np.arange(copies), column] += 1j * COMPLEX_STEP
+    def taken(value: Any) -> Any:
+        return _taken(value, copied)
+    stacked_held = _Held(**{name: taken(getattr(held, name))
+                            for name in held.__dataclass_fields__})
+    stacked_inputs = _ApproachInputs(taken(inputs.ref_i), taken(inputs.ref_j),
+                                     taken(inputs.ref_k), taken(inputs.beyond_face),
+                                     inputs.dt, inputs.push_speed)
+    row_copy = copy_of[:, contact]  # (width, r): each row's copy per input, -1 if not stepped
+    row_input, row = np.nonzero(row_copy >= 0)
+    entries, rhs, _ = _approach_values(stepped, stacked_inputs,
+                                       (closest[row] * copies + row_copy[row_input, row],
+                                        sign[row]), stacked_held, hold_closest)
     count = len(normal)
-    return (np.moveaxis(entries.imag.reshape(width, count, 6), 0, -1) / COMPLEX_STEP,
-            rhs.imag.reshape(width, count).T / COMPLEX_STEP)
+    grad_entries, grad_rhs = np.zeros((count, 6, width)), np.zeros((count, width))
+    grad_entries[row, :, row_input] = entries.imag / COMPLEX_STEP
+    grad_rhs[row, row_input] = rhs.imag / COMPLEX_STEP
+    return grad_entries, grad_rhs
 
 
 def _normal_rows(qp: StepQP, n_contacts: int) -> tuple[IntArray, FloatArray]:

@@ -206,12 +206,13 @@ def approach_view(model: Model, points: FloatArray, qp: StepQP, push_speed: floa
     about = qp.linearised_about
     if about is None:
         raise GradientError("a closest-approach pass without its linearisation point")
-    rows = rows_along(model, qp.contacts, closest_approach(model, points, qp.contacts, about,
-                                                           dt, push_speed))
+    approach = (qp.approach if qp.approach is not None
+                else closest_approach(model, points, qp.contacts, about, dt, push_speed))
+    rows = rows_along(model, qp.contacts, approach)
     size = 3 * model.n_boxes
     return declare_qp(np.ones(size), np.zeros(size), empty_rows(size), np.zeros(0),
                       body_rows(rows.matrix, points), rows.rhs, qp.contacts,
-                      linearised_about=about)
+                      linearised_about=about, approach=approach)
 
 
 def check_rows(model: Model, qp: StepQP, fit: CornerFit, view: ContactRows | None,
