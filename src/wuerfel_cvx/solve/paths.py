@@ -27,7 +27,7 @@ from ..errors import InputError, StepFailure
 from ..formulations.qp import StepQP
 from ..scenes.geometry import FloatArray
 from . import residual_kernel
-from .adapters import Adapter, Answer, NativeData, adapter_for
+from .adapters import Accept, Adapter, Answer, NativeData, adapter_for
 from .adapters._native import PatternChanged
 from .cvxpy_forms import (
     COMPILED,
@@ -42,6 +42,7 @@ from .kkt import (
     KEPT,
     POLISH_OUTCOMES,
     POLISHED,
+    REPAIRS,
     REUSED,
     ActiveSet,
     Polish,
@@ -172,7 +173,10 @@ class SolvePath:
         With :attr:`reuse_active_sets` any remembered set is tried; without, only one
         remembered in step ``step`` (``None``: none), for a QP that repeats the structure of
         an earlier QP of its step (:func:`solve_step_qp`'s ``repeated``).  See
-        :func:`~wuerfel_cvx.solve.kkt.reuse_active_set`.
+        :func:`~wuerfel_cvx.solve.kkt.reuse_active_set`; a QP of step ``step`` allows its
+        :data:`~wuerfel_cvx.solve.kkt.REPAIRS` corrections of the set (the Coulomb fixed
+        point's QPs; across steps, a set that needs corrections is left to the solver, whose
+        run a pile's failed attempts would each lengthen by several factorizations).
         """
         if not self.reuse_active_sets and step is None:
             return None
@@ -180,9 +184,22 @@ class SolvePath:
         if remembered is None or not (self.reuse_active_sets or remembered.step == step):
             return None
         reused = reuse_active_set(qp, remembered.active, remembered.x, remembered.eq_dual,
-                                  remembered.ineq_dual)
+                                  remembered.ineq_dual, 0 if step is None else REPAIRS)
         self.reused_active_sets += reused is not None
         return reused
+
+    def remembered_start(self, qp: StepQP, step: int) -> WarmStart | None:
+        """The last polished answer of ``qp``'s structure in step ``step`` as a start.
+
+        ``None`` without one, or when the path does not warm-start.  The start of a
+        solver that keeps its own last iterate (OSQP) for a QP of the Coulomb fixed point:
+        that iterate is stale when the QPs since were answered on a reused active set.
+        """
+        kept = self._active_sets.get(structure_key(qp))
+        if self.warm_starts is None or kept is None or kept.step != step \
+                or kept.x.shape[0] != qp.n_variables:
+            return None
+        return WarmStart(kept.x, kept.eq_dual, kept.ineq_dual, kept.ineq_dual.shape[0])
 
     def remember_active_set(self, qp: StepQP, polished: Polish, step: int = 0) -> None:
         """Keep ``polished``'s active set and point for the next QP of ``qp``'s structure.
@@ -201,10 +218,14 @@ class SolvePath:
             self._active_sets.popitem(last=False)
 
     def solve(self, qp: StepQP, spec: SolverSpec, options: dict[str, object],
-              warm: WarmStart | None) -> tuple[Answer, str]:
-        """Solve ``qp`` (in the solver's units) on this path; the answer and the path taken."""
+              warm: WarmStart | None, accept: Accept | None = None) -> tuple[Answer, str]:
+        """Solve ``qp`` (in the solver's units) on this path; the answer and the path taken.
+
+        ``accept``: a check of intermediate answers for an adapter that solves in stages
+        (:data:`~wuerfel_cvx.solve.adapters.Accept`; ignored through cvxpy).
+        """
         if spec.adapter is not None and (self.name == NATIVE or spec.native_only):
-            return self._native(qp, spec, options, warm), NATIVE
+            return self._native(qp, spec, options, warm, accept), NATIVE
         if self.name == DECLARED:
             declared, path = declare(qp), DECLARED
         else:
@@ -213,7 +234,7 @@ class SolvePath:
                                  {"warm_start": False, **options}), path
 
     def _native(self, qp: StepQP, spec: SolverSpec, options: dict[str, object],
-                warm: WarmStart | None) -> Answer:
+                warm: WarmStart | None, accept: Accept | None) -> Answer:
         assert spec.adapter is not None
         if self.warm_starts is None:
             options = {**options, "warm_start": False}
@@ -223,7 +244,7 @@ class SolvePath:
         if adapter is not None:
             self._adapters.move_to_end(key)
             try:
-                answer = adapter.solve(data, warm)
+                answer = adapter.solve(data, warm, accept)
             except PatternChanged:
                 adapter = None
             else:
@@ -234,7 +255,7 @@ class SolvePath:
         if len(self._adapters) > self.capacity:
             self._adapters.popitem(last=False)
         self.native_setups += 1
-        return adapter.solve(data, warm)
+        return adapter.solve(data, warm, accept)
 
     def counts(self) -> dict[str, int]:
         """What the path did so far, for a trajectory's ``info`` (:data:`PATH_COUNTS`)."""
@@ -276,25 +297,25 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     warm_starts = path.warm_starts if spec.takes_warm_start else None
     started = time.perf_counter()
     seen = scaled_qp(qp, scale, weight_scale)
-    answer, taken, reused = _solve_or_reuse(seen, spec, eps, path, warm_starts, scale, step,
-                                            polishing, repeated)  # reused: its point
+    answer, taken, polished = _solve_or_reuse(seen, spec, eps, path, warm_starts, scale, step,
+                                              polishing, repeated)  # reused or staged: polished
     wall = time.perf_counter() - started
     outcome, reason, active = KEPT, "", None
-    if reused is not None:
-        outcome, active = REUSED, reused.active
-    elif polishing:  # in the solver's units: a power-of-two change of units changes no bit
-        polished = polish(seen, *_answer_on_qp(answer, step, spec.name, 1.0, 1.0))
+    if polishing:  # in the solver's units: a power-of-two change of units changes no bit
+        if polished is None:
+            polished = polish(seen, *_answer_on_qp(answer, step, spec.name, 1.0, 1.0))
         outcome, reason = polished.outcome, polished.reason
-        active = polished.active if outcome == POLISHED else None
+        active = polished.active if outcome in (POLISHED, REUSED) else None
         answer = dataclasses.replace(answer, x=polished.x, eq_dual=polished.eq_dual,
                                      ineq_dual=polished.ineq_dual)
-        if outcome == POLISHED and (path.reuse_active_sets or repeated):
+        if outcome in (POLISHED, REUSED) and (path.reuse_active_sets or repeated):
             path.remember_active_set(seen, polished, step)
     x, eq_dual, ineq_dual = _answer_on_qp(answer, step, spec.name, scale, scale / weight_scale)
     # checked on the original QP, whatever units the solver saw; a polish of the QP itself
     # (ordinary data: the solver saw ``qp``) checked these very numbers already
-    same = seen is qp and polishing and reused is None
-    residuals = polished.residuals if same else kkt_residuals(qp, x, eq_dual, ineq_dual)
+    same = seen is qp and polished is not None and outcome != REUSED
+    residuals = (polished.residuals if same and polished is not None
+                 else kkt_residuals(qp, x, eq_dual, ineq_dual))
     verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
     if answer.status == cp.OPTIMAL_INACCURATE and not verified:
         raise StepFailure(step, spec.name, answer.status,
@@ -305,7 +326,7 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
                              ineq_dual / dual_scale, scale)
     return StepSolution(x=x, solver=spec.name, status=answer.status, residuals=residuals,
                         verified=verified, solve_wall_time=wall,
-                        solver_time=0.0 if reused is not None else spec.timing.solver_time(
+                        solver_time=0.0 if outcome == REUSED else spec.timing.solver_time(
                             answer.reported_time, answer.native_time),  # reused: no solver
                         iterations=int(answer.iterations), ineq_dual=ineq_dual, path=taken,
                         eq_dual=eq_dual, polish=outcome, polish_reason=reason, active=active,
@@ -315,24 +336,53 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
 def _solve_or_reuse(seen: StepQP, spec: SolverSpec, eps: float, path: SolvePath,
                     warm_starts: WarmStarts | None, scale: float, step: int,
                     polishing: bool, repeated: bool) -> tuple[Answer, str, Polish | None]:
-    """The answer to ``seen`` (in the solver's units), the path taken, and whether reused.
+    """The answer to ``seen`` (in the solver's units), the path taken, and its polish if made.
 
-    Reused: with ``polishing``, the last polished answer's active set gave ``seen``'s exact
-    answer, and no solver ran.  Raises :class:`StepFailure` for a solver that raises.
+    With ``polishing``: the last polished answer's active set may give ``seen``'s exact
+    answer, and no solver runs (its polish is :data:`REUSED`); a solver that runs in stages
+    stops at a stage whose answer's polish is an exact KKT point within ``eps``
+    (:func:`_stage_check`; its polish is :data:`POLISHED`); the polish is ``None`` when
+    neither happened.  Raises :class:`StepFailure` for a solver that raises.
     """
     reused = path.reuse_active_set(seen, step if repeated else None) if polishing else None
     if reused is not None:
         return Answer(x=reused.x, eq_dual=reused.eq_dual, ineq_dual=reused.ineq_dual,
                       status=cp.OPTIMAL, reported_time=0.0, iterations=0,
                       native_time=0.0), REUSED, reused
+    staged: list[Polish] = []
     try:
-        warm = None if warm_starts is None else warm_starts.guess(spec.name, seen, scale)
-        answer, taken = path.solve(seen, spec, spec.options(eps), warm)
+        warm = (warm_starts.guess(spec.name, seen, scale) if warm_starts is not None
+                else path.remembered_start(seen, step) if repeated and polishing else None)
+        answer, taken = path.solve(seen, spec, spec.options(eps), warm,
+                                   _stage_check(seen, eps, staged) if polishing else None)
     except cp.error.SolverError as exc:
         raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
     except Exception as exc:  # a solver library raising anything is a failed step
         raise StepFailure(step, spec.name, "exception", f"{type(exc).__name__}: {exc}") from exc
-    return answer, taken, None
+    return answer, taken, staged[-1] if staged and answer.status == cp.OPTIMAL else None
+
+
+def _stage_check(seen: StepQP, eps: float, accepted: list[Polish]) -> Accept:
+    """A staged solver's check of its intermediate answers to ``seen`` (solver's units).
+
+    Accepts an answer whose polish (:func:`~wuerfel_cvx.solve.kkt.polish`: an exact KKT
+    point of its active set, feasible and sign-consistent to round-off) has residuals at
+    most ``eps``, ``VERIFY_FACTOR`` below what verifies an answer: such a point is the QP's
+    optimum, whatever iterate it was polished from.  The accepted polish is appended to
+    ``accepted``.
+    """
+    def accept(answer: Answer) -> bool:
+        if answer.x is None or not np.isfinite(answer.x).all():
+            return False
+        polished = polish(seen, np.asarray(answer.x, dtype=np.float64),
+                          np.asarray(answer.eq_dual, dtype=np.float64),
+                          np.asarray(answer.ineq_dual, dtype=np.float64))
+        if polished.outcome != POLISHED or not polished.residuals.worst() <= eps:
+            return False
+        accepted.append(polished)
+        return True
+
+    return accept
 
 
 def _answer_on_qp(answer: Answer, step: int, solver: str, scale: float,

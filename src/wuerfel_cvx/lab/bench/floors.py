@@ -46,7 +46,7 @@ from ...errors import StepFailure
 from ...formulations import StepQP
 from ...scenes.scene import Scene
 from ...settings import Settings
-from ...solve.adapters import Answer
+from ...solve.adapters import Accept, Answer
 from ...solve.cvxpy_forms import NATIVE
 from ...solve.kkt import ActiveSet, reduced_kkt
 from ...solve.paths import SolvePath
@@ -108,10 +108,14 @@ class CapturingPath(SolvePath):
         self.calls: list[SolverCall] = []
 
     def solve(self, qp: StepQP, spec: SolverSpec, options: dict[str, object],
-              warm: WarmStart | None) -> tuple[Answer, str]:
-        """Keep the call, then solve as :meth:`SolvePath.solve` does."""
+              warm: WarmStart | None, accept: Accept | None = None) -> tuple[Answer, str]:
+        """Keep the call, then solve as :meth:`SolvePath.solve` does.
+
+        The replay (:func:`replay`) calls the solver bare, without ``accept``: a staged
+        solve (OSQP's) runs to its own stopping criteria there.
+        """
         self.calls.append(SolverCall(qp, spec, dict(options), warm))
-        return super().solve(qp, spec, options, warm)
+        return super().solve(qp, spec, options, warm, accept)
 
 
 @dataclass(frozen=True)

@@ -19,21 +19,23 @@ import importlib
 from typing import Any, Protocol
 
 from ..warm_start import WarmStart
-from ._native import Answer, NativeData
+from ._native import Accept, Answer, NativeData
 
-__all__ = ["Adapter", "Answer", "NativeData", "adapter_for"]
+__all__ = ["Accept", "Adapter", "Answer", "NativeData", "adapter_for"]
 
 
 class Adapter(Protocol):
     """One solver set up for one QP structure, kept from step to step."""
 
-    def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
+    def solve(self, data: NativeData, warm: WarmStart | None = None,
+              accept: Accept | None = None) -> Answer:
         """Solve the QP ``data`` (of the structure this adapter was set up for).
 
         The first call solves the data it was set up with; each later one first writes
         ``data``'s numbers into the solver in place.  ``warm`` (the last step's solution
         mapped onto this QP's rows, :mod:`wuerfel_cvx.solve.warm_start`) is used by a solver that
-        takes such a start and ignored by the others.
+        takes such a start and ignored by the others.  ``accept`` (:data:`Accept`) is used
+        by a solver that runs in stages (OSQP) and ignored by the others.
         """
         ...
 

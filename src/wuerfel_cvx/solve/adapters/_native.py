@@ -59,6 +59,13 @@ class Answer:
     """Wall time (s) of the solver's own update and solve calls (``None``: not measured)."""
 
 
+Accept = Callable[[Answer], bool]
+"""A check of a solver's intermediate answer (in the package's terms, before it is checked):
+a solver that runs in stages (:mod:`.osqp`) stops at the first answer the check accepts and
+returns it as ``optimal``.  The solve paths pass one that polishes the answer and checks its
+KKT residuals (:func:`wuerfel_cvx.solve.paths.solve_step_qp`)."""
+
+
 class InPlace:
     """A solver set up on a structure's first QP and updated in place by its later ones.
 
@@ -78,17 +85,21 @@ class InPlace:
         set_up()
         self._setup_time = time.perf_counter() - started
 
-    def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
+    def solve(self, data: NativeData, warm: WarmStart | None = None,
+              accept: Accept | None = None) -> Answer:
         """Solve ``data`` (this structure): update the solver in place unless just set up.
 
-        ``warm`` is ignored: these solvers start from their own last solution, or cold.
+        These solvers start from their own last solution, or cold, unless :meth:`_start`
+        takes ``warm``.  ``accept``: see :meth:`_solve_staged`.
         """
         started = time.perf_counter()
         first = data is self._pending
         if not first:
             self._update(data)
         self._pending = None
-        answer = self._solve(data)
+        if warm is not None:
+            self._start(data, warm)
+        answer = self._solve(data) if accept is None else self._solve_staged(data, accept)
         elapsed = time.perf_counter() - started + (self._setup_time if first else 0.0)
         return dataclasses.replace(answer, native_time=elapsed)
 
@@ -97,6 +108,16 @@ class InPlace:
 
     def _solve(self, data: NativeData) -> Answer:
         raise NotImplementedError
+
+    def _start(self, data: NativeData, warm: WarmStart) -> None:
+        """Start the next solve of ``data`` from ``warm`` (this default: ignored)."""
+
+    def _solve_staged(self, data: NativeData, accept: Accept) -> Answer:
+        """Solve, stopping early at an intermediate answer ``accept`` takes, if staged.
+
+        A solver that does not run in stages ignores ``accept`` (this default).
+        """
+        return self._solve(data)
 
 
 class PatternChanged(Exception):

@@ -35,7 +35,7 @@ from ..._sparse import dense_rows
 from ...formulations.qp import StepQP
 from ...scenes.geometry import FloatArray
 from ..warm_start import WarmStart
-from ._native import Answer, NativeData, status_name
+from ._native import Accept, Answer, NativeData, status_name
 
 EQUALITY = 5
 """DAQP's ``sense`` of an equality row (active and immutable)."""
@@ -115,8 +115,9 @@ class DAQPAdapter:
         # the last step's start comes as ``warm`` (the mapped guess), not as a setting
         self.options = {key: value for key, value in options.items() if key != "warm_start"}
 
-    def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
-        """Solve ``data`` from ``warm`` if given."""
+    def solve(self, data: NativeData, warm: WarmStart | None = None,
+              accept: Accept | None = None) -> Answer:
+        """Solve ``data`` from ``warm`` if given; ``accept`` is ignored (one stage)."""
         return _solve(data.qp, self.options, warm)
 
 

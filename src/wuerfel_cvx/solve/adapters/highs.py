@@ -34,7 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..warm_start import WarmStart
-from ._native import Answer, NativeData, status_name
+from ._native import Accept, Answer, NativeData, status_name
 
 _STATUS = {"kNotset": "solver_error", "kModelError": "solver_error",
            "kSolveError": "solver_error", "kOptimal": "optimal", "kInfeasible": "infeasible",
@@ -109,8 +109,9 @@ class HIGHSAdapter:
         # HiGHS takes no start from the package (its own phase 1 finds one)
         self.options = {key: value for key, value in options.items() if key != "warm_start"}
 
-    def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
-        """Solve ``data``; ``warm`` is ignored."""
+    def solve(self, data: NativeData, warm: WarmStart | None = None,
+              accept: Accept | None = None) -> Answer:
+        """Solve ``data``; ``warm`` and ``accept`` are ignored."""
         return _solve(data, self.options)
 
 

@@ -5,7 +5,20 @@ OSQP takes ``l <= [E; G] d <= u`` in the deviation ``d = x - t`` (:mod:`._native
 ``y`` its first rows' ``w`` and ``z = -w`` on ``G``.  A later QP of the structure writes its
 bounds and the nonzeros of ``P`` and ``A`` (same patterns) into the solver, which starts
 from its own last solution (``warm_starting``); the mapped warm start of
-:mod:`wuerfel_cvx.solve.warm_start` is not used.  Its ``run_time`` includes the update.
+:mod:`wuerfel_cvx.solve.warm_start` is not used.  A ``warm`` start given to a solve (a
+Coulomb fixed point's last polished answer of the structure,
+:meth:`~wuerfel_cvx.solve.paths.SolvePath.remembered_start`) replaces that iterate.
+Its ``run_time`` includes the update.
+
+Staged (:meth:`OSQPAdapter._solve_staged`, when the solve path passes an ``accept`` check):
+OSQP runs :data:`FIRST_STAGE` iterations, then stages doubling the iterations so far, each
+continuing from its own iterate, and stops at the first stage's answer the check accepts
+(the solve paths' check: its polish on its active set is an exact KKT point within
+``eps``).  On nearly parallel rows a hair apart (a resting card's corners, the Coulomb
+fixed point's contact QPs) ADMM spends thousands of iterations deciding which of two
+rows holds while its iterate has long had the active set whose polish is exact
+(``reports/perf/coulomb-card-house.md``).  A QP solved within the first stage is solved
+as without stages: its iterates are the same.
 
 OSQP's Python wrapper (1.x) copies the vectors into a cache kept for derivatives and builds
 a namespace of the solver's report on every call; its native solver object is called
@@ -16,6 +29,7 @@ directly where the wrapper has one, with the same numbers (bounds clipped to
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import threading
 from typing import Any
@@ -23,12 +37,30 @@ from typing import Any
 import numpy as np
 
 from ...scenes.geometry import FloatArray
-from ._native import Answer, InPlace, NativeData, RowStack, check_patterns, status_name
+from ..warm_start import WarmStart
+from ._native import (
+    Accept,
+    Answer,
+    InPlace,
+    NativeData,
+    RowStack,
+    check_patterns,
+    status_name,
+)
 
 _STATUS = {1: "optimal", 2: "optimal_inaccurate", 3: "infeasible", 4: "infeasible_inaccurate",
            5: "unbounded", 6: "unbounded_inaccurate", 7: "user_limit", 8: "user_limit",
            10: "solver_error", 11: "solver_error"}
 """OSQP's ``status_val`` by name (cvxpy's table for OSQP 1.x)."""
+
+_STAGE_ENDS = ("user_limit", "optimal_inaccurate")
+"""The statuses a stage ends with at its iteration limit (OSQP reports ``solved
+inaccurate`` there when its residuals meet a looser tolerance): the next stage may go on."""
+
+FIRST_STAGE = 200
+"""OSQP iterations (a multiple of its ``adaptive_rho_interval`` 50 and ``check_termination``
+25, so that the stages' iterates are those of one run) before the first check of a staged
+solve; the later stages double the iterations so far."""
 
 _INFINITY = 1e30
 """OSQP's ``OSQP_INFTY``: bounds beyond it are clipped to it."""
@@ -63,6 +95,8 @@ class OSQPAdapter(InPlace):
         self.hessian = data.upper_triangle
         self.n_eq = qp.n_equalities
         lower, upper = _bounds(data)
+        self.max_iter = int(options.get("max_iter", 4000))  # OSQP's default
+        self._stage_limit = self.max_iter
         self.solver = osqp.OSQP()
         self._set_up(lambda: self.solver.setup(P=self.hessian, q=data.linear,
                                                A=self.rows.matrix, l=lower, u=upper,
@@ -83,6 +117,40 @@ class OSQPAdapter(InPlace):
         return Answer(x=data.unknowns(solution.x), eq_dual=w[:self.n_eq],
                       ineq_dual=-w[self.n_eq:], status=status_name(_STATUS, info.status_val),
                       reported_time=float(info.run_time), iterations=int(info.iter))
+
+    def _start(self, data: NativeData, warm: WarmStart) -> None:
+        """Start from ``warm``'s ``d = x - t`` and ``w = [y; -z]``."""
+        start = np.concatenate([warm.eq_dual, -warm.ineq_dual])
+        if self.native is not None:
+            self.native.warm_start(warm.x - data.target, start)
+        else:
+            self.solver.warm_start(x=warm.x - data.target, y=start)
+
+    def _solve_staged(self, data: NativeData, accept: Accept) -> Answer:
+        """Solve in stages (module docstring), ``max_iter`` iterations in all at most.
+
+        The answer is the first stage's ``accept`` takes (status ``optimal``), else the
+        last stage's; its iterations and reported time are the stages' sums.
+        """
+        done, reported = 0, 0.0
+        while True:
+            self._limit_stage(min(max(done, FIRST_STAGE), self.max_iter - done))
+            answer = self._solve(data)
+            done += answer.iterations
+            reported += answer.reported_time
+            if answer.status not in _STAGE_ENDS or done >= self.max_iter:
+                break
+            if accept(answer):
+                answer = dataclasses.replace(answer, status="optimal")
+                break
+        self._limit_stage(self.max_iter)
+        return dataclasses.replace(answer, iterations=done, reported_time=reported)
+
+    def _limit_stage(self, iterations: int) -> None:
+        """Set OSQP's ``max_iter`` to ``iterations`` (unless it is already)."""
+        if iterations != self._stage_limit:
+            self.solver.update_settings(max_iter=iterations)
+            self._stage_limit = iterations
 
     def _update(self, data: NativeData) -> None:
         lower, upper = _bounds(data)

@@ -48,7 +48,7 @@ from ..._sparse import dense_rows
 from ...formulations.qp import StepQP
 from ...scenes.geometry import FloatArray
 from ..warm_start import WarmStart
-from ._native import Answer, NativeData, status_name
+from ._native import Accept, Answer, NativeData, status_name
 
 MICROSECOND = 1e-6
 """proxsuite reports its times in microseconds."""
@@ -133,8 +133,9 @@ class PROXQPAdapter:
         # the last step's start comes as ``warm`` (the mapped guess), not as a setting
         self.options = {key: value for key, value in options.items() if key != "warm_start"}
 
-    def solve(self, data: NativeData, warm: WarmStart | None = None) -> Answer:
-        """Solve ``data`` from ``warm`` if given."""
+    def solve(self, data: NativeData, warm: WarmStart | None = None,
+              accept: Accept | None = None) -> Answer:
+        """Solve ``data`` from ``warm`` if given; ``accept`` is ignored (one stage)."""
         return _solve(data.qp, self.options, warm)
 
 
