@@ -113,6 +113,7 @@ def test_a_wrong_guess_is_repaired() -> None:
 def test_a_wrong_guess_without_repairs_is_rejected(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(kkt, "REPAIRS", 0)
     monkeypatch.setattr(kkt, "MERGED_REPAIRS", 0)
+    monkeypatch.setattr(kkt, "DENSE_UNKNOWNS", 0)  # no exact crossover either
     qp = _qp([1, 1], [0, 0], [[1, 1], [1, 0]], [2, 1 - 1e-6])
     # a claimed multiplier 1e6 times the slack: both guesses take the second row as tight
     answer = (np.array([1.0, 1.0]), np.zeros(0), np.array([2.0, 1.0]))
