@@ -466,7 +466,8 @@ def _least_distance(reduced: _Eliminated, rows: FloatArray, bounds: FloatArray
     ``w >= 0``, ``E = [B'; d' / s]``, ``f`` the last unit vector, ``s = max |d|``; its
     residual ``r`` gives ``u = -s r[:k] / r[k]``.  A row's weight is positive only if it
     holds the point.  ``None`` if the rows are infeasible (``r = 0``) or the method does not
-    end (scipy's ``nnls``, its default ``3 m`` iterations for ``m`` rows).
+    end (scipy's ``nnls``, its default ``3 m`` iterations for ``m`` rows).  No rows: the
+    unconstrained minimiser.
     """
     on_basis = rows if reduced.null_basis is None else rows @ reduced.null_basis
     lowered = bounds - rows @ reduced.particular + on_basis @ reduced.shift
@@ -475,10 +476,13 @@ def _least_distance(reduced: _Eliminated, rows: FloatArray, bounds: FloatArray
     system = np.vstack([distance_rows, lowered[None, :] / size])
     unit = np.zeros(system.shape[0])
     unit[-1] = 1.0
-    try:
-        weights = scipy.optimize.nnls(system, unit)[0]
-    except RuntimeError:  # its iterations ran out
-        return None
+    if not bounds.size:  # scipy's nnls fails on an empty matrix (a double free in 1.17)
+        weights = np.zeros(0)
+    else:
+        try:
+            weights = scipy.optimize.nnls(system, unit)[0]
+        except RuntimeError:  # its iterations ran out
+            return None
     residual = system @ weights - unit
     if not -residual[-1] > LEAST_DISTANCE_FLOOR:
         return None
