@@ -238,8 +238,8 @@ def test_nearly_dependent_near_tight_rows_are_polished_by_the_exact_crossover(
     _, scales = kkt._checked(qp, *answer)
     assert kkt.guess_active_set(qp, answer[0], answer[2], scales).size == qp.n_inequalities
     exact = kkt.exact_active_set(qp, answer[0], scales)
-    assert exact is not None and exact.size == 2  # independent: two rows fix two unknowns
-    assert np.linalg.matrix_rank(matrix[exact.rows]) == 2
+    assert exact is not None and exact.active.size == 2  # independent: two rows fix two unknowns
+    assert np.linalg.matrix_rank(matrix[exact.active.rows]) == 2
     result = _check_exact(qp, vertex, answer)
     assert result.residuals.worst() <= ROUND_OFF
     assert np.all(result.ineq_dual >= 0.0)
@@ -253,10 +253,12 @@ def test_the_exact_crossover_finds_upper_bounds_equalities_and_the_coupling_cost
     # the coupling-cost QP (x = (1, 1/2) on its row's lower bound)
     upper = _qp([1, 1], [3, 3], [[1, 1]], [-10], upper=[2], eq=[[1, -1]], eq_rhs=[0])
     found = kkt.exact_active_set(upper, np.array([0.9, 0.9]), kkt._Scales(1.0, 1.0))
-    assert found is not None and list(found.upper) == [0] and not found.lower.size
+    assert found is not None and list(found.active.upper) == [0]
+    assert not found.active.lower.size
     coupled = _qp([1, 1], [0, 0], [[1, 0], [0, 1]], [1, -5], factor=[[1, -1]])
     found = kkt.exact_active_set(coupled, np.array([1.0, 0.5]), kkt._Scales(1.0, 1.0))
-    assert found is not None and list(found.lower) == [0] and not found.upper.size
+    assert found is not None and list(found.active.lower) == [0]
+    assert not found.active.upper.size
 
 
 def test_the_card_house_at_rest_is_polished_on_every_step() -> None:

@@ -370,8 +370,19 @@ LEAST_DISTANCE_FLOOR = 1e-14
 residual is zero when they are not)."""
 
 
-def exact_active_set(qp: StepQP, x: FloatArray, scales: _Scales) -> ActiveSet | None:
-    """The active set of ``qp``'s exact minimiser, found by a finite method (a crossover).
+class Crossover(NamedTuple):
+    """``qp``'s minimiser found by :func:`exact_active_set`, and the rows that hold it."""
+
+    active: ActiveSet
+    """The rows with a positive multiplier."""
+    x: FloatArray
+    """The minimiser (the QP's unknowns)."""
+    ineq_dual: FloatArray
+    """Multipliers ``z`` of every inequality row (zero off ``active``), cvxpy's signs."""
+
+
+def exact_active_set(qp: StepQP, x: FloatArray, scales: _Scales) -> Crossover | None:
+    """The exact minimiser of ``qp`` and its active set, by a finite method (a crossover).
 
     An interior-point answer does not tell a row whose exact slack is 1e-8 of the scales
     from a tight one, nor which of nearly dependent tight rows carry the load (the card
@@ -384,10 +395,12 @@ def exact_active_set(qp: StepQP, x: FloatArray, scales: _Scales) -> ActiveSet | 
     (:func:`_least_distance`), whose non-negative least squares keep the rows they load
     linearly independent: the rows with a positive weight are an independent set that holds
     the load, their reduced KKT matrix regular however dependent the candidates are.
-    ``None`` when the QP is too large for dense matrices (:data:`DENSE_UNKNOWNS`), its
-    objective is not strictly convex on ``N``, the rows are infeasible, or the method does
-    not end.  The point itself is not used: :func:`polish` solves, repairs and checks the
-    reduced system on the set as on any guess.
+    The loaded rows may still be dependent in ``x`` (independent only with their bounds
+    appended), so the point's non-negative multipliers go with the set: :func:`polish`
+    starts its refinement from them, which keeps their split among dependent rows, and
+    solves, repairs and checks the reduced system as for any guess.  ``None`` when the QP
+    is too large for dense matrices (:data:`DENSE_UNKNOWNS`), its objective is not strictly
+    convex on ``N``, the rows are infeasible, or the method does not end.
     """
     reduced = _eliminated(qp)
     if reduced is None:
@@ -395,23 +408,45 @@ def exact_active_set(qp: StepQP, x: FloatArray, scales: _Scales) -> ActiveSet | 
     rows, signs, bounds = _one_sided(qp)
     matrix = qp.ineq_matrix
     slack = signs * _ineq_lhs(qp, np.asarray(x, dtype=np.float64))[rows] - bounds
-    candidates = np.flatnonzero(slack <= CANDIDATE_SLACK * scales.primal)
+    candidates = _distinct(qp, rows, signs, np.flatnonzero(slack <= CANDIDATE_SLACK
+                                                           * scales.primal), scales)
     for _ in range(CANDIDATE_ROUNDS):
         picked = matrix[rows[candidates]]
         found = _least_distance(reduced, signs[candidates, None] * picked.toarray(),
                                 bounds[candidates])
         if found is None:
             return None
-        point, weights = found
+        point, multipliers = found
         violated = signs * _ineq_lhs(qp, point)[rows] - bounds < -ROUND_OFF * scales.primal
-        violated[candidates] = False
+        if violated[candidates].any():  # the least squares lost their accuracy
+            return None
         if not violated.any():
-            loaded = candidates[weights > 0.0]
+            loaded = candidates[multipliers > 0.0]
             on_upper = signs[loaded] < 0.0
-            return ActiveSet(lower=np.sort(rows[loaded[~on_upper]]),
-                             upper=np.sort(rows[loaded[on_upper]]))
+            ineq_dual = np.zeros(qp.n_inequalities)
+            ineq_dual[rows[loaded]] = signs[loaded] * multipliers[multipliers > 0.0]
+            return Crossover(ActiveSet(lower=np.sort(rows[loaded[~on_upper]]),
+                                       upper=np.sort(rows[loaded[on_upper]])),
+                             point, ineq_dual)
         candidates = np.union1d(candidates, np.flatnonzero(violated))
     return None
+
+
+def _distinct(qp: StepQP, rows: np.ndarray, signs: FloatArray, candidates: np.ndarray,
+              scales: _Scales) -> np.ndarray:
+    """``candidates`` (positions in :func:`_one_sided`'s rows) without parallel copies.
+
+    Of each group of parallel rows (:func:`merge_parallel_rows`) the most binding is kept;
+    the others join only if the point found without them violates them.
+    """
+    upper = signs[candidates] < 0.0
+    merged, _ = merge_parallel_rows(
+        qp, ActiveSet(lower=np.sort(rows[candidates[~upper]]),
+                      upper=np.sort(rows[candidates[upper]])),
+        np.zeros(qp.n_inequalities), scales)
+    kept = np.where(upper, np.isin(rows[candidates], merged.upper),
+                    np.isin(rows[candidates], merged.lower))
+    return candidates[kept]
 
 
 class _Eliminated(NamedTuple):
@@ -476,23 +511,27 @@ def _null_space(matrix: FloatArray, rhs: FloatArray) -> tuple[FloatArray, FloatA
 
 def _least_distance(reduced: _Eliminated, rows: FloatArray, bounds: FloatArray
                     ) -> tuple[FloatArray, FloatArray] | None:
-    """The minimiser ``x`` of the QP on ``rows x >= bounds`` (dense) and the rows' weights.
+    """The minimiser ``x`` of the QP on ``rows x >= bounds`` (dense), the rows' multipliers.
 
     With ``u = R v + R^-T N' (P x_p + q)`` the objective is ``|u|^2 / 2`` plus a constant,
     and the rows are ``B u >= d`` with ``B = rows N R^-1`` and ``d = bounds - rows (x_p -
     N shift)``: the least-distance problem, solved (Lawson and Hanson, *Solving Least
     Squares Problems*, 1974, ch. 23) by the non-negative least squares ``min |E w - f|``,
     ``w >= 0``, ``E = [B'; d' / s]``, ``f`` the last unit vector, ``s = max |d|``; its
-    residual ``r`` gives ``u = -s r[:k] / r[k]``.  A row's weight is positive only if it
-    holds the point.  ``None`` if the rows are infeasible (``r = 0``) or the method does not
-    end (scipy's ``nnls``, its default ``3 m`` iterations for ``m`` rows).  No rows: the
-    unconstrained minimiser.
+    residual ``r`` gives ``u = -s r[:k] / r[k] = B' w s / -r[k]``; as ``R' u = N' (P x +
+    q)``, the rows' multipliers ``z`` (``N' (P x + q) = (rows N)' z``) are ``w s / -r[k]``,
+    positive only on rows that hold the point.  ``None`` if the rows are infeasible (``r =
+    0``) or the method does not end (scipy's ``nnls``, its default ``3 m`` iterations for
+    ``m`` rows).  No rows: the unconstrained minimiser.
     """
     on_basis = rows if reduced.null_basis is None else rows @ reduced.null_basis
     lowered = bounds - rows @ reduced.particular + on_basis @ reduced.shift
     size = _largest(lowered) or 1.0
     distance_rows = scipy.linalg.solve_triangular(reduced.factor, on_basis.T, trans="T")
     system = np.vstack([distance_rows, lowered[None, :] / size])
+    lengths = np.sqrt(np.einsum("ij,ij->j", system, system))
+    lengths[lengths == 0.0] = 1.0
+    system /= lengths  # each row by its length: the same rows, the weights w * lengths
     unit = np.zeros(system.shape[0])
     unit[-1] = 1.0
     if not bounds.size:  # scipy's nnls fails on an empty matrix (a double free in 1.17)
@@ -509,7 +548,7 @@ def _least_distance(reduced: _Eliminated, rows: FloatArray, bounds: FloatArray
     moved = scipy.linalg.solve_triangular(reduced.factor, nearest) - reduced.shift
     point = reduced.particular + (moved if reduced.null_basis is None
                                   else reduced.null_basis @ moved)
-    return point, weights
+    return point, weights * (size / -residual[-1]) / lengths
 
 
 def _one_sided(qp: StepQP) -> tuple[np.ndarray, FloatArray, FloatArray]:
@@ -574,11 +613,6 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
         if second.outcome == POLISHED:
             return second
         guesses.append(strict)
-    exact = exact_active_set(qp, x, scales)
-    if exact is not None:
-        crossed = _polished_on(qp, exact, answer, scales, residuals)
-        if crossed.outcome == POLISHED:
-            return crossed
     tried: list[ActiveSet] = []
     for guess in guesses:
         merged, start = merge_parallel_rows(qp, guess, ineq_dual, scales)
@@ -587,6 +621,12 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
             last = _polished_on(qp, merged, answer, scales, residuals, MERGED_REPAIRS, start)
             if last.outcome == POLISHED:
                 return last
+    exact = exact_active_set(qp, x, scales)
+    if exact is not None:  # refined from the crossover's point; the answer kept if rejected
+        crossed = _polished_on(qp, exact.active, (exact.x, eq_dual, exact.ineq_dual), scales,
+                               residuals)
+        if crossed.outcome == POLISHED:
+            return crossed
     return first
 
 
