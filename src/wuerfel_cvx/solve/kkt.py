@@ -17,7 +17,8 @@ answer's slacks and multipliers, solves the KKT system of the QP with those rows
 equalities, and keeps the result only if it is feasible, its multipliers have the right
 signs and its residuals are no worse than the answer's.  See :func:`polish` for how it
 copes with a degenerate active set (more tight rows than unknowns, as in a resting pile
-with friction cones).
+with friction cones), and :func:`exact_active_set` for the crossover it falls back on where
+no guess from the answer's slacks and multipliers is right.
 """
 
 from __future__ import annotations
@@ -241,8 +242,8 @@ class Polish:
     reason: str
     """Why a polish was rejected (``""`` when polished): ``singular`` (the reduced KKT
     matrix did not factor), ``active set`` (no sign-consistent, feasible active set within
-    :data:`REPAIRS` corrections, nor :data:`MERGED_REPAIRS` after merging parallel rows)
-    or ``worse`` (residuals above the answer's)."""
+    :data:`REPAIRS` corrections, nor :data:`MERGED_REPAIRS` after merging parallel rows,
+    nor from the exact crossover's set) or ``worse`` (residuals above the answer's)."""
     x: FloatArray
     eq_dual: FloatArray
     ineq_dual: FloatArray
@@ -596,8 +597,12 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     sign-consistent to :data:`ROUND_OFF` and its residuals are no worse than ``residuals``;
     else the same is tried once more from a stricter guess (:data:`CLEAR_MARGIN`: only rows
     whose multiplier clearly exceeds their slack), then from each guess with its parallel
-    rows merged (:func:`merge_parallel_rows`, at most :data:`MERGED_REPAIRS` repairs), and
-    if all fail, :data:`REJECTED` with the first attempt's reason.
+    rows merged (:func:`merge_parallel_rows`, at most :data:`MERGED_REPAIRS` repairs), then
+    from the active set and point of an exact dense crossover (:func:`exact_active_set`, QPs
+    of at most :data:`DENSE_UNKNOWNS` unknowns: where no guess from the answer is right), and
+    if all fail, :data:`REJECTED` with the first attempt's reason.  The acceptance checks are
+    the same for every attempt; an attempt runs only where the ones before it were rejected,
+    so a later one changes no polish an earlier one accepts.
     """
     checked, scales = _checked(qp, x, eq_dual, ineq_dual)
     residuals = checked if residuals is None else residuals
