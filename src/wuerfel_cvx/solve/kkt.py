@@ -385,23 +385,24 @@ class Crossover(NamedTuple):
 def exact_active_set(qp: StepQP, x: FloatArray, scales: _Scales) -> Crossover | None:
     """The exact minimiser of ``qp`` and its active set, by a finite method (a crossover).
 
-    An interior-point answer does not tell a row whose exact slack is 1e-8 of the scales
-    from a tight one, nor which of nearly dependent tight rows carry the load (the card
-    house at rest: about 330 rows guessed tight on 120 unknowns, 40 of them 1e-10 to 1e-6
-    off their bounds at the exact point); no guess is then right, and the repairs cycle.
-    Here the QP is solved exactly on the rows within :data:`CANDIDATE_SLACK` of their bounds
-    at ``x`` (rows its point violates added, at most :data:`CANDIDATE_ROUNDS` times): the
-    equalities eliminated (``x = x_p + N v``, ``N`` a null-space basis of ``E``) and
-    ``N' P N = R' R``, it is the least-distance problem ``min |u|`` s.t. ``B u >= d``
-    (:func:`_least_distance`), whose non-negative least squares keep the rows they load
-    linearly independent: the rows with a positive weight are an independent set that holds
-    the load, their reduced KKT matrix regular however dependent the candidates are.
-    The loaded rows may still be dependent in ``x`` (independent only with their bounds
-    appended), so the point's non-negative multipliers go with the set: :func:`polish`
+    An interior-point answer does not tell a row whose exact slack is a small fraction of
+    its tolerance from a tight one when it gives both slack and multiplier to nearly
+    dependent rows; no guess from its slacks and multipliers is then right, the guessed
+    rows contradict each other, and the repairs cycle (the card house at rest:
+    ``reports/polish/card-house.md``).  Here the QP is solved exactly on the rows within
+    :data:`CANDIDATE_SLACK` of their bounds at ``x``, without parallel copies (rows its
+    point violates added, at most :data:`CANDIDATE_ROUNDS` times): the equalities
+    eliminated (``x = x_p + N v``, ``N`` a null-space basis of ``E``) and ``N' P N = R'
+    R``, it is the least-distance problem ``min |u|`` s.t. ``B u >= d``
+    (:func:`_least_distance`), whose non-negative least squares end in a finite number of
+    steps with the rows they load independent together with their bounds, however
+    dependent the candidates.  The loaded rows may still be dependent in ``x`` alone, so
+    the point's non-negative multipliers go with the set: :func:`polish`
     starts its refinement from them, which keeps their split among dependent rows, and
     solves, repairs and checks the reduced system as for any guess.  ``None`` when the QP
     is too large for dense matrices (:data:`DENSE_UNKNOWNS`), its objective is not strictly
-    convex on ``N``, the rows are infeasible, or the method does not end.
+    convex on ``N``, the rows are infeasible, the method does not end, or its point
+    violates one of its own rows (its least squares lost their accuracy).
     """
     reduced = _eliminated(qp)
     if reduced is None:
@@ -494,7 +495,7 @@ def _eliminated(qp: StepQP) -> _Eliminated | None:
 def _null_space(matrix: FloatArray, rhs: FloatArray) -> tuple[FloatArray, FloatArray]:
     """A solution of ``matrix @ x = rhs`` and an orthonormal basis of ``matrix``'s null space.
 
-    From the pivoted QR factorization ``matrix' Pi = Q R`` (a fifth of an SVD's time): the
+    From the pivoted QR factorization ``matrix' Pi = Q R`` (cheaper than an SVD): the
     rank ``r`` counts the diagonal entries of ``R`` above ``n`` ulps of the largest, the last
     ``n - r`` columns of ``Q`` span the null space, and ``x = Q_r R_r^-T (Pi' rhs)_r``
     solves the independent rows (the others, dependent, hold with them when consistent).
