@@ -8,7 +8,7 @@ Run with the package to measure on the path (``PYTHONPATH=src``)::
 suite's settings otherwise (tol ``default``, native path, polishing on).  Prints one JSON
 line per solver: the count of each per-step ``polish`` status in the trajectory's metrics,
 the fraction of steps whose answers were exact (polished or reused), and the run's polish,
-solver and wall times (s) and its solver iterations.
+solver and wall times (s), its solver iterations and verified steps.
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ def main(steps: int, formulation: str, solvers: list[str]) -> None:
             "polish_time_s": round(float(metrics["polish_time_s"].sum()), 2),
             "solver_time_s": round(float(metrics["solver_time_s"].sum()), 2),
             "solver_iterations": int(metrics["iterations"].sum()),
+            "verified_steps": int(metrics["verified"].sum()),
             "wall_s": round(time.perf_counter() - started, 1)}), flush=True)
 
 
