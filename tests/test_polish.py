@@ -113,6 +113,7 @@ def test_a_wrong_guess_is_repaired() -> None:
 def test_a_wrong_guess_without_repairs_is_rejected(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(kkt, "REPAIRS", 0)
     monkeypatch.setattr(kkt, "MERGED_REPAIRS", 0)
+    monkeypatch.setattr(kkt, "DENSE_UNKNOWNS", 0)  # no exact crossover either
     qp = _qp([1, 1], [0, 0], [[1, 1], [1, 0]], [2, 1 - 1e-6])
     # a claimed multiplier 1e6 times the slack: both guesses take the second row as tight
     answer = (np.array([1.0, 1.0]), np.zeros(0), np.array([2.0, 1.0]))
@@ -189,6 +190,87 @@ def test_a_wrong_guess_of_parallel_rows_is_polished_exactly(
     result = _check_exact(qp, x_exact, answer)
     np.testing.assert_allclose(result.ineq_dual, z_exact, rtol=0, atol=ROUND_OFF)
     assert list(result.active.lower) == [1]
+
+
+NEAR_TIGHT_SLACK = 1e-8
+"""Slack (m/s here: 1) at the exact point of the rows beside the tight ones in the
+card-house miniature: the card house's rows guessed tight but free at the exact point are
+1e-10 to 1e-6 of the scales off their bounds, below what an interior-point answer
+resolves."""
+
+TILT = 1e-9
+"""Direction offset (1) of each near-tight row from its tight neighbour in the miniature."""
+
+
+def _card_house_miniature() -> tuple[StepQP, np.ndarray]:
+    """``min |x|^2`` in two unknowns held at its vertex ``(1, 1)`` by six rows, and ``x``.
+
+    Six rows pass through the vertex (dependent: any two of them fix it), each beside a row
+    tilted by :data:`TILT` whose bound is :data:`NEAR_TIGHT_SLACK` lower: the card house at
+    rest in miniature (many faces touching, their contacts' rows nearly parallel and nearly
+    tight).  ``x = (1, 1)``; the multipliers are any non-negative split of ``2 x`` among
+    the six tight rows.
+    """
+    vertex = np.array([1.0, 1.0])
+    rows, bounds = [], []
+    for angle in np.linspace(0.1, 1.4, 6):
+        tight = np.array([np.cos(angle), np.sin(angle)])
+        beside = tight + TILT * np.array([1.0, -1.0])
+        rows += [list(tight), list(beside)]
+        bounds += [tight @ vertex, beside @ vertex - NEAR_TIGHT_SLACK]
+    return _qp([1, 1], [0, 0], rows, bounds), vertex
+
+
+def test_nearly_dependent_near_tight_rows_are_polished_by_the_exact_crossover(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # an interior-point answer spreads the load over all twelve rows; taken tight together
+    # the rows are inconsistent by NEAR_TIGHT_SLACK, and without repairs (their rounds spent,
+    # as on the card house, where they cycle) the guesses are rejected; the crossover's
+    # independent set polishes exactly
+    monkeypatch.setattr(kkt, "REPAIRS", 0)
+    monkeypatch.setattr(kkt, "MERGED_REPAIRS", 0)
+    qp, vertex = _card_house_miniature()
+    matrix = qp.ineq_matrix.toarray()
+    spread = np.full(qp.n_inequalities, 1.0)
+    spread *= (2.0 * vertex) @ (matrix.T @ spread) / np.sum((matrix.T @ spread) ** 2)
+    answer = _interior(qp, vertex, np.zeros(0), spread, 1e-9)
+    residuals = kkt_residuals(qp, *answer)
+    _, scales = kkt._checked(qp, *answer)
+    assert kkt.guess_active_set(qp, answer[0], answer[2], scales).size == qp.n_inequalities
+    exact = kkt.exact_active_set(qp, answer[0], scales)
+    assert exact is not None and exact.active.size == 2  # independent: two rows fix two unknowns
+    assert np.linalg.matrix_rank(matrix[exact.active.rows]) == 2
+    result = _check_exact(qp, vertex, answer)
+    assert result.residuals.worst() <= ROUND_OFF
+    assert np.all(result.ineq_dual >= 0.0)
+    np.testing.assert_allclose(matrix.T @ result.ineq_dual, 2.0 * vertex, atol=ROUND_OFF)
+    monkeypatch.setattr(kkt, "DENSE_UNKNOWNS", 0)  # the same without the crossover
+    assert polish(qp, *answer, residuals).outcome == REJECTED
+
+
+def test_the_exact_crossover_finds_upper_bounds_equalities_and_the_coupling_cost() -> None:
+    # the upper-bound-and-equality QP above (x = (1, 1) on the upper bound of its row) and
+    # the coupling-cost QP (x = (1, 1/2) on its row's lower bound)
+    upper = _qp([1, 1], [3, 3], [[1, 1]], [-10], upper=[2], eq=[[1, -1]], eq_rhs=[0])
+    found = kkt.exact_active_set(upper, np.array([0.9, 0.9]), kkt._Scales(1.0, 1.0))
+    assert found is not None and list(found.active.upper) == [0]
+    assert not found.active.lower.size
+    coupled = _qp([1, 1], [0, 0], [[1, 0], [0, 1]], [1, -5], factor=[[1, -1]])
+    found = kkt.exact_active_set(coupled, np.array([1.0, 0.5]), kkt._Scales(1.0, 1.0))
+    assert found is not None and list(found.active.lower) == [0]
+    assert not found.active.upper.size
+
+
+def test_the_card_house_at_rest_is_polished_on_every_step() -> None:
+    """The card house (ccp, rigid) of issue 24 polishes every step's answer.
+
+    From step 20 (its cards at rest) every CLARABEL answer's polish was rejected (the
+    first guesses' repairs cycle); now every answer is polished, and so exact and verified.
+    """
+    traj = simulate(Scene.named("card-house"), dt=1 / 60, steps=30, solver="CLARABEL",
+                    friction_model="ccp")
+    assert traj.metrics["polish"].isin([POLISHED, REUSED]).all()
+    assert traj.metrics["verified"].all()
 
 
 def test_a_polish_that_makes_things_worse_is_rejected(monkeypatch: pytest.MonkeyPatch) -> None:

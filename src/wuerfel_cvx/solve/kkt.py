@@ -17,7 +17,8 @@ answer's slacks and multipliers, solves the KKT system of the QP with those rows
 equalities, and keeps the result only if it is feasible, its multipliers have the right
 signs and its residuals are no worse than the answer's.  See :func:`polish` for how it
 copes with a degenerate active set (more tight rows than unknowns, as in a resting pile
-with friction cones).
+with friction cones), and :func:`exact_active_set` for the crossover it falls back on where
+no guess from the answer's slacks and multipliers is right.
 """
 
 from __future__ import annotations
@@ -29,6 +30,8 @@ from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
+import scipy.linalg
+import scipy.optimize
 import scipy.sparse as sp
 
 from .._sparse import (
@@ -239,8 +242,8 @@ class Polish:
     reason: str
     """Why a polish was rejected (``""`` when polished): ``singular`` (the reduced KKT
     matrix did not factor), ``active set`` (no sign-consistent, feasible active set within
-    :data:`REPAIRS` corrections, nor :data:`MERGED_REPAIRS` after merging parallel rows)
-    or ``worse`` (residuals above the answer's)."""
+    :data:`REPAIRS` corrections, nor :data:`MERGED_REPAIRS` after merging parallel rows,
+    nor from the exact crossover's set) or ``worse`` (residuals above the answer's)."""
     x: FloatArray
     eq_dual: FloatArray
     ineq_dual: FloatArray
@@ -348,6 +351,224 @@ def _kept_rows(matrix: sp.csr_array, bounds: FloatArray, tight: np.ndarray,
     return np.sort(tight[np.fromiter(groups.values(), dtype=np.int64, count=len(groups))])
 
 
+DENSE_UNKNOWNS = 1000
+"""Most unknowns of a QP whose exact active set :func:`exact_active_set` finds with dense
+matrices (the card house has 120 in ``rigid``, 320 in ``velocity``); a large pile's
+thousands are left to the repairs of :func:`polish`."""
+
+CANDIDATE_SLACK = 1e-4
+"""Largest slack (relative to the answer's primal scale, 1) of the rows
+:func:`exact_active_set` starts from; a row farther from its bound joins only if the exact
+point of the rows taken so far violates it."""
+
+CANDIDATE_ROUNDS = 5
+"""Most times :func:`exact_active_set` adds the rows its exact point violates and solves
+again."""
+
+LEAST_DISTANCE_FLOOR = 1e-14
+"""Smallest squared residual (1) of the least-distance problem's non-negative least squares
+(:func:`_least_distance`, right side of norm 1) at which its rows count as feasible (the
+residual is zero when they are not)."""
+
+
+class Crossover(NamedTuple):
+    """``qp``'s minimiser found by :func:`exact_active_set`, and the rows that hold it."""
+
+    active: ActiveSet
+    """The rows with a positive multiplier."""
+    x: FloatArray
+    """The minimiser (the QP's unknowns)."""
+    ineq_dual: FloatArray
+    """Multipliers ``z`` of every inequality row (zero off ``active``), cvxpy's signs."""
+
+
+def exact_active_set(qp: StepQP, x: FloatArray, scales: _Scales) -> Crossover | None:
+    """The exact minimiser of ``qp`` and its active set, by a finite method (a crossover).
+
+    An interior-point answer does not tell a row whose exact slack is a small fraction of
+    its tolerance from a tight one when it gives both slack and multiplier to nearly
+    dependent rows; no guess from its slacks and multipliers is then right, the guessed
+    rows contradict each other, and the repairs cycle (the card house at rest:
+    ``reports/polish/card-house.md``).  Here the QP is solved exactly on the rows within
+    :data:`CANDIDATE_SLACK` of their bounds at ``x``, without parallel copies (rows its
+    point violates added, at most :data:`CANDIDATE_ROUNDS` times): the equalities
+    eliminated (``x = x_p + N v``, ``N`` a null-space basis of ``E``) and ``N' P N = R'
+    R``, it is the least-distance problem ``min |u|`` s.t. ``B u >= d``
+    (:func:`_least_distance`), whose non-negative least squares end in a finite number of
+    steps with the rows they load independent together with their bounds, however
+    dependent the candidates.  The loaded rows may still be dependent in ``x`` alone, so
+    the point's non-negative multipliers go with the set: :func:`polish`
+    starts its refinement from them, which keeps their split among dependent rows, and
+    solves, repairs and checks the reduced system as for any guess.  ``None`` when the QP
+    is too large for dense matrices (:data:`DENSE_UNKNOWNS`), its objective is not strictly
+    convex on ``N``, the rows are infeasible, or the method does not end.  The point holds
+    its own rows only to the least squares' accuracy (1e-14 of the scale on the card house,
+    1e-7 on some of rain-50's QPs, worse on degenerate piles): the polish's solve, repairs
+    and checks decide.
+    """
+    reduced = _eliminated(qp)
+    if reduced is None:
+        return None
+    rows, signs, bounds = _one_sided(qp)
+    matrix = qp.ineq_matrix
+    slack = signs * _ineq_lhs(qp, np.asarray(x, dtype=np.float64))[rows] - bounds
+    candidates = _distinct(qp, rows, signs, np.flatnonzero(slack <= CANDIDATE_SLACK
+                                                           * scales.primal), scales)
+    for _ in range(CANDIDATE_ROUNDS):
+        picked = matrix[rows[candidates]]
+        found = _least_distance(reduced, signs[candidates, None] * picked.toarray(),
+                                bounds[candidates])
+        if found is None:
+            return None
+        point, multipliers = found
+        violated = signs * _ineq_lhs(qp, point)[rows] - bounds < -ROUND_OFF * scales.primal
+        violated[candidates] = False  # to the least squares' accuracy: the polish repairs
+        if not violated.any():
+            loaded = candidates[multipliers > 0.0]
+            on_upper = signs[loaded] < 0.0
+            ineq_dual = np.zeros(qp.n_inequalities)
+            ineq_dual[rows[loaded]] = signs[loaded] * multipliers[multipliers > 0.0]
+            return Crossover(ActiveSet(lower=np.sort(rows[loaded[~on_upper]]),
+                                       upper=np.sort(rows[loaded[on_upper]])),
+                             point, ineq_dual)
+        candidates = np.union1d(candidates, np.flatnonzero(violated))
+    return None
+
+
+def _distinct(qp: StepQP, rows: np.ndarray, signs: FloatArray, candidates: np.ndarray,
+              scales: _Scales) -> np.ndarray:
+    """``candidates`` (positions in :func:`_one_sided`'s rows) without parallel copies.
+
+    Of each group of parallel rows (:func:`merge_parallel_rows`) the most binding is kept;
+    the others join only if the point found without them violates them.
+    """
+    upper = signs[candidates] < 0.0
+    merged, _ = merge_parallel_rows(
+        qp, ActiveSet(lower=np.sort(rows[candidates[~upper]]),
+                      upper=np.sort(rows[candidates[upper]])),
+        np.zeros(qp.n_inequalities), scales)
+    kept = np.where(upper, np.isin(rows[candidates], merged.upper),
+                    np.isin(rows[candidates], merged.lower))
+    return candidates[kept]
+
+
+class _Eliminated(NamedTuple):
+    """A QP's objective on the null space of its equalities (:func:`_eliminated`)."""
+
+    particular: FloatArray
+    """``x_p``: a solution of ``E x = e`` (least squares; zero without equalities)."""
+    null_basis: FloatArray | None
+    """``N``: an orthonormal basis of the null space of ``E`` (``None``: the identity)."""
+    factor: FloatArray
+    """``R``, upper triangular, with ``N' P N = R' R``."""
+    shift: FloatArray
+    """``(N' P N)^-1 N' (P x_p + q)``: the unconstrained minimiser is ``v = -shift``."""
+
+
+def _eliminated(qp: StepQP) -> _Eliminated | None:
+    """The objective ``x' P x / 2 + q' x`` on ``x = x_p + N v`` (see :class:`_Eliminated`).
+
+    ``None`` above :data:`DENSE_UNKNOWNS` unknowns or if ``N' P N`` is not positive definite.
+    """
+    n = qp.n_variables
+    if n > DENSE_UNKNOWNS:
+        return None
+    gradient = qp.objective_gradient(np.zeros(n))
+    coupling = (np.sqrt(2.0) * qp.cost_factor.toarray()
+                if qp.cost_factor is not None and qp.n_cost_rows else np.zeros((0, n)))
+    particular, null_basis = np.zeros(n), None
+    if qp.n_equalities:  # P = 2 W + C' C, C = sqrt(2) F; N' P N without P itself
+        particular, null_basis = _null_space(qp.eq_matrix.toarray(), qp.eq_rhs)
+        gradient = null_basis.T @ (2.0 * qp.weights * particular + gradient
+                                   + coupling.T @ (coupling @ particular))
+        coupling = coupling @ null_basis
+        hessian = (null_basis.T * (2.0 * qp.weights)) @ null_basis + coupling.T @ coupling
+    else:
+        hessian = np.diag(2.0 * qp.weights) + coupling.T @ coupling
+    try:
+        upper = np.asarray(np.linalg.cholesky(hessian).T, dtype=np.float64)
+    except np.linalg.LinAlgError:
+        return None
+    shift = scipy.linalg.cho_solve((upper, False), gradient)
+    return _Eliminated(particular, null_basis, upper, shift)
+
+
+def _null_space(matrix: FloatArray, rhs: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """A solution of ``matrix @ x = rhs`` and an orthonormal basis of ``matrix``'s null space.
+
+    From the pivoted QR factorization ``matrix' Pi = Q R`` (cheaper than an SVD): the
+    rank ``r`` counts the diagonal entries of ``R`` above ``n`` ulps of the largest, the last
+    ``n - r`` columns of ``Q`` span the null space, and ``x = Q_r R_r^-T (Pi' rhs)_r``
+    solves the independent rows (the others, dependent, hold with them when consistent).
+    """
+    n = matrix.shape[1]
+    orthogonal, triangular, pivots = scipy.linalg.qr(matrix.T, pivoting=True)
+    diagonal = np.abs(np.diag(triangular))
+    largest = float(diagonal[0]) if diagonal.size else 0.0
+    rank = int(np.count_nonzero(diagonal > n * np.finfo(float).eps * largest))
+    leading = scipy.linalg.solve_triangular(triangular[:rank, :rank], rhs[pivots[:rank]],
+                                            trans="T")
+    return (np.asarray(orthogonal[:, :rank] @ leading, dtype=np.float64),
+            np.asarray(orthogonal[:, rank:], dtype=np.float64))
+
+
+def _least_distance(reduced: _Eliminated, rows: FloatArray, bounds: FloatArray
+                    ) -> tuple[FloatArray, FloatArray] | None:
+    """The minimiser ``x`` of the QP on ``rows x >= bounds`` (dense), the rows' multipliers.
+
+    With ``u = R v + R^-T N' (P x_p + q)`` the objective is ``|u|^2 / 2`` plus a constant,
+    and the rows are ``B u >= d`` with ``B = rows N R^-1`` and ``d = bounds - rows (x_p -
+    N shift)``: the least-distance problem, solved (Lawson and Hanson, *Solving Least
+    Squares Problems*, 1974, ch. 23) by the non-negative least squares ``min |E w - f|``,
+    ``w >= 0``, ``E = [B'; d' / s]``, ``f`` the last unit vector, ``s = max |d|``; its
+    residual ``r`` gives ``u = -s r[:k] / r[k] = B' w s / -r[k]``; as ``R' u = N' (P x +
+    q)``, the rows' multipliers ``z`` (``N' (P x + q) = (rows N)' z``) are ``w s / -r[k]``,
+    positive only on rows that hold the point.  ``None`` if the rows are infeasible (``r =
+    0``) or the method does not end (scipy's ``nnls``, its default ``3 m`` iterations for
+    ``m`` rows).  No rows: the unconstrained minimiser.
+    """
+    on_basis = rows if reduced.null_basis is None else rows @ reduced.null_basis
+    lowered = bounds - rows @ reduced.particular + on_basis @ reduced.shift
+    size = _largest(lowered) or 1.0
+    distance_rows = scipy.linalg.solve_triangular(reduced.factor, on_basis.T, trans="T")
+    system = np.vstack([distance_rows, lowered[None, :] / size])
+    lengths = np.sqrt(np.einsum("ij,ij->j", system, system))
+    lengths[lengths == 0.0] = 1.0
+    system /= lengths  # each row by its length: the same rows, the weights w * lengths
+    unit = np.zeros(system.shape[0])
+    unit[-1] = 1.0
+    if not bounds.size:  # scipy's nnls fails on an empty matrix (a double free in 1.17)
+        weights = np.zeros(0)
+    else:
+        try:
+            weights = scipy.optimize.nnls(system, unit)[0]
+        except RuntimeError:  # its iterations ran out
+            return None
+    residual = system @ weights - unit
+    if not -residual[-1] > LEAST_DISTANCE_FLOOR:
+        return None
+    nearest = -size * residual[:-1] / residual[-1]
+    moved = scipy.linalg.solve_triangular(reduced.factor, nearest) - reduced.shift
+    point = reduced.particular + (moved if reduced.null_basis is None
+                                  else reduced.null_basis @ moved)
+    return point, weights * (size / -residual[-1]) / lengths
+
+
+def _one_sided(qp: StepQP) -> tuple[np.ndarray, FloatArray, FloatArray]:
+    """The inequalities as one-sided rows ``sign G_r x >= bound``: row, sign, bound.
+
+    Every row's lower bound (sign 1), then the finite upper bounds as ``-G_r x >= -u_r``.
+    """
+    lower = np.arange(qp.n_inequalities, dtype=np.int64)
+    upper = qp.upper_rows
+    if not upper.size:
+        return lower, np.ones(lower.size), qp.ineq_rhs
+    assert qp.ineq_upper is not None
+    return (np.concatenate([lower, upper]),
+            np.concatenate([np.ones(lower.size), -np.ones(upper.size)]),
+            np.concatenate([qp.ineq_rhs, -qp.ineq_upper[upper]]))
+
+
 def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray,
            residuals: Residuals | None = None) -> Polish:
     """The answer ``(x, y, z)`` with residuals ``residuals``, made exact on its active set.
@@ -378,8 +599,12 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     sign-consistent to :data:`ROUND_OFF` and its residuals are no worse than ``residuals``;
     else the same is tried once more from a stricter guess (:data:`CLEAR_MARGIN`: only rows
     whose multiplier clearly exceeds their slack), then from each guess with its parallel
-    rows merged (:func:`merge_parallel_rows`, at most :data:`MERGED_REPAIRS` repairs), and
-    if all fail, :data:`REJECTED` with the first attempt's reason.
+    rows merged (:func:`merge_parallel_rows`, at most :data:`MERGED_REPAIRS` repairs), then
+    from the active set and point of an exact dense crossover (:func:`exact_active_set`, QPs
+    of at most :data:`DENSE_UNKNOWNS` unknowns: where no guess from the answer is right), and
+    if all fail, :data:`REJECTED` with the first attempt's reason.  The acceptance checks are
+    the same for every attempt; an attempt runs only where the ones before it were rejected,
+    so a later one changes no polish an earlier one accepts.
     """
     checked, scales = _checked(qp, x, eq_dual, ineq_dual)
     residuals = checked if residuals is None else residuals
@@ -403,6 +628,12 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
             last = _polished_on(qp, merged, answer, scales, residuals, MERGED_REPAIRS, start)
             if last.outcome == POLISHED:
                 return last
+    exact = exact_active_set(qp, x, scales)
+    if exact is not None:  # refined from the crossover's point; the answer kept if rejected
+        crossed = _polished_on(qp, exact.active, (exact.x, eq_dual, exact.ineq_dual), scales,
+                               residuals)
+        if crossed.outcome == POLISHED:
+            return crossed
     return first
 
 
