@@ -9,8 +9,7 @@ parallel to within 1e-6 and inactive by less than 0.1 mm/s (each resting contact
 row and closest-approach row). OSQP solves the QP restricted to its active rows at once
 and the whole QP only after thousands of iterations; an adaptive step size that follows
 the residuals within a factor of 2 (the package's option) takes fewer iterations than
-OSQP's own factor of 5.  OSQP's staged solve (its answer checked at 200 iterations, then
-at each doubling) leaves its iterates as they are.
+OSQP's own factor of 5.
 """
 
 from __future__ import annotations
@@ -25,8 +24,6 @@ import scipy.sparse as sp
 from stalled_qps import load_step_qp
 from wuerfel_cvx.formulations import StepQP
 from wuerfel_cvx.solve import registry
-from wuerfel_cvx.solve.adapters import Accept, Answer, NativeData
-from wuerfel_cvx.solve.adapters import osqp as osqp_adapter
 from wuerfel_cvx.solve.paths import SolvePath, StepSolution, solve_step_qp
 
 pytestmark = pytest.mark.integration
@@ -140,31 +137,3 @@ def test_adaptive_step_within_a_factor_two_saves_osqp_iterations(
     own = _osqp(contact_qp, monkeypatch, adaptive_rho_tolerance=5.0)
     assert package.verified and own.verified
     assert package.iterations < own.iterations
-
-
-def _staged(qp: StepQP, accept: Accept) -> Answer:
-    """``qp`` solved by a fresh OSQP adapter in stages, ``accept`` checking each stage."""
-    data = NativeData(qp)
-    return osqp_adapter.setup(data, registry.solver_options("OSQP", "default")).solve(
-        data, None, accept)
-
-
-def test_osqp_stages_leave_its_iterates_unchanged(contact_qp: StepQP) -> None:
-    """Stages of 200 then doubling, none accepted: bit for bit OSQP's own solve."""
-    data = NativeData(contact_qp)
-    plain = osqp_adapter.setup(data, registry.solver_options("OSQP", "default")).solve(data)
-    checked: list[int] = []
-    staged = _staged(contact_qp, lambda answer: checked.append(answer.iterations) or False)
-    assert plain.status == staged.status == "optimal"
-    assert staged.iterations == plain.iterations > osqp_adapter.FIRST_STAGE
-    assert plain.x is not None and staged.x is not None
-    np.testing.assert_array_equal(staged.x, plain.x)
-    assert checked[:2] == [osqp_adapter.FIRST_STAGE] * 2  # then each stage the total so far
-    assert all(later == 2 * earlier for earlier, later in zip(checked[1:], checked[2:],
-                                                              strict=False))
-
-
-def test_an_accepted_stage_ends_the_osqp_solve(contact_qp: StepQP) -> None:
-    """The first stage's answer accepted: OSQP stops there, and says optimal."""
-    staged = _staged(contact_qp, lambda answer: True)
-    assert (staged.status, staged.iterations) == ("optimal", osqp_adapter.FIRST_STAGE)

@@ -391,24 +391,3 @@ def test_a_resting_stack_reuses_its_active_set_without_a_solver() -> None:
     fresh = solve_step_qp(record.qps[0], "CLARABEL", "default", path=SolvePath())
     assert fresh.polish == POLISHED
     np.testing.assert_allclose(record.solutions[0].x, fresh.x, rtol=0, atol=1e-14)
-
-
-def test_a_reused_active_set_is_corrected_only_when_repairs_are_allowed() -> None:
-    """The last QP's set, wrong for the next QP: corrected to its exact answer.
-
-    ``min |x - t|^2`` over ``x0 + x1 >= 2`` and ``x0 >= c``: with ``t = 0``, ``c = 0`` the
-    first row holds (``x = (1, 1)``, ``z = (2, 0)``); with ``t = (5, 0)``, ``c = 6`` the
-    second holds instead (``x = (6, 0)``, ``z = (0, 2)``).  On the first set the next QP's
-    point has a wrong-signed multiplier and violates the second row: one correction.
-    """
-    last = _qp([1, 1], [0, 0], [[1, 1], [1, 0]], [2, 0])
-    answer = (np.array([1.0, 1.0]), np.zeros(0), np.array([2.0, 0.0]))
-    first = _check_exact(last, np.array([1.0, 1.0]), answer)
-    moved = _qp([1, 1], [5, 0], [[1, 1], [1, 0]], [2, 6])
-    assert kkt.reuse_active_set(moved, first.active, *answer) is None
-    reused = kkt.reuse_active_set(moved, first.active, *answer, repairs=kkt.REPAIRS)
-    assert reused is not None and reused.outcome == REUSED
-    np.testing.assert_allclose(reused.x, [6.0, 0.0], rtol=0, atol=ROUND_OFF)
-    np.testing.assert_allclose(reused.ineq_dual, [0.0, 2.0], atol=ROUND_OFF)
-    assert list(reused.active.lower) == [1]
-    assert reused.residuals.worst() <= kkt.REUSE_TOLERANCE

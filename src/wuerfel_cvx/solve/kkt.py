@@ -961,7 +961,7 @@ _OWN_ORDER = np.zeros(0, dtype=np.int64)
 
 
 def reuse_active_set(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,
-                     ineq_dual: FloatArray, repairs: int = 0) -> Polish | None:
+                     ineq_dual: FloatArray) -> Polish | None:
     """``qp``'s exact answer on another QP's ``active`` set, or ``None`` if it is not one.
 
     ``(x, y, z)``, the other QP's answer, starts the refinement.  One factorization of the
@@ -969,30 +969,14 @@ def reuse_active_set(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: Floa
     is feasible and sign-consistent to :data:`ROUND_OFF` and its residuals are at most
     :data:`REUSE_TOLERANCE`, else ``None`` (a solver must run).  The active set of a resting
     pile's last answer is that of its next QP: the pile's QPs then need no solver.
-
-    ``repairs``: at most so many corrections of the set as :func:`polish` makes them (rows
-    with a wrong-signed multiplier freed, violated rows made tight, each solve from the
-    last point; a set met again ends the attempt), a primal-dual active-set method started
-    from the other QP's set; the answer is then the exact point of the corrected set, held
-    to the same checks.  The Coulomb fixed point's successive contact QPs differ by a
-    friction impulse that moves a few contacts on or off their rows.
     """
-    seen: set[bytes] = set()
-    for _ in range(repairs + 1):
-        point = _solve_on(qp, active, x, eq_dual, ineq_dual)
-        if point is None:
-            return None
-        x, eq_dual, ineq_dual = point
-        repaired = _repaired(qp, active, x, ineq_dual, _scales(qp, x, eq_dual, ineq_dual))
-        if repaired is None:
-            break
-        seen.add(active.key)
-        if repaired.key in seen:
-            return None
-        active = repaired
-    else:
+    point = _solve_on(qp, active, x, eq_dual, ineq_dual)
+    if point is None:
         return None
-    x_new, y_new, z_new = x, eq_dual, ineq_dual
+    x_new, y_new, z_new = point
+    scales = _scales(qp, x_new, y_new, z_new)
+    if _repaired(qp, active, x_new, z_new, scales) is not None:
+        return None
     residuals = kkt_residuals(qp, x_new, y_new, z_new)
     if not residuals.worst() <= REUSE_TOLERANCE:
         return None

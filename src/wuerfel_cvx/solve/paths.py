@@ -42,7 +42,6 @@ from .kkt import (
     KEPT,
     POLISH_OUTCOMES,
     POLISHED,
-    REPAIRS,
     REUSED,
     ActiveSet,
     Polish,
@@ -173,10 +172,7 @@ class SolvePath:
         With :attr:`reuse_active_sets` any remembered set is tried; without, only one
         remembered in step ``step`` (``None``: none), for a QP that repeats the structure of
         an earlier QP of its step (:func:`solve_step_qp`'s ``repeated``).  See
-        :func:`~wuerfel_cvx.solve.kkt.reuse_active_set`; a QP of step ``step`` allows its
-        :data:`~wuerfel_cvx.solve.kkt.REPAIRS` corrections of the set (the Coulomb fixed
-        point's QPs; across steps, a set that needs corrections is left to the solver, whose
-        run a pile's failed attempts would each lengthen by several factorizations).
+        :func:`~wuerfel_cvx.solve.kkt.reuse_active_set`.
         """
         if not self.reuse_active_sets and step is None:
             return None
@@ -184,22 +180,9 @@ class SolvePath:
         if remembered is None or not (self.reuse_active_sets or remembered.step == step):
             return None
         reused = reuse_active_set(qp, remembered.active, remembered.x, remembered.eq_dual,
-                                  remembered.ineq_dual, 0 if step is None else REPAIRS)
+                                  remembered.ineq_dual)
         self.reused_active_sets += reused is not None
         return reused
-
-    def remembered_start(self, qp: StepQP, step: int) -> WarmStart | None:
-        """The last polished answer of ``qp``'s structure in step ``step`` as a start.
-
-        ``None`` without one, or when the path does not warm-start.  The start of a
-        solver that keeps its own last iterate (OSQP) for a QP of the Coulomb fixed point:
-        that iterate is stale when the QPs since were answered on a reused active set.
-        """
-        kept = self._active_sets.get(structure_key(qp))
-        if self.warm_starts is None or kept is None or kept.step != step \
-                or kept.x.shape[0] != qp.n_variables:
-            return None
-        return WarmStart(kept.x, kept.eq_dual, kept.ineq_dual, kept.ineq_dual.shape[0])
 
     def remember_active_set(self, qp: StepQP, polished: Polish, step: int = 0) -> None:
         """Keep ``polished``'s active set and point for the next QP of ``qp``'s structure.
@@ -308,7 +291,7 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
         active = polished.active if outcome in (POLISHED, REUSED) else None
         answer = dataclasses.replace(answer, x=polished.x, eq_dual=polished.eq_dual,
                                      ineq_dual=polished.ineq_dual)
-        if outcome in (POLISHED, REUSED) and (path.reuse_active_sets or repeated):
+        if outcome == POLISHED and (path.reuse_active_sets or repeated):
             path.remember_active_set(seen, polished, step)
     x, eq_dual, ineq_dual = _answer_on_qp(answer, step, spec.name, scale, scale / weight_scale)
     # checked on the original QP, whatever units the solver saw; a polish of the QP itself
@@ -351,8 +334,7 @@ def _solve_or_reuse(seen: StepQP, spec: SolverSpec, eps: float, path: SolvePath,
                       native_time=0.0), REUSED, reused
     staged: list[Polish] = []
     try:
-        warm = (warm_starts.guess(spec.name, seen, scale) if warm_starts is not None
-                else path.remembered_start(seen, step) if repeated and polishing else None)
+        warm = None if warm_starts is None else warm_starts.guess(spec.name, seen, scale)
         answer, taken = path.solve(seen, spec, spec.options(eps), warm,
                                    _stage_check(seen, eps, staged) if polishing else None)
     except cp.error.SolverError as exc:

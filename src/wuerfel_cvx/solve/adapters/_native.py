@@ -89,16 +89,14 @@ class InPlace:
               accept: Accept | None = None) -> Answer:
         """Solve ``data`` (this structure): update the solver in place unless just set up.
 
-        These solvers start from their own last solution, or cold, unless :meth:`_start`
-        takes ``warm``.  ``accept``: see :meth:`_solve_staged`.
+        ``warm`` is ignored: these solvers start from their own last solution, or cold.
+        ``accept``: see :meth:`_solve_staged`.
         """
         started = time.perf_counter()
         first = data is self._pending
         if not first:
             self._update(data)
         self._pending = None
-        if warm is not None:
-            self._start(data, warm)
         answer = self._solve(data) if accept is None else self._solve_staged(data, accept)
         elapsed = time.perf_counter() - started + (self._setup_time if first else 0.0)
         return dataclasses.replace(answer, native_time=elapsed)
@@ -108,9 +106,6 @@ class InPlace:
 
     def _solve(self, data: NativeData) -> Answer:
         raise NotImplementedError
-
-    def _start(self, data: NativeData, warm: WarmStart) -> None:
-        """Start the next solve of ``data`` from ``warm`` (this default: ignored)."""
 
     def _solve_staged(self, data: NativeData, accept: Accept) -> Answer:
         """Solve, stopping early at an intermediate answer ``accept`` takes, if staged.

@@ -5,10 +5,7 @@ OSQP takes ``l <= [E; G] d <= u`` in the deviation ``d = x - t`` (:mod:`._native
 ``y`` its first rows' ``w`` and ``z = -w`` on ``G``.  A later QP of the structure writes its
 bounds and the nonzeros of ``P`` and ``A`` (same patterns) into the solver, which starts
 from its own last solution (``warm_starting``); the mapped warm start of
-:mod:`wuerfel_cvx.solve.warm_start` is not used.  A ``warm`` start given to a solve (a
-Coulomb fixed point's last polished answer of the structure,
-:meth:`~wuerfel_cvx.solve.paths.SolvePath.remembered_start`) replaces that iterate.
-Its ``run_time`` includes the update.
+:mod:`wuerfel_cvx.solve.warm_start` is not used.  Its ``run_time`` includes the update.
 
 Staged (:meth:`OSQPAdapter._solve_staged`, when the solve path passes an ``accept`` check):
 OSQP runs :data:`FIRST_STAGE` iterations, then stages doubling the iterations so far, each
@@ -37,7 +34,6 @@ from typing import Any
 import numpy as np
 
 from ...scenes.geometry import FloatArray
-from ..warm_start import WarmStart
 from ._native import (
     Accept,
     Answer,
@@ -117,14 +113,6 @@ class OSQPAdapter(InPlace):
         return Answer(x=data.unknowns(solution.x), eq_dual=w[:self.n_eq],
                       ineq_dual=-w[self.n_eq:], status=status_name(_STATUS, info.status_val),
                       reported_time=float(info.run_time), iterations=int(info.iter))
-
-    def _start(self, data: NativeData, warm: WarmStart) -> None:
-        """Start from ``warm``'s ``d = x - t`` and ``w = [y; -z]``."""
-        start = np.concatenate([warm.eq_dual, -warm.ineq_dual])
-        if self.native is not None:
-            self.native.warm_start(warm.x - data.target, start)
-        else:
-            self.solver.warm_start(x=warm.x - data.target, y=start)
 
     def _solve_staged(self, data: NativeData, accept: Accept) -> Answer:
         """Solve in stages (module docstring), ``max_iter`` iterations in all at most.
