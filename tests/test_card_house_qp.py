@@ -9,7 +9,8 @@ parallel to within 1e-6 and inactive by less than 0.1 mm/s (each resting contact
 row and closest-approach row). OSQP solves the QP restricted to its active rows at once
 and the whole QP only after thousands of iterations; an adaptive step size that follows
 the residuals within a factor of 2 (the package's option) takes fewer iterations than
-OSQP's own factor of 5.
+OSQP's own factor of 5.  OSQP's staged solve (its answer checked at 200 iterations, then
+at each doubling) leaves its iterates as they are.
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ import scipy.sparse as sp
 from stalled_qps import load_step_qp
 from wuerfel_cvx.formulations import StepQP
 from wuerfel_cvx.solve import registry
+from wuerfel_cvx.solve.adapters import Accept, Answer, NativeData
+from wuerfel_cvx.solve.adapters import osqp as osqp_adapter
 from wuerfel_cvx.solve.paths import SolvePath, StepSolution, solve_step_qp
 
 pytestmark = pytest.mark.integration
@@ -59,14 +62,17 @@ def _slack(qp: StepQP, solution: StepSolution) -> np.ndarray:
     return np.asarray(qp.ineq_matrix @ solution.x - qp.ineq_rhs)
 
 
-def _osqp(qp: StepQP, monkeypatch: pytest.MonkeyPatch | None = None,
+def _osqp(qp: StepQP, monkeypatch: pytest.MonkeyPatch | None = None, polishing: bool = False,
           **options: object) -> StepSolution:
-    """``qp`` solved by OSQP at tol ``default`` on a fresh path, ``options`` overriding."""
+    """``qp`` solved by OSQP at tol ``default`` on a fresh path, ``options`` overriding.
+
+    Unpolished by default: OSQP runs to its own criteria (polished, it runs in stages).
+    """
     if monkeypatch is not None:
         spec = registry.SOLVERS["OSQP"]
         monkeypatch.setitem(registry.SOLVERS, "OSQP", dataclasses.replace(
             spec, options=lambda eps: {**spec.options(eps), **options}))
-    return solve_step_qp(qp, "OSQP", "default", path=SolvePath())
+    return solve_step_qp(qp, "OSQP", "default", path=SolvePath(), polishing=polishing)
 
 
 def test_fixture_holds_the_card_house_contact_qp(contact_qp: StepQP) -> None:
@@ -117,16 +123,23 @@ def test_resting_contacts_hold_parallel_rows_a_hair_apart(contact_qp: StepQP,
 
 def test_osqp_solves_the_active_rows_at_once_and_the_whole_qp_slowly(
         contact_qp: StepQP, reference: StepSolution) -> None:
-    """The same optimum: at most 500 iterations on its active rows, 5,000 or more on all."""
+    """The same optimum: at most 500 iterations on its active rows, 5,000 or more on all.
+
+    Polished, OSQP runs in stages and stops at the first whose answer polishes to the
+    exact point: the first stage here, the same optimum.
+    """
     active = np.flatnonzero(_slack(contact_qp, reference) < ACTIVE_SLACK)
     restricted = dataclasses.replace(contact_qp, ineq_matrix=contact_qp.ineq_matrix[active],
                                      ineq_rhs=contact_qp.ineq_rhs[active])
     few, whole = _osqp(restricted), _osqp(contact_qp)
-    assert few.verified and whole.verified
+    staged = _osqp(contact_qp, polishing=True)
+    assert few.verified and whole.verified and staged.verified
     assert few.iterations <= 500
     assert whole.iterations >= 5_000
-    np.testing.assert_allclose(few.x, reference.x, atol=1e-6)
-    np.testing.assert_allclose(whole.x, reference.x, atol=1e-6)
+    assert staged.iterations == osqp_adapter.FIRST_STAGE
+    for solution in (few, whole):
+        np.testing.assert_allclose(solution.x, reference.x, atol=1e-6)
+    np.testing.assert_allclose(staged.x, reference.x, atol=1e-9)
 
 
 def test_adaptive_step_within_a_factor_two_saves_osqp_iterations(
@@ -137,3 +150,31 @@ def test_adaptive_step_within_a_factor_two_saves_osqp_iterations(
     own = _osqp(contact_qp, monkeypatch, adaptive_rho_tolerance=5.0)
     assert package.verified and own.verified
     assert package.iterations < own.iterations
+
+
+def _staged(qp: StepQP, accept: Accept) -> Answer:
+    """``qp`` solved by a fresh OSQP adapter in stages, ``accept`` checking each stage."""
+    data = NativeData(qp)
+    return osqp_adapter.setup(data, registry.solver_options("OSQP", "default")).solve(
+        data, None, accept)
+
+
+def test_osqp_stages_leave_its_iterates_unchanged(contact_qp: StepQP) -> None:
+    """Stages of 200 then doubling, none accepted: bit for bit OSQP's own solve."""
+    data = NativeData(contact_qp)
+    plain = osqp_adapter.setup(data, registry.solver_options("OSQP", "default")).solve(data)
+    checked: list[int] = []
+    staged = _staged(contact_qp, lambda answer: checked.append(answer.iterations) or False)
+    assert plain.status == staged.status == "optimal"
+    assert staged.iterations == plain.iterations > osqp_adapter.FIRST_STAGE
+    assert plain.x is not None and staged.x is not None
+    np.testing.assert_array_equal(staged.x, plain.x)
+    assert checked[:2] == [osqp_adapter.FIRST_STAGE] * 2  # then each stage the total so far
+    assert all(later == 2 * earlier for earlier, later in zip(checked[1:], checked[2:],
+                                                              strict=False))
+
+
+def test_an_accepted_stage_ends_the_osqp_solve(contact_qp: StepQP) -> None:
+    """The first stage's answer accepted: OSQP stops there, and says optimal."""
+    staged = _staged(contact_qp, lambda answer: True)
+    assert (staged.status, staged.iterations) == ("optimal", osqp_adapter.FIRST_STAGE)
