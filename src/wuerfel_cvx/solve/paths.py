@@ -296,9 +296,10 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     x, eq_dual, ineq_dual = _answer_on_qp(answer, step, spec.name, scale, scale / weight_scale)
     # checked on the original QP, whatever units the solver saw; a polish of the QP itself
     # (ordinary data: the solver saw ``qp``) checked these very numbers already
-    same = seen is qp and polished is not None and outcome != REUSED
-    residuals = (polished.residuals if same and polished is not None
-                 else kkt_residuals(qp, x, eq_dual, ineq_dual))
+    if seen is qp and polished is not None and outcome != REUSED:
+        residuals = polished.residuals
+    else:
+        residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
     verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
     if answer.status == cp.OPTIMAL_INACCURATE and not verified:
         raise StepFailure(step, spec.name, answer.status,
