@@ -26,13 +26,14 @@ from __future__ import annotations
 import hashlib
 import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg
 import scipy.optimize
 import scipy.sparse as sp
+from threadpoolctl import ThreadpoolController
 
 from .._sparse import (
     DISSECTION_MIN_UNKNOWNS,
@@ -406,6 +407,23 @@ def exact_active_set(qp: StepQP, x: FloatArray, scales: _Scales) -> Crossover | 
     1e-7 on some of rain-50's QPs, worse on degenerate piles): the polish's solve, repairs
     and checks decide.
     """
+    with _blas().limit(limits=1, user_api="blas"):
+        return _crossover(qp, x, scales)
+
+
+@cache
+def _blas() -> ThreadpoolController:
+    """The BLAS libraries loaded in this process (found once: it takes a millisecond).
+
+    :func:`exact_active_set` runs them on one thread: its dense matrices have a few
+    hundred rows, and BLAS threads waiting for a busy core made it 3 to 10 times slower
+    (rain-50's crossover: 1.8 against 5.9 ms a call with two threads).
+    """
+    return ThreadpoolController()
+
+
+def _crossover(qp: StepQP, x: FloatArray, scales: _Scales) -> Crossover | None:
+    """:func:`exact_active_set`'s work."""
     reduced = _eliminated(qp)
     if reduced is None:
         return None

@@ -21,7 +21,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from threadpoolctl import ThreadpoolController
 
 from ..errors import InputError, StepFailure
 from ..formulations import (
@@ -162,7 +161,6 @@ class Simulation:
         self.planner = IslandPlanner(self.model.n_boxes, settings.sleep, settings.islands)
         self.state = State.initial(scene)
         self.step_index = 0
-        self._blas = ThreadpoolController()
         self.contacts, self._search_time = self._search(self.state)
         self.tape = (GradientTape(self.model, self.formulation, self.dt)
                      if settings.gradients else None)
@@ -175,17 +173,7 @@ class Simulation:
 
         Raises :class:`StepFailure` when no solver solves a QP of the step, or the new
         state is not finite; the object then still holds the state before the step.
-
-        NumPy's and SciPy's BLAS run on one thread during the step (restored after it): a
-        step's dense matrices are small (the polish's crossover: a few hundred unknowns),
-        and BLAS threads that wait for a busy core made them 3 to 10 times slower
-        (``reports/perf``).  The solvers' own threads are not limited.
         """
-        with self._blas.limit(limits=1, user_api="blas"):
-            return self._step()
-
-    def _step(self) -> StepRecord:
-        """:meth:`step`'s work."""
         step = self.step_index + 1
         clock = StageClock(self._search_time)
         plan = self.planner.plan(self.contacts)
