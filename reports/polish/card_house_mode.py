@@ -18,7 +18,8 @@ script takes OSQP's states ``FIRST..LAST`` and
 4. ``models``: from the same state, a few steps with ``ccp`` at dt 1/60 and 1/120 s and
    with ``coulomb`` at 1/60 s (CLARABEL): the largest body speed per step;
 5. ``kicks``: card 22 turned about its foot at rest (state 285 of OSQP's and of CLARABEL's
-   run), opening or closing its top's gap, then CLARABEL's steps: the gap and speed;
+   run), opening or closing its top's gap, then CLARABEL's steps: the gap and speed (also
+   with the ``velocity`` formulation);
 6. ``scan``: every body turned by +-5e-10 rad about its lowest corner at rest: which grow;
 7. ``coulomb``: ``coulomb``'s own run to its step 240, and card 22 turned there.
 
@@ -54,11 +55,11 @@ TIGHT = 1e-12
 1e-7 to 0.3 m/s here, the polished answers' residuals 1e-15)."""
 
 
-def simulation(solver: str = "CLARABEL", dt: float = 1 / 60,
-               friction_model: str = "ccp") -> Simulation:
-    """A card house simulation (``rigid``, the default formulation)."""
+def simulation(solver: str = "CLARABEL", dt: float = 1 / 60, friction_model: str = "ccp",
+               formulation: str = "rigid") -> Simulation:
+    """A card house simulation (``rigid``, the default formulation, unless told)."""
     return Simulation(Scene.named("card-house"), dt=dt, solver=solver,
-                      friction_model=friction_model)
+                      friction_model=friction_model, formulation=formulation)
 
 
 def restart(sim: Simulation, state: State) -> None:
@@ -276,8 +277,11 @@ def kicks(states: dict[int, State]) -> None:
     for _ in range(FIRST):
         sim.step()
     rest["CLARABEL"] = sim.state
-    for name, state in rest.items():
-        for angle in KICKS:
+    runs = [(name, state, sim, KICKS) for name, state in rest.items()]
+    runs.append(("OSQP", states[FIRST],
+                 simulation(formulation="velocity"), (KICKS[0], 0.0)))
+    for name, state, sim, angles in runs:
+        for angle in angles:
             restart(sim, turned(state, 22, 88, angle))
             line = [f"gap {gap_of(sim.contacts, 90, 20):+.1e}"]
             for k in range(12):
@@ -285,7 +289,8 @@ def kicks(states: dict[int, State]) -> None:
                 if k % 3 == 2:
                     line.append(f"{k + 1}: gap {gap_of(sim.contacts, 90, 20):+.1e} m, "
                                 f"speed {np.abs(sim.state.velocities).max():.1e} m/s")
-            print(f"{name}'s state {FIRST}, card 22 turned by {angle:+.0e} rad:", "; ".join(line))
+            print(f"{name}'s state {FIRST}, {sim.formulation.name}, card 22 turned by "
+                  f"{angle:+.0e} rad:", "; ".join(line))
 
 
 def scan(states: dict[int, State]) -> None:
