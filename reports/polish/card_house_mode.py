@@ -296,26 +296,47 @@ def kicks(states: dict[int, State]) -> None:
 def scan(states: dict[int, State]) -> None:
     """Each card turned by +-5e-10 rad about its lowest corner at rest (CLARABEL's steps).
 
-    Prints the cards whose turn grows: the speed's factor per step over steps 3 to 6.
+    Prints the speed's factor per step over steps 3 to 6, and for a turn that grows, the
+    fastest body's sliding contact in the sixth step (:func:`sliding`, the largest slip):
+    its corner, the face's body, ``t = n.v / s`` and ``mu / (mu - t)``.
     """
     sim = simulation()
     rest = states[FIRST]
     for body in range(sim.model.n_boxes):
         corners = rest.points[4 * body: 4 * body + 4]
         foot = 4 * body + int(corners[:, 1].argmin())
-        factors, fastest = [], []
+        factors, notes = [], []
         for angle in (5e-10, -5e-10):
             restart(sim, turned(rest, body, foot, angle))
             speeds = []
             for _ in range(6):
-                sim.step()
+                record = sim.step()
                 speeds.append(np.abs(sim.state.velocities).max())
             factors.append((speeds[5] / speeds[2]) ** (1 / 3))
-            fastest.append(int(np.abs(body_coordinates(sim, sim.state.points,
-                                                       sim.state.velocities)).max(axis=1).argmax()))
-        flag = f"  <- grows (fastest body {fastest})" if max(factors) > 1.5 else ""
+            if factors[-1] > 1.5:
+                notes.append(f"{'counter-clockwise' if angle > 0 else 'clockwise'}: "
+                             + slider(sim, record.qps[0], record.solutions[0]))
         print(f"body {body:2d} (foot corner {foot:3d}): factor per step, turned "
-              f"counter-clockwise {factors[0]:.3f}, clockwise {factors[1]:.3f}{flag}")
+              f"counter-clockwise {factors[0]:.3f}, clockwise {factors[1]:.3f}"
+              + "".join(f"; {note}" for note in notes))
+
+
+def slider(sim: Simulation, qp, solution) -> str:
+    """The fastest body's sliding contact of largest slip in ``solution``, described."""
+    fastest = int(np.abs(body_coordinates(sim, sim.state.points, sim.state.velocities))
+                  .max(axis=1).argmax())
+    c, cones = qp.contacts, qp.cones
+    values, slip = qp.ineq_matrix @ solution.x, cones.slip @ solution.x
+    best, text = 0.0, f"fastest body {fastest}, no sliding contact"
+    for row, _ in sliding(qp, solution):
+        j = int(cones.row_contact[row])
+        if fastest in (c.point_body[j], c.edge_body[j]) and abs(slip[j]) > best:
+            best, mu = abs(slip[j]), cones.coefficient[j]
+            t = 0.5 * (values[row] + values[cones.minus[row]]) / abs(slip[j])
+            text = (f"fastest body {fastest}, sliding corner {c.point[j]} (body "
+                    f"{c.point_body[j]}) on body {c.edge_body[j]}: t {t:.4f}, "
+                    f"mu/(mu-t) {mu / (mu - t):.4f}")
+    return text
 
 
 def coulomb(steps: int = 240) -> None:
