@@ -20,7 +20,8 @@ script takes OSQP's states ``FIRST..LAST`` and
 5. ``kicks``: card 22 turned about its foot at rest (state 285 of OSQP's and of CLARABEL's
    run), opening or closing its top's gap, then CLARABEL's steps: the gap and speed (also
    with the ``velocity`` formulation);
-6. ``scan``: every body turned by +-5e-10 rad about its lowest corner at rest: which grow;
+6. ``scan``: every body turned by +-5e-10 rad about its lowest corner at rest: which grow,
+   and the sliding contact of the body that moves fastest;
 7. ``coulomb``: ``coulomb``'s own run to its step 240, and card 22 turned there.
 
 Run from the repository root (about a minute in all on a loaded 2-core machine; the
