@@ -43,7 +43,11 @@ import warnings
 import numpy as np
 
 from wuerfel_cvx import Scene
+from wuerfel_cvx.formulations import StepQP
+from wuerfel_cvx.formulations.cone import ConeRows
 from wuerfel_cvx.formulations.rigid import body_velocities
+from wuerfel_cvx.solve.paths import StepSolution
+from wuerfel_cvx.step.contacts import Contacts
 from wuerfel_cvx.step.model import State
 from wuerfel_cvx.step.simulation import Simulation
 
@@ -81,8 +85,9 @@ def osqp_states(path: str | None) -> dict[int, State]:
         if k >= FIRST:
             states[k] = sim.state
     if path is not None:
-        np.savez(path, **{f"p{k}": s.points for k, s in states.items()},
-                 **{f"v{k}": s.velocities for k, s in states.items()})
+        arrays = {f"p{k}": s.points for k, s in states.items()}
+        arrays.update({f"v{k}": s.velocities for k, s in states.items()})
+        np.savez(path, allow_pickle=False, **arrays)
     return states
 
 
@@ -112,9 +117,15 @@ def mode(sim: Simulation, states: dict[int, State]) -> int:
     return int(np.abs(shape).max(axis=1).argmax())
 
 
-def sliding(qp, solution) -> list[tuple[int, int]]:
+def cones_of(qp: StepQP) -> ConeRows:
+    """The QP's friction cones (every QP here has them: the card house has friction)."""
+    assert qp.cones is not None
+    return qp.cones
+
+
+def sliding(qp: StepQP, solution: StepSolution) -> list[tuple[int, int]]:
     """``(normal row, loaded edge row)`` of each contact with exactly one edge tight and loaded."""
-    cones, slack = qp.cones, qp.ineq_matrix @ solution.x - qp.ineq_rhs
+    cones, slack = cones_of(qp), qp.ineq_matrix @ solution.x - qp.ineq_rhs
     found = []
     for row, minus in enumerate(cones.minus):
         if minus < 0:
@@ -151,7 +162,7 @@ def contacts(sim: Simulation, states: dict[int, State], body: int) -> None:
         restart(sim, states[k])
         record = sim.step()
         qp, solution = record.qps[0], record.solutions[0]
-        c, cones = qp.contacts, qp.cones
+        c, cones = qp.contacts, cones_of(qp)
         values = qp.ineq_matrix @ solution.x
         slip = cones.slip @ solution.x
         after = sim.contacts
@@ -256,7 +267,7 @@ def turned(state: State, body: int, pivot: int, angle: float) -> State:
     return State(points, state.velocities.copy())
 
 
-def gap_of(contacts, point: int, body: int) -> float:
+def gap_of(contacts: Contacts, point: int, body: int) -> float:
     """The gap (m) of corner ``point`` against ``body``'s face (NaN: no such contact)."""
     found = np.flatnonzero((contacts.point == point) & (contacts.edge_body == body))
     return float(contacts.distance[found[0]]) if found.size else float("nan")
@@ -278,7 +289,8 @@ def kicks(states: dict[int, State]) -> None:
     for _ in range(FIRST):
         sim.step()
     rest["CLARABEL"] = sim.state
-    runs = [(name, state, sim, KICKS) for name, state in rest.items()]
+    runs: list[tuple[str, State, Simulation, tuple[float, ...]]] = [
+        (name, state, sim, KICKS) for name, state in rest.items()]
     runs.append(("OSQP", states[FIRST],
                  simulation(formulation="velocity"), (KICKS[0], 0.0)))
     for name, state, sim, angles in runs:
@@ -322,11 +334,11 @@ def scan(states: dict[int, State]) -> None:
               + "".join(f"; {note}" for note in notes))
 
 
-def slider(sim: Simulation, qp, solution) -> str:
+def slider(sim: Simulation, qp: StepQP, solution: StepSolution) -> str:
     """The fastest body's sliding contact of largest slip in ``solution``, described."""
     fastest = int(np.abs(body_coordinates(sim, sim.state.points, sim.state.velocities))
                   .max(axis=1).argmax())
-    c, cones = qp.contacts, qp.cones
+    c, cones = qp.contacts, cones_of(qp)
     values, slip = qp.ineq_matrix @ solution.x, cones.slip @ solution.x
     best, text = 0.0, f"fastest body {fastest}, no sliding contact"
     for row, _ in sliding(qp, solution):
