@@ -26,12 +26,15 @@ from wuerfel_cvx.formulations import FORMULATIONS
 from wuerfel_cvx.lab.robustness.determinism import (
     FORMULATION_RUN,
     FORMULATION_SOLVER,
+    FRICTION_MODELS,
+    FRICTION_SCENE,
     GOLDEN_DECIMALS,
     GOLDEN_RUN,
     GOLDEN_SOLVERS,
     exact_digest,
     fingerprint_of,
     formulation_digest,
+    friction_digest,
     golden_fingerprint,
     largest_difference,
     physics_fingerprint,
@@ -115,6 +118,41 @@ def test_golden_digest_of_every_formulation(formulation: str) -> None:
         "that is intended, regenerate tests/golden/trajectory_hashes.toml (see its header)")
 
 
+@pytest.mark.parametrize("model", FRICTION_MODELS)
+def test_golden_digest_of_every_friction_model(model: str) -> None:
+    """Every friction model's run of FRICTION_SCENE is pinned too.
+
+    The runs above are frictionless, so without these a change of ``ccp``'s rows or of
+    the Coulomb fixed point would leave the physics fingerprint as it was.
+    """
+    golden = tomllib.loads(GOLDEN_FILE.read_text())
+    if pinned_versions(FORMULATION_SOLVER) != golden["solvers"][FORMULATION_SOLVER]["versions"]:
+        pytest.skip(f"golden digests recorded with other versions of {FORMULATION_SOLVER}'s")
+    assert friction_digest(model) == golden["friction"][model]["sha256"], (
+        f"{model}'s run of {FRICTION_SCENE} changed by more than 1e-9 m; if that is "
+        "intended, regenerate tests/golden/trajectory_hashes.toml (see its header)")
+
+
+@pytest.mark.parametrize("model", FRICTION_MODELS)
+def test_round_off_stays_far_below_the_golden_rounding_with_friction(model: str) -> None:
+    """The friction runs keep the rounding's margin too (see the frictionless test below).
+
+    A 1e-15 change of the start moves ``ccp``'s run by about 4e-14 m and the Coulomb fixed
+    point's by about 2e-15 m (its stopping test did not flip); 1e-11 m is two orders below
+    the 1e-9 m rounding step.
+    """
+    scene = Scene.named(FRICTION_SCENE)
+    shifted = tuple(
+        dataclasses.replace(square, angle=square.angle + ROUND_OFF_PERTURBATION,
+                            center=(square.center[0],
+                                    square.center[1] + ROUND_OFF_PERTURBATION))
+        for square in scene.squares)
+    runs = [simulate(start, dt=GOLDEN_RUN.dt, steps=GOLDEN_RUN.steps, solver=FORMULATION_SOLVER,
+                     tol=GOLDEN_RUN.tol, friction_model=model)
+            for start in (scene, dataclasses.replace(scene, squares=shifted))]
+    assert 0.0 < largest_difference(*runs) < 1e-11
+
+
 @pytest.mark.parametrize("solver", GOLDEN_SOLVERS)
 def test_round_off_differences_stay_far_below_the_golden_rounding(solver: str) -> None:
     """Justifies rounding to 1e-9 m: a few-ulp change of the start moves the run by far less.
@@ -153,7 +191,10 @@ def test_the_physics_fingerprint_is_the_golden_files() -> None:
     assert physics_fingerprint() == expected
     digests = ({solver: entry["sha256"] for solver, entry in golden["solvers"].items()}
                | {f"formulation:{name}": entry["sha256"]
-                  for name, entry in golden["formulations"].items()})
+                  for name, entry in golden["formulations"].items()}
+               | {f"friction:{name}": entry["sha256"]
+                  for name, entry in golden["friction"].items()})
     assert fingerprint_of(digests) == expected
     assert fingerprint_of({**digests, "OSQP": "0" * 64}) != expected
     assert fingerprint_of({**digests, "formulation:rigid-baumgarte": "0" * 64}) != expected
+    assert fingerprint_of({**digests, "friction:coulomb": "0" * 64}) != expected

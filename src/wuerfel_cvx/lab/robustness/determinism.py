@@ -71,11 +71,13 @@ class GoldenRun:
     """Number of steps."""
     tol: str = "default"
     """Solver tolerance preset."""
+    friction_model: str = "ccp"
+    """Friction model (the scenes without friction do not use it)."""
 
     def run(self, solver: str, formulation: str = DEFAULT_FORMULATION) -> Trajectory:
         """Simulate the reference run with ``solver`` (the default formulation unless given)."""
         return simulate(self.scene, dt=self.dt, steps=self.steps, solver=solver, tol=self.tol,
-                        formulation=formulation)
+                        formulation=formulation, friction_model=self.friction_model)
 
 
 GOLDEN_RUN = GoldenRun()
@@ -85,6 +87,14 @@ FORMULATION_RUN = GoldenRun(scene="tilted-drop")
 tips (the landing on a face of :data:`GOLDEN_RUN` does not tell a formulation's
 linearisations apart: ``rigid`` and ``rigid-baumgarte`` agree on it to 1e-15 m, and differ
 here by 2.6e-7 m)."""
+
+FRICTION_MODELS = ("ccp", "coulomb")
+"""The friction models the golden file pins, each by :func:`friction_digest`."""
+
+FRICTION_SCENE = "friction-slide"
+"""The scene of the friction models' digests: a square launched along a table with mu 0.5
+slides, stops after 0.61 s and rests (the golden runs above have no friction, so without
+these a change of a friction model would leave the fingerprint as it was)."""
 
 
 def exact_digest(trajectory: Trajectory) -> str:
@@ -115,8 +125,9 @@ def pinned_versions(solver: str) -> dict[str, str]:
 def fingerprint_of(digests: Mapping[str, str]) -> str:
     """The physics fingerprint of a set of golden digests (name -> digest): 12 hex digits.
 
-    The names are the solvers of the default formulation's runs and ``formulation:<name>``
-    for :data:`FORMULATION_SOLVER`'s run of every formulation.
+    The names are the solvers of the default formulation's runs, ``formulation:<name>``
+    for :data:`FORMULATION_SOLVER`'s run of every formulation and ``friction:<model>`` for
+    its run of every friction model (:func:`friction_digest`).
 
     Equal for two sets exactly when every digest is; a report states the fingerprint of the
     physics it was measured on (:func:`physics_fingerprint`), and a test compares it with
@@ -132,12 +143,23 @@ def physics_fingerprint() -> str:
     return fingerprint_of({solver: rounded_digest(GOLDEN_RUN.run(solver).points)
                            for solver in GOLDEN_SOLVERS}
                           | {f"formulation:{name}": formulation_digest(name)
-                             for name in FORMULATIONS})
+                             for name in FORMULATIONS}
+                          | {f"friction:{model}": friction_digest(model)
+                             for model in FRICTION_MODELS})
 
 
 def formulation_digest(formulation: str) -> str:
     """The rounded digest of :data:`FORMULATION_SOLVER`'s golden run of ``formulation``."""
     return rounded_digest(FORMULATION_RUN.run(FORMULATION_SOLVER, formulation).points)
+
+
+def friction_digest(model: str) -> str:
+    """The rounded digest of a run of :data:`FRICTION_SCENE` with friction model ``model``.
+
+    :data:`FORMULATION_SOLVER`, the default formulation, :data:`GOLDEN_RUN`'s settings.
+    """
+    run = GoldenRun(scene=FRICTION_SCENE, friction_model=model)
+    return rounded_digest(run.run(FORMULATION_SOLVER).points)
 
 
 def golden_fingerprint(text: str) -> str:
@@ -146,7 +168,9 @@ def golden_fingerprint(text: str) -> str:
     return fingerprint_of(
         {solver: str(entry["sha256"]) for solver, entry in golden["solvers"].items()}
         | {f"formulation:{name}": str(entry["sha256"])
-           for name, entry in golden.get("formulations", {}).items()})
+           for name, entry in golden.get("formulations", {}).items()}
+        | {f"friction:{name}": str(entry["sha256"])
+           for name, entry in golden.get("friction", {}).items()})
 
 
 def golden_file_text() -> str:
@@ -175,6 +199,10 @@ def golden_file_text() -> str:
               f"as above) with {FORMULATION_SOLVER}", "# (its versions above)."]
     for name in FORMULATIONS:
         lines += ["", f'[formulations."{name}"]', f'sha256 = "{formulation_digest(name)}"']
+    lines += ["", f"# Each friction model's run of {FRICTION_SCENE} (the default formulation, "
+              f"the other settings", f"# as above) with {FORMULATION_SOLVER} (its versions above)."]
+    for model in FRICTION_MODELS:
+        lines += ["", f'[friction."{model}"]', f'sha256 = "{friction_digest(model)}"']
     return "\n".join(lines) + "\n"
 
 
