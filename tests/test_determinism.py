@@ -103,34 +103,28 @@ def test_golden_digest_of_the_reference_run(solver: str) -> None:
         "tests/golden/trajectory_hashes.toml (see its header)")
 
 
-@pytest.mark.parametrize("formulation", FORMULATIONS)
-def test_golden_digest_of_every_formulation(formulation: str) -> None:
-    """Every formulation's run of FORMULATION_RUN is pinned too.
+PINNED_VARIANTS = ([("formulations", name) for name in FORMULATIONS]
+                   + [("friction", model) for model in FRICTION_MODELS])
+"""The golden file's runs with :data:`FORMULATION_SOLVER` beside the reference run: every
+formulation's run of ``FORMULATION_RUN`` and every friction model's of ``FRICTION_SCENE``."""
 
-    So a changed meaning of a name that is not the default's (``rigid``'s rows, say)
-    changes the physics fingerprint.
+
+@pytest.mark.parametrize(("section", "name"), PINNED_VARIANTS)
+def test_golden_digest_of_every_formulation_and_friction_model(section: str, name: str) -> None:
+    """Every formulation's and friction model's run is pinned too.
+
+    So a changed meaning of a name that is not the default's (``rigid``'s rows, say) changes
+    the physics fingerprint, and so does a change of ``ccp``'s rows or of the Coulomb fixed
+    point, which the frictionless reference run does not reach.
     """
     golden = tomllib.loads(GOLDEN_FILE.read_text())
     if pinned_versions(FORMULATION_SOLVER) != golden["solvers"][FORMULATION_SOLVER]["versions"]:
         pytest.skip(f"golden digests recorded with other versions of {FORMULATION_SOLVER}'s")
-    assert formulation_digest(formulation) == golden["formulations"][formulation]["sha256"], (
-        f"{formulation}'s run of {FORMULATION_RUN.scene} changed by more than 1e-9 m; if "
-        "that is intended, regenerate tests/golden/trajectory_hashes.toml (see its header)")
-
-
-@pytest.mark.parametrize("model", FRICTION_MODELS)
-def test_golden_digest_of_every_friction_model(model: str) -> None:
-    """Every friction model's run of FRICTION_SCENE is pinned too.
-
-    The runs above are frictionless, so without these a change of ``ccp``'s rows or of
-    the Coulomb fixed point would leave the physics fingerprint as it was.
-    """
-    golden = tomllib.loads(GOLDEN_FILE.read_text())
-    if pinned_versions(FORMULATION_SOLVER) != golden["solvers"][FORMULATION_SOLVER]["versions"]:
-        pytest.skip(f"golden digests recorded with other versions of {FORMULATION_SOLVER}'s")
-    assert friction_digest(model) == golden["friction"][model]["sha256"], (
-        f"{model}'s run of {FRICTION_SCENE} changed by more than 1e-9 m; if that is "
-        "intended, regenerate tests/golden/trajectory_hashes.toml (see its header)")
+    scene, digest = ((FORMULATION_RUN.scene, formulation_digest(name))
+                     if section == "formulations" else (FRICTION_SCENE, friction_digest(name)))
+    assert digest == golden[section][name]["sha256"], (
+        f"{name}'s run of {scene} changed by more than 1e-9 m; if that is intended, "
+        "regenerate tests/golden/trajectory_hashes.toml (see its header)")
 
 
 @pytest.mark.parametrize("model", FRICTION_MODELS)
