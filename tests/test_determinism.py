@@ -52,6 +52,15 @@ GOLDEN_FILE = Path(__file__).parent / "golden" / "trajectory_hashes.toml"
 ROUND_OFF_PERTURBATION = 1e-15
 
 
+def perturbed_start(scene: Scene) -> Scene:
+    """``scene`` with every square's angle (rad) and height (m) moved by the round-off size."""
+    return dataclasses.replace(scene, squares=tuple(
+        dataclasses.replace(square, angle=square.angle + ROUND_OFF_PERTURBATION,
+                            center=(square.center[0],
+                                    square.center[1] + ROUND_OFF_PERTURBATION))
+        for square in scene.squares))
+
+
 @cache
 def reference_run(solver: str) -> Trajectory:
     """The golden run with ``solver``, computed once per test process."""
@@ -136,14 +145,9 @@ def test_round_off_stays_far_below_the_golden_rounding_with_friction(model: str)
     the 1e-9 m rounding step.
     """
     scene = Scene.named(FRICTION_SCENE)
-    shifted = tuple(
-        dataclasses.replace(square, angle=square.angle + ROUND_OFF_PERTURBATION,
-                            center=(square.center[0],
-                                    square.center[1] + ROUND_OFF_PERTURBATION))
-        for square in scene.squares)
     runs = [simulate(start, dt=GOLDEN_RUN.dt, steps=GOLDEN_RUN.steps, solver=FORMULATION_SOLVER,
                      tol=GOLDEN_RUN.tol, friction_model=model)
-            for start in (scene, dataclasses.replace(scene, squares=shifted))]
+            for start in (scene, perturbed_start(scene))]
     assert 0.0 < largest_difference(*runs) < 1e-11
 
 
@@ -160,12 +164,7 @@ def test_round_off_differences_stay_far_below_the_golden_rounding(solver: str) -
     the solve time).
     """
     scene = Scene.named(GOLDEN_RUN.scene)
-    shifted = tuple(
-        dataclasses.replace(square, angle=square.angle + ROUND_OFF_PERTURBATION,
-                            center=(square.center[0],
-                                    square.center[1] + ROUND_OFF_PERTURBATION))
-        for square in scene.squares)
-    perturbed = simulate(dataclasses.replace(scene, squares=shifted), dt=GOLDEN_RUN.dt,
+    perturbed = simulate(perturbed_start(scene), dt=GOLDEN_RUN.dt,
                          steps=GOLDEN_RUN.steps, solver=solver, tol=GOLDEN_RUN.tol)
     difference = largest_difference(perturbed, reference_run(solver))
     assert 0.0 < difference < 1e-11  # > 0: the perturbation did reach the run

@@ -416,8 +416,8 @@ def _blas() -> ThreadpoolController:
     """The BLAS libraries loaded in this process (found once: it takes a millisecond).
 
     :func:`exact_active_set` runs them on one thread: its dense matrices have a few
-    hundred rows, and BLAS threads waiting for a busy core made it 3 to 10 times slower
-    (rain-50's crossover: 1.8 against 5.9 ms a call with two threads).
+    hundred rows, too small for a second thread to pay, and a BLAS thread waiting for a busy
+    core slowed it several times over (measured in the CHANGELOG's entry).
     """
     return ThreadpoolController()
 
