@@ -92,13 +92,13 @@ def test_a_large_resting_pile_refines_on_its_last_factor(
     reused, residuals at most 1e-10).
     """
     factorizations = []
-    original = kkt._regularised_factor
+    original = kkt.equilibrated_solution
 
     def counted(*args: object, **kwargs: object) -> object:
         factorizations.append(1)
         return original(*args, **kwargs)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(kkt, "_regularised_factor", counted)
+    monkeypatch.setattr(kkt, "equilibrated_solution", counted)
     scene = Scene.named("field-pyramid-30")
     simulation = Simulation(scene, dt=0.01, solver="PIQP", reuse_active_sets=True)
     for _ in range(2):

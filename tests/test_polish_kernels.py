@@ -71,27 +71,28 @@ def _assert_same_system(qp: StepQP, active: kkt.ActiveSet, start: np.ndarray) ->
     """Equilibration, scaling, factor and refinement of the reduced system: the references'."""
     matrix, rhs = kkt.reduced_kkt(qp, active)
     n = qp.n_variables
-    scale = kkt._equilibration(matrix, n)
+    arrays = (matrix.data, matrix.indices, matrix.indptr)
+    scale = _sparse.equilibration(*arrays, n)
     assert np.array_equal(scale, reference.equilibration(matrix, n))
-    scaled = kkt._scaled(matrix, scale)
-    assert np.array_equal(scaled.data, reference.scaled(matrix, scale))
-    factor = kkt._regularised_factor(scaled, n)
+    scaled = _sparse.canonical_csc(reference.scaled(matrix, scale), matrix.indices,
+                                   matrix.indptr, matrix.shape)
     new_of_old, shift = reference.regularisation(scaled, n, kkt.REGULARISATION)
     *expected, factored = _sparse.ldl_factor(*_sparse.permuted_upper(
         scaled.data, scaled.indices, scaled.indptr, new_of_old, shift))
-    assert (factor is not None) == factored
-    if factor is None:
+    point, their_scale, *factor, their_new_of_old, ours_factored = (
+        _sparse.equilibrated_solution(*arrays, n, np.zeros(0, dtype=np.int64), rhs, start,
+                                      kkt.REGULARISATION, kkt.REFINEMENTS))
+    assert np.array_equal(their_scale, scale)
+    assert ours_factored == factored
+    if not factored:
         return
-    assert np.array_equal(factor.new_of_old, new_of_old)
-    for ours, theirs in zip((factor.l_ptr, factor.l_rows, factor.l_data, factor.inverse_pivot),
-                            expected, strict=True):
+    assert np.array_equal(their_new_of_old, new_of_old)
+    for ours, theirs in zip(factor, expected, strict=True):
         assert np.array_equal(ours, theirs)
-    scaled_rhs, scaled_start = scale * rhs, start / scale
     l_ptr, l_rows, l_data, inverse_pivot = expected
-    assert np.array_equal(
-        factor.refined(scaled, scaled_rhs, scaled_start),
-        reference.refined(scaled, (l_ptr, l_rows, l_data, inverse_pivot), new_of_old,
-                          scaled_rhs, scaled_start, kkt.REFINEMENTS, _sparse.ldl_solve))
+    assert np.array_equal(point, scale * reference.refined(
+        scaled, (l_ptr, l_rows, l_data, inverse_pivot), new_of_old, scale * rhs,
+        start / scale, kkt.REFINEMENTS, _sparse.ldl_solve))
 
 
 @pytest.mark.parametrize(("scene", "formulation", "steps"), CASES)

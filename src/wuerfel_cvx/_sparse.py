@@ -510,6 +510,62 @@ def refined(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, l_ptr: np
     return solution
 
 
+@compiled
+def _nearest_power_of_two(value: float) -> float:
+    """The power of two nearest ``value`` (positive) on a log scale."""
+    return float(np.exp2(np.rint(np.log2(value))))
+
+
+@compiled
+def equilibration(data: FloatArray, indices: np.ndarray, indptr: np.ndarray,
+                  n: int) -> FloatArray:
+    """Power-of-two scales of a reduced KKT matrix (CSC, unknowns first, ``n`` of them).
+
+    An unknown's is the power of two nearest ``1 / sqrt(M_jj)`` (1 where the diagonal is
+    not positive), a row's the power of two nearest the inverse of its largest entry
+    against the scaled unknowns (1 for an empty row).
+    """
+    scale = inverse_root_diagonal(data, indices, indptr, n)
+    for j in range(scale.shape[0]):
+        scale[j] = _nearest_power_of_two(scale[j])
+    rows = inverse_largest_coupling(data, indices, indptr, n, scale)
+    for r in range(rows.shape[0]):
+        scale[n + r] = _nearest_power_of_two(rows[r])
+    return scale
+
+
+@compiled
+def equilibrated_solution(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, n: int,
+                          order: np.ndarray, rhs: FloatArray, start: FloatArray,
+                          regularisation: float, sweeps: int
+                          ) -> tuple[FloatArray, FloatArray, np.ndarray, np.ndarray,
+                                     FloatArray, FloatArray, np.ndarray, bool]:
+    """``M point = rhs`` for a reduced KKT matrix ``M``: equilibrated, factored, refined.
+
+    Solved as ``(S M S) (S^-1 point) = S rhs`` with the scales ``S`` of
+    :func:`equilibration`; ``S M S`` factored with the quasi-definite shifts
+    ``-regularisation * r^2 / h`` on the rows and ``regularisation * h`` on the unknowns
+    (``h`` the largest unknown's diagonal, 1 if zero; ``r`` the largest coupling;
+    :func:`block_sizes`), in ``order`` (:func:`regularised_ldl`); then ``start`` refined by at
+    most ``sweeps`` corrections (:func:`refined`).  Returns the point, ``S``, the factor's
+    arrays (:func:`regularised_ldl`'s) and whether it factored (the point is ``start``
+    if not).
+    """
+    scale = equilibration(data, indices, indptr, n)
+    scaled = scaled_entries(data, indices, indptr, scale)
+    hessian_scale, row_scale = block_sizes(scaled, indices, indptr, n)
+    if hessian_scale == 0.0:
+        hessian_scale = 1.0
+    l_ptr, l_rows, l_data, inverse_pivot, new_of_old, factored = regularised_ldl(
+        scaled, indices, indptr, n, order, -regularisation * row_scale**2 / hessian_scale,
+        regularisation * hessian_scale)
+    point = start
+    if factored:
+        point = scale * refined(scaled, indices, indptr, l_ptr, l_rows, l_data, inverse_pivot,
+                                new_of_old, scale * rhs, start / scale, sweeps)
+    return point, scale, l_ptr, l_rows, l_data, inverse_pivot, new_of_old, factored
+
+
 DISSECTION_MIN_UNKNOWNS = 1000
 """Unknowns from which :func:`fill_reducing_order` dissects (fewer: the identity)."""
 

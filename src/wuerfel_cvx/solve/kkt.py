@@ -37,14 +37,11 @@ from threadpoolctl import ThreadpoolController
 
 from .._sparse import (
     DISSECTION_MIN_UNKNOWNS,
-    block_sizes,
     canonical_csc,
+    equilibrated_solution,
     fill_reducing_order,
-    inverse_largest_coupling,
-    inverse_root_diagonal,
     kkt_matrix,
     refined,
-    regularised_ldl,
     scaled_entries,
 )
 from ..formulations.qp import StepQP
@@ -802,26 +799,30 @@ def _refined_solution(matrix: sp.csc_matrix, n: int, rhs: FloatArray,
                       start: FloatArray, order: np.ndarray | None = None) -> FloatArray | None:
     """``matrix @ point = rhs`` solved from ``start``: equilibrated, factored, refined.
 
-    The system is solved as ``(S K S) (S^-1 point) = S rhs`` with the power-of-two scales
-    ``S`` of :func:`_equilibration`, so that the regularisation is small against every
-    unknown's weight and every row, however far apart the weights are (a heavy table's
-    corners of 1e6 kg beside 0.25 kg corners); powers of two change no bit of the data.
-    ``None`` if the regularised matrix does not factor.  With ``order`` (the unknowns'),
-    factored afresh in it, nothing remembered.
+    The system is solved as ``(S K S) (S^-1 point) = S rhs`` with power-of-two scales ``S``
+    (:func:`~wuerfel_cvx._sparse.equilibration`), so that the regularisation is small
+    against every unknown's weight and every row, however far apart the weights are (a
+    heavy table's corners of 1e6 kg beside 0.25 kg corners); powers of two change no bit
+    of the data.  One compiled call (:func:`~wuerfel_cvx._sparse.equilibrated_solution`)
+    from the matrix to the refined point.  ``None`` if the regularised matrix does not
+    factor.  With ``order`` (the unknowns'), factored afresh in it, nothing remembered.
     """
     remembered = None if order is not None else _remembered(matrix, n)
     if remembered is not None and remembered.factor is not None:
         point = remembered.refined(matrix, rhs, start)
         if point is not None:
             return point
-    scale = _equilibration(matrix, n)
-    scaled = _scaled(matrix, scale)
-    factor = _regularised_factor(scaled, n, order if remembered is None else remembered.order)
-    if factor is None:
+    if remembered is not None:
+        order = remembered.order
+    point, scale, *factor, factored = equilibrated_solution(
+        matrix.data, matrix.indices, matrix.indptr, n, _OWN_ORDER if order is None else order,
+        np.asarray(rhs, dtype=np.float64), np.asarray(start, dtype=np.float64),
+        REGULARISATION, REFINEMENTS)
+    if not factored:
         return None
     if remembered is not None:
-        remembered.scale, remembered.factor = scale, factor
-    return scale * factor.refined(scaled, scale * rhs, start / scale)
+        remembered.scale, remembered.factor = scale, _Factor(*factor)
+    return point
 
 
 def _scaled(matrix: sp.csc_matrix, scale: FloatArray) -> sp.csc_matrix:
@@ -830,32 +831,9 @@ def _scaled(matrix: sp.csc_matrix, scale: FloatArray) -> sp.csc_matrix:
                          matrix.indices, matrix.indptr, matrix.shape)
 
 
-def _equilibration(matrix: sp.csc_matrix, n: int) -> FloatArray:
-    """Power-of-two scales: an unknown's by its diagonal, then a row's by its largest entry.
-
-    The unknown ``j``'s scale is the power of two nearest ``1 / sqrt(K_jj)`` (1 where the
-    diagonal is not positive), a row's the power of two nearest the inverse of its largest
-    entry against the scaled unknowns (1 for an empty row).
-    """
-    data, indices, indptr = matrix.data, matrix.indices, matrix.indptr
-    scale = _power_of_two(inverse_root_diagonal(data, indices, indptr, n))  # 1 stays 1
-    scale[n:] = _power_of_two(inverse_largest_coupling(data, indices, indptr, n, scale))
-    return scale
-
-
-def _power_of_two(values: FloatArray) -> FloatArray:
-    """The powers of two nearest ``values`` (positive) on a log scale, written over them.
-
-    ``np.rint`` is what ``np.round`` calls for no decimals, without its Python wrapper.
-    """
-    np.log2(values, out=values)
-    np.rint(values, out=values)
-    return np.exp2(values, out=values)
-
-
 @dataclass(frozen=True)
 class _Factor:
-    """``L D L'`` of a permuted regularised reduced KKT matrix (:func:`_regularised_factor`)."""
+    """``L D L'`` of a regularised reduced KKT matrix, permuted (``equilibrated_solution``'s)."""
 
     l_ptr: np.ndarray
     l_rows: np.ndarray
@@ -952,27 +930,6 @@ def _elimination_graph(matrix: sp.csc_matrix, n: int) -> sp.csr_array:
 
 def _largest(values: FloatArray) -> float:
     return float(np.max(np.abs(values))) if np.size(values) else 0.0
-
-
-def _regularised_factor(matrix: sp.csc_matrix, n: int,
-                        order: np.ndarray | None = None) -> _Factor | None:
-    """The factor of ``matrix + diag(delta_x I_n, -delta_y I)`` (:data:`REGULARISATION`).
-
-    ``matrix`` is :func:`reduced_kkt`'s, every diagonal entry stored.  Factored ``L D L'``
-    without pivoting (:func:`~wuerfel_cvx._sparse.ldl_factor`), which the regularisation
-    makes possible (the matrix is quasi-definite), with the rows eliminated first: their
-    pivots are ``-delta_y`` exactly, ``L`` has no entries beyond the rows' own, and what
-    remains is the unknowns' block ``P + delta_x I + A' A / delta_y``, positive definite.
-    ``order``: the unknowns' order (the old index of each position,
-    :func:`~wuerfel_cvx._sparse.fill_reducing_order`), theirs if ``None``.
-    ``None`` if a pivot is zero or not finite.
-    """
-    hessian_scale, row_scale = block_sizes(matrix.data, matrix.indices, matrix.indptr, n)
-    hessian_scale = hessian_scale or 1.0
-    *factor, factored = regularised_ldl(
-        matrix.data, matrix.indices, matrix.indptr, n, _OWN_ORDER if order is None else order,
-        -REGULARISATION * row_scale**2 / hessian_scale, REGULARISATION * hessian_scale)
-    return _Factor(*factor) if factored else None
 
 
 _OWN_ORDER = np.zeros(0, dtype=np.int64)
