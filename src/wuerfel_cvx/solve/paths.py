@@ -10,7 +10,6 @@ three residuals are below ``VERIFY_FACTOR * eps``.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 import warnings
@@ -284,16 +283,17 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
                                               polishing, repeated)  # reused or staged: polished
     wall = time.perf_counter() - started
     outcome, reason, active = KEPT, "", None
+    solved = _answer_on_qp(answer, step, spec.name)  # in the solver's units, checked
     if polishing:  # in the solver's units: a power-of-two change of units changes no bit
         if polished is None:
-            polished = polish(seen, *_answer_on_qp(answer, step, spec.name, 1.0, 1.0))
+            polished = polish(seen, *solved)
         outcome, reason = polished.outcome, polished.reason
         active = polished.active if outcome in (POLISHED, REUSED) else None
-        answer = dataclasses.replace(answer, x=polished.x, eq_dual=polished.eq_dual,
-                                     ineq_dual=polished.ineq_dual)
+        solved = polished.x, polished.eq_dual, polished.ineq_dual
         if outcome == POLISHED and (path.reuse_active_sets or repeated):
             path.remember_active_set(seen, polished, step)
-    x, eq_dual, ineq_dual = _answer_on_qp(answer, step, spec.name, scale, scale / weight_scale)
+    dual_scale = scale / weight_scale
+    x, eq_dual, ineq_dual = scale * solved[0], dual_scale * solved[1], dual_scale * solved[2]
     # checked on the original QP, whatever units the solver saw; a polish of the QP itself
     # (ordinary data: the solver saw ``qp``) checked these very numbers already
     if seen is qp and polished is not None and outcome != REUSED:
@@ -305,7 +305,6 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
         raise StepFailure(step, spec.name, answer.status,
                           f"residuals {residuals.worst():.2e} above {VERIFY_FACTOR * eps:.1e}")
     if warm_starts is not None and verified:
-        dual_scale = scale / weight_scale
         warm_starts.remember(spec.name, seen, x / scale, eq_dual / dual_scale,
                              ineq_dual / dual_scale, scale)
     return StepSolution(x=x, solver=spec.name, status=answer.status, residuals=residuals,
@@ -368,20 +367,19 @@ def _stage_check(seen: StepQP, eps: float, accepted: list[Polish]) -> Accept:
     return accept
 
 
-def _answer_on_qp(answer: Answer, step: int, solver: str, scale: float,
-                  dual_scale: float) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """The solver's ``(x, y, z)`` in the QP's own units.
+def _answer_on_qp(answer: Answer, step: int, solver: str
+                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The solver's ``(x, y, z)`` as float arrays, in the units it saw.
 
-    ``scale`` and ``dual_scale`` are powers of two, so the mapping is exact.  Raises
-    :class:`StepFailure` for a status other than solved or a non-finite ``x``.
+    Raises :class:`StepFailure` for a status other than solved or a non-finite ``x``.
     """
     if answer.status not in SOLVED or answer.x is None:
         raise StepFailure(step, solver, answer.status)
-    x = scale * np.asarray(answer.x, dtype=np.float64)
+    x = np.asarray(answer.x, dtype=np.float64)
     if not np.isfinite(x).all():
         raise StepFailure(step, solver, answer.status, "solution has non-finite entries")
-    return (x, dual_scale * np.asarray(answer.eq_dual, dtype=np.float64),
-            dual_scale * np.asarray(answer.ineq_dual, dtype=np.float64))
+    return (x, np.asarray(answer.eq_dual, dtype=np.float64),
+            np.asarray(answer.ineq_dual, dtype=np.float64))
 
 
 def _solve_with_cvxpy(qp: StepQP, declared: DeclaredQP, solver: str,

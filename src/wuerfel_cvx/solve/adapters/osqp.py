@@ -100,6 +100,11 @@ class OSQPAdapter(InPlace):
         self.native = getattr(self.solver, "_solver", None)
 
     def _solve(self, data: NativeData) -> Answer:
+        self._limit_stage(self.max_iter)
+        return self._run(data)
+
+    def _run(self, data: NativeData) -> Answer:
+        """One run of OSQP within its current iteration limit."""
         # With no row active at the optimum, OSQP prints "Polishing not needed ..." to
         # sys.stdout whatever its verbose; the lock keeps two threads' redirects apart.
         with _STDOUT_LOCK, contextlib.redirect_stdout(io.StringIO()):
@@ -118,12 +123,14 @@ class OSQPAdapter(InPlace):
         """Solve in stages (module docstring), ``max_iter`` iterations in all at most.
 
         The answer is the first stage's ``accept`` takes (status ``optimal``), else the
-        last stage's; its iterations and reported time are the stages' sums.
+        last stage's; its iterations and reported time are the stages' sums.  The limit is
+        left at the last stage's (usually the first's, which the next staged solve sets
+        again); an unstaged solve sets its own.
         """
         done, reported = 0, 0.0
         while True:
             self._limit_stage(min(max(done, FIRST_STAGE), self.max_iter - done))
-            answer = self._solve(data)
+            answer = self._run(data)
             done += answer.iterations
             reported += answer.reported_time
             if answer.status not in _STAGE_ENDS or done >= self.max_iter:
@@ -131,14 +138,22 @@ class OSQPAdapter(InPlace):
             if accept(answer):
                 answer = dataclasses.replace(answer, status="optimal")
                 break
-        self._limit_stage(self.max_iter)
         return dataclasses.replace(answer, iterations=done, reported_time=reported)
 
     def _limit_stage(self, iterations: int) -> None:
-        """Set OSQP's ``max_iter`` to ``iterations`` (unless it is already)."""
-        if iterations != self._stage_limit:
+        """Set OSQP's ``max_iter`` to ``iterations`` (unless it is already).
+
+        On the native solver directly where there is one: the wrapper's ``update_settings``
+        loops over every setting's name in Python (some 10 us a call).
+        """
+        if iterations == self._stage_limit:
+            return
+        if self.native is not None:
+            self.solver.settings.max_iter = iterations
+            self.native.update_settings(self.solver.settings)
+        else:
             self.solver.update_settings(max_iter=iterations)
-            self._stage_limit = iterations
+        self._stage_limit = iterations
 
     def _update(self, data: NativeData) -> None:
         lower, upper = _bounds(data)
