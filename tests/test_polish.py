@@ -19,7 +19,14 @@ import scipy.sparse as sp
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.formulations.qp import StepQP, declare_qp
 from wuerfel_cvx.solve import kkt
-from wuerfel_cvx.solve.kkt import POLISHED, REJECTED, REUSED, kkt_residuals, polish
+from wuerfel_cvx.solve.kkt import (
+    EXACT_OUTCOMES,
+    POLISHED,
+    REJECTED,
+    REUSED,
+    kkt_residuals,
+    polish,
+)
 from wuerfel_cvx.solve.registry import TOLERANCE_PRESETS, available_solvers
 from wuerfel_cvx.step.contacts import Contacts
 
@@ -70,6 +77,22 @@ def test_a_simple_active_set_is_polished_to_the_exact_point() -> None:
     np.testing.assert_allclose(result.ineq_dual, [2.0, 0.0], atol=ROUND_OFF)
     assert list(result.active.lower) == [0]
 
+
+
+def test_an_answer_exact_to_round_off_is_kept_as_it_is() -> None:
+    # the problem above, answered exactly (as an active-set solver, or OSQP after its own
+    # polish, answers): nothing to polish, the answer itself, its active set guessed
+    qp = _qp([1, 1], [0, 0], [[1, 1], [1, 0]], [2, -5])
+    exact = (np.array([1.0, 1.0]), np.zeros(0), np.array([2.0, 0.0]))
+    result = polish(qp, *exact)
+    assert result.outcome == kkt.EXACT
+    assert all(ours is theirs for ours, theirs in
+               zip((result.x, result.eq_dual, result.ineq_dual), exact, strict=True))
+    assert list(result.active.lower) == [0] and not result.active.upper.size
+    # off by ten times the round-off bound: not exact, so polished back to the exact point
+    nearly = (exact[0] + np.array([10 * kkt.ROUND_OFF, 0.0]), *exact[1:])
+    assert kkt_residuals(qp, *nearly).worst() > kkt.ROUND_OFF
+    assert polish(qp, *nearly).outcome == POLISHED
 
 def test_a_degenerate_active_set_keeps_the_answers_split_of_the_multipliers() -> None:
     # three rows through the optimum (1, 1) in two unknowns, one of them twice: the
@@ -269,13 +292,13 @@ def test_the_card_house_at_rest_is_polished_on_every_step() -> None:
     """
     traj = simulate(Scene.named("card-house"), dt=1 / 60, steps=30, solver="CLARABEL",
                     friction_model="ccp")
-    assert traj.metrics["polish"].isin([POLISHED, REUSED]).all()
+    assert traj.metrics["polish"].isin(EXACT_OUTCOMES).all()
     assert traj.metrics["verified"].all()
 
 
 def test_a_polish_that_makes_things_worse_is_rejected(monkeypatch: pytest.MonkeyPatch) -> None:
     qp = _qp([1, 1], [0, 0], [[1, 1]], [2])
-    answer = (np.array([1.0, 1.0]), np.zeros(0), np.array([2.0]))
+    answer = _interior(qp, np.array([1.0, 1.0]), np.zeros(0), np.array([2.0]))
     residuals = kkt_residuals(qp, *answer)
     # a reduced solve returning a point off the optimum (as a bad factorization would)
     monkeypatch.setattr(kkt, "_solve_on", lambda *_: (np.array([1.5, 0.5]), np.zeros(0),
@@ -319,7 +342,7 @@ def test_a_row_at_rest_stays_put(solver: str, tol: str) -> None:
     widening = (xs.max(axis=1) - xs.min(axis=1)) - (xs[0].max() - xs[0].min())
     assert np.max(np.abs(widening)) <= 1e-9
     assert traj.metrics["verified"].all()
-    assert traj.metrics["polish"].isin([POLISHED, REUSED]).all()
+    assert traj.metrics["polish"].isin(EXACT_OUTCOMES).all()
 
 
 @pytest.mark.parametrize("tol", list(TOLERANCE_PRESETS))

@@ -36,7 +36,7 @@ import numpy as np
 from ..formulations.qp import StepQP
 from ..formulations.velocity import FIRST_DAMPED_PASS
 from ..scenes.geometry import FloatArray, rot90
-from ..solve.kkt import POLISHED, REUSED, ActiveSet, guess_active_set
+from ..solve.kkt import EXACT_OUTCOMES, ActiveSet, guess_active_set
 from ..solve.paths import StepSolution
 from ..step.model import IntArray, Model
 from .adjoint import (
@@ -178,7 +178,7 @@ def _active(record: StepTape, qp: StepQP, solution: StepSolution) -> tuple[Activ
     """An answer's active set, and whether it was guessed (its polish rejected)."""
     if not solution.verified:
         raise GradientError(f"step {record.step}: a pass was not verified")
-    guessed = solution.polish not in (POLISHED, REUSED) or solution.active is None
+    guessed = solution.polish not in EXACT_OUTCOMES or solution.active is None
     active = solution.active
     if active is None:
         active = guess_active_set(qp, solution.x, solution.ineq_dual)

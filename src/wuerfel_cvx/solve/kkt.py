@@ -48,15 +48,21 @@ from ..formulations.qp import StepQP
 from ..scenes.geometry import FloatArray
 from . import residual_kernel
 
-__all__ = ["POLISH_OUTCOMES", "ActiveSet", "Polish", "Residuals", "guess_active_set",
-           "kkt_residuals", "merge_parallel_rows", "polish", "reduced_kkt", "solve_reduced"]
+__all__ = ["EXACT_OUTCOMES", "POLISH_OUTCOMES", "ActiveSet", "Polish", "Residuals",
+           "guess_active_set", "kkt_residuals", "merge_parallel_rows", "polish", "reduced_kkt",
+           "solve_reduced"]
 
-POLISHED, KEPT, REJECTED, REUSED = "polished", "kept", "rejected", "reused"
-POLISH_OUTCOMES = (KEPT, REUSED, POLISHED, REJECTED)
+POLISHED, KEPT, REJECTED, REUSED, EXACT = "polished", "kept", "rejected", "reused", "exact"
+POLISH_OUTCOMES = (KEPT, EXACT, REUSED, POLISHED, REJECTED)
 """What became of a QP's answer: replaced by its polished point, kept as the solver gave it
 (polishing off), or kept because the polished point was rejected (:attr:`Polish.reason`);
-``reused``: no solver ran, the last answer's active set gave this QP's exact answer
-(:func:`reuse_active_set`)."""
+``exact``: kept as the solver gave it because it already is an exact KKT point (every
+relative residual at most :data:`ROUND_OFF`: feasible, sign-consistent and complementary to
+round-off, which is all a polish would make it; an active-set solver's answer, or OSQP's
+after its own polish); ``reused``: no solver ran, the last answer's active set gave this
+QP's exact answer (:func:`reuse_active_set`)."""
+EXACT_OUTCOMES = (POLISHED, EXACT, REUSED)
+"""The outcomes whose answer is an exact KKT point of its active set (to round-off)."""
 
 REUSE_TOLERANCE = 1e-10
 """Largest relative KKT residual (1) of an answer found on a reused active set: as exact as
@@ -236,7 +242,8 @@ class Polish:
     """What :func:`polish` made of an answer."""
 
     outcome: str
-    """:data:`POLISHED` (the point below replaces the answer) or :data:`REJECTED`."""
+    """:data:`POLISHED` (the point below replaces the answer), :data:`EXACT` (the answer
+    itself) or :data:`REJECTED`."""
     reason: str
     """Why a polish was rejected (``""`` when polished): ``singular`` (the reduced KKT
     matrix did not factor), ``active set`` (no sign-consistent, feasible active set within
@@ -248,7 +255,7 @@ class Polish:
     residuals: Residuals
     """The polished point's residuals (:func:`kkt_residuals`)."""
     active: ActiveSet
-    """The active set of the polished point."""
+    """The active set of the polished point (of an exact answer: the one guessed from it)."""
 
 
 def _scales(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray) -> _Scales:
@@ -588,7 +595,9 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
            residuals: Residuals | None = None) -> Polish:
     """The answer ``(x, y, z)`` with residuals ``residuals``, made exact on its active set.
 
-    ``residuals`` are the answer's (:func:`kkt_residuals`; computed when not given).
+    ``residuals`` are the answer's (:func:`kkt_residuals`; computed when not given).  An
+    answer whose own residuals are all at most :data:`ROUND_OFF` is returned as it is,
+    :data:`EXACT`, with the active set guessed from it (below).
 
     Guesses the tight rows (:func:`guess_active_set`) and solves the equality-constrained
     KKT system ``[[P, A'], [A, 0]] [x; lam] = [-q; b]`` of the objective (``P = 2 (W +
@@ -625,6 +634,8 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     residuals = checked if residuals is None else residuals
     answer = (x, eq_dual, ineq_dual)
     active = guess_active_set(qp, x, ineq_dual, scales)
+    if checked.worst() <= ROUND_OFF:  # nothing for a polish to correct
+        return Polish(EXACT, "", x, eq_dual, ineq_dual, checked, active)
     first = _polished_on(qp, active, answer, scales, residuals)
     if first.outcome == POLISHED or first.reason == "singular":
         return first

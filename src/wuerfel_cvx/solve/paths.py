@@ -38,6 +38,8 @@ from .cvxpy_forms import (
     structure_key,
 )
 from .kkt import (
+    EXACT,
+    EXACT_OUTCOMES,
     KEPT,
     POLISH_OUTCOMES,
     POLISHED,
@@ -105,15 +107,17 @@ class StepSolution:
     """Multipliers ``y`` of ``E x = e`` (cvxpy's sign, as :attr:`ineq_dual`)."""
     polish: str = KEPT
     """What became of the solver's answer (:data:`~wuerfel_cvx.solve.kkt.POLISH_OUTCOMES`):
-    ``polished`` (``x`` and the multipliers are its polished point), ``kept`` (polishing
-    off) or ``rejected`` (the solver's answer, its polish rejected: :attr:`polish_reason`)."""
+    ``polished`` (``x`` and the multipliers are its polished point), ``exact`` (the
+    solver's answer, already exact to round-off), ``reused`` (found on an earlier answer's
+    active set, no solver), ``kept`` (polishing off) or ``rejected`` (the solver's answer,
+    its polish rejected: :attr:`polish_reason`)."""
     polish_reason: str = ""
     """Why the polish was rejected (:attr:`wuerfel_cvx.solve.kkt.Polish.reason`), else ``""``."""
     polish_time: float = 0.0
     """Wall time (s) after the solver returned: mapping back, polish and the KKT check."""
     active: ActiveSet | None = None
-    """The active set of the polished point (``None`` unless :attr:`polish` is
-    ``polished``): the rows whose KKT system a gradient through the step solves
+    """The active set of the exact point (``None`` unless :attr:`polish` is ``polished``,
+    ``exact`` or ``reused``): the rows whose KKT system a gradient through the step solves
     (:mod:`wuerfel_cvx.gradients`)."""
 
 
@@ -288,9 +292,9 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
         if polished is None:
             polished = polish(seen, *solved)
         outcome, reason = polished.outcome, polished.reason
-        active = polished.active if outcome in (POLISHED, REUSED) else None
+        active = polished.active if outcome in EXACT_OUTCOMES else None
         solved = polished.x, polished.eq_dual, polished.ineq_dual
-        if outcome == POLISHED and (path.reuse_active_sets or repeated):
+        if outcome in (POLISHED, EXACT) and (path.reuse_active_sets or repeated):
             path.remember_active_set(seen, polished, step)
     dual_scale = scale / weight_scale
     x, eq_dual, ineq_dual = scale * solved[0], dual_scale * solved[1], dual_scale * solved[2]
@@ -359,7 +363,7 @@ def _stage_check(seen: StepQP, eps: float, accepted: list[Polish]) -> Accept:
         polished = polish(seen, np.asarray(answer.x, dtype=np.float64),
                           np.asarray(answer.eq_dual, dtype=np.float64),
                           np.asarray(answer.ineq_dual, dtype=np.float64))
-        if polished.outcome != POLISHED or not polished.residuals.worst() <= eps:
+        if polished.outcome not in (POLISHED, EXACT) or not polished.residuals.worst() <= eps:
             return False
         accepted.append(polished)
         return True
@@ -529,7 +533,8 @@ def polish_of(solutions: Sequence[StepSolution]) -> tuple[str, str]:
     """``polish`` and ``polish_reason`` of several answers taken as one.
 
     The last of :data:`~wuerfel_cvx.solve.kkt.POLISH_OUTCOMES` any had (``rejected`` over
-    ``polished`` over ``reused`` over ``kept``), and their reasons joined by ``+``.
+    ``polished`` over ``reused`` over ``exact`` over ``kept``), and their reasons joined by
+    ``+``.
     """
     return (max((solution.polish for solution in solutions), key=POLISH_OUTCOMES.index),
             "+".join(dict.fromkeys(solution.polish_reason for solution in solutions

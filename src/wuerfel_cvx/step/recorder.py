@@ -57,8 +57,9 @@ number of QPs solved one after another for the step (the most of any island): 1 
 single-pass formulation, up to ``max_passes`` for the
 closest-approach Gauss-Newton passes of ``velocity``, 0 for a step that solved none; its
 times and ``iterations`` are those passes' sums.  ``polish`` is what became of the step's
-answers (:data:`~wuerfel_cvx.solve.kkt.POLISH_OUTCOMES`: ``polished``, ``kept`` with
-polishing off, ``rejected (reason)`` if any QP's polish was, with the reasons of
+answers (:data:`~wuerfel_cvx.solve.kkt.POLISH_OUTCOMES`: ``polished``, ``exact`` where
+the solver's answers needed no polish, ``reused``, ``kept`` with polishing off,
+``rejected (reason)`` if any QP's polish was, with the reasons of
 :attr:`wuerfel_cvx.solve.kkt.Polish.reason`).  The next six are the physical
 criteria of the step's contact impulses (:mod:`wuerfel_cvx.step.criteria`: Signorini and
 pushes at a distance in every step with a contact, the friction criteria NaN for a step

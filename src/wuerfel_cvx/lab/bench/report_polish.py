@@ -118,7 +118,8 @@ def _acceptance(polished: pd.DataFrame) -> str:
                      rejected, reasons or "-"])
     table = markdown_table(["solver", "tol", "points", "steps", "steps exact",
                             "steps with a rejected polish", "reasons (steps)"], rows)
-    return ("Share of the steps whose answers were all exact: polished, or found on the last "
+    return ("Share of the steps whose answers were all exact: polished, exact as the solver "
+            "gave them (residuals at round-off: nothing to polish), or found on the last "
             "answer's active set without a solver (a step counts only if every QP it solved "
             "was), over the points that ran polished:\n\n" + table)
 

@@ -24,6 +24,7 @@ from ...formulations import StepQP
 from ...scenes.geometry import FloatArray
 from ...scenes.scene import Scene
 from ...simulate import ASLEEP, resolve_scene, simulate
+from ...solve.kkt import EXACT_OUTCOMES
 from ...solve.paths import StepSolution, solve_step_qp
 from ...solve.registry import SOLVERS
 from ...step.metrics import deepest_overlap, largest_corner_distance, total_energy
@@ -282,7 +283,7 @@ def _polish_summary(trajectory: Trajectory) -> dict[str, Any]:
     rejected = outcomes[outcomes.str.startswith("rejected")]
     reasons = rejected.str.extract(r"\((.*)\)", expand=False).fillna("").value_counts()
     return summary | {
-        "polished_fraction": float(outcomes.isin(["polished", "reused"]).mean()),
+        "polished_fraction": float(outcomes.isin(list(EXACT_OUTCOMES)).mean()),
         "reused_fraction": float(outcomes.eq("reused").mean()),
         "polish_rejected_steps": len(rejected),
         "polish_rejections": ", ".join(f"{reason}: {count}" for reason, count in reasons.items())

@@ -143,8 +143,9 @@ COLUMNS: tuple[Column, ...] = (
     _c("verified", "bool", "", "the independent KKT residual check held on every step"),
     _c("verified_fraction", "float", "1", "fraction of completed steps that were verified"),
     _c("polished_fraction", "float", "1",
-       "fraction of the steps that solved a QP whose answers were all polished or found on "
-       "the last answer's active set (exact either way); empty without polishing"),
+       "fraction of the steps that solved a QP whose answers were all exact: polished, exact "
+       "as the solver gave them, or found on the last answer's active set; empty without "
+       "polishing"),
     _c("reused_fraction", "float", "1",
        "fraction of the steps that solved a QP whose answers were all found on the last "
        "answer's active set, without the solver; empty without polishing"),
