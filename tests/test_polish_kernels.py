@@ -95,6 +95,23 @@ def _assert_same_system(qp: StepQP, active: kkt.ActiveSet, start: np.ndarray) ->
         start / scale, kkt.REFINEMENTS, _sparse.ldl_solve))
 
 
+def _assert_one_call_solves_the_system(qp: StepQP, active: kkt.ActiveSet,
+                                       answer: tuple[np.ndarray, np.ndarray],
+                                       start: np.ndarray) -> None:
+    """``_sparse.reduced_solution`` (a small system's one call): the assembled system's point."""
+    n, n_eq = qp.n_variables, qp.n_equalities
+    matrix, rhs = kkt.reduced_kkt(qp, active)
+    expected = kkt._refined_solution(matrix, n, rhs, start)
+    point = kkt._solve_on(qp, active, answer[0], np.zeros(n_eq), answer[1])
+    assert (point is None) == (expected is None or not np.isfinite(expected).all())
+    if point is None or expected is None:
+        return
+    z = np.zeros(qp.n_inequalities)
+    z[active.rows] = -expected[n + n_eq:]
+    for ours, theirs in zip(point, (expected[:n], expected[n:n + n_eq], z), strict=True):
+        assert np.array_equal(ours, theirs)
+
+
 @pytest.mark.parametrize(("scene", "formulation", "steps"), CASES)
 def test_the_polish_kernels_are_the_references_on_step_qps(scene: str, formulation: str,
                                                            steps: int) -> None:
@@ -107,8 +124,9 @@ def test_the_polish_kernels_are_the_references_on_step_qps(scene: str, formulati
             _assert_same_rules(route, noisy_x, noisy_z)
         _, scales = kkt._checked(qp, x, np.zeros(qp.n_equalities), z)
         active = kkt.guess_active_set(qp, x, z, scales)
-        _assert_same_system(qp, active, np.concatenate(
-            [noisy_x, np.zeros(qp.n_equalities), -noisy_z[active.rows]]))
+        start = np.concatenate([noisy_x, np.zeros(qp.n_equalities), -noisy_z[active.rows]])
+        _assert_same_system(qp, active, start)
+        _assert_one_call_solves_the_system(qp, active, (noisy_x, noisy_z), start)
 
 
 def test_the_checks_scales_are_the_general_codes() -> None:

@@ -566,6 +566,48 @@ def equilibrated_solution(data: FloatArray, indices: np.ndarray, indptr: np.ndar
     return point, scale, l_ptr, l_rows, l_data, inverse_pivot, new_of_old, factored
 
 
+@compiled
+def reduced_solution(h_ptr: np.ndarray, h_rows: np.ndarray, h_data: FloatArray,
+                     gradient_at_zero: FloatArray, e_data: FloatArray, e_indices: np.ndarray,
+                     e_indptr: np.ndarray, eq_rhs: FloatArray, g_data: FloatArray,
+                     g_indices: np.ndarray, g_indptr: np.ndarray, ineq_rhs: FloatArray,
+                     ineq_upper: FloatArray, lower: np.ndarray, upper: np.ndarray,
+                     x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray,
+                     regularisation: float, sweeps: int
+                     ) -> tuple[FloatArray, FloatArray, FloatArray, bool]:
+    """The KKT point of a QP with the rows ``lower`` and ``upper`` of ``G`` tight.
+
+    The QP: ``min 1/2 x' H x + q' x`` (``H`` canonical CSC, ``q`` = ``gradient_at_zero``)
+    subject to ``E x = e`` (CSR) and ``h <= G x <= u`` (CSR; ``u`` = ``ineq_upper``, read
+    only at the rows ``upper``).  Its reduced KKT system (:func:`kkt_matrix`, the right side
+    ``[-q; e; h_lower; u_upper]``) solved by :func:`equilibrated_solution` in its own order,
+    refined from ``(x, y, -z_tight)``.  Returns ``x``, ``y``, ``z`` (zero off the tight rows;
+    ``z = -lambda`` on them) and whether the system factored to a finite point.
+    """
+    n, n_eq, n_lower = x.shape[0], eq_rhs.shape[0], lower.shape[0]
+    n_tight = n_lower + upper.shape[0]
+    tight = np.empty(n_tight, dtype=np.int64)
+    tight[:n_lower] = lower
+    tight[n_lower:] = upper
+    indptr, indices, data = kkt_matrix(h_ptr, h_rows, h_data, e_data, e_indices, e_indptr,
+                                       g_data, g_indices, g_indptr, tight)
+    rhs, start = np.empty(n + n_eq + n_tight), np.empty(n + n_eq + n_tight)
+    rhs[:n], start[:n] = -gradient_at_zero, x
+    rhs[n:n + n_eq], start[n:n + n_eq] = eq_rhs, eq_dual
+    for k in range(n_tight):
+        row = tight[k]
+        rhs[n + n_eq + k] = ineq_rhs[row] if k < n_lower else ineq_upper[row]
+        start[n + n_eq + k] = -ineq_dual[row]
+    point, _, _, _, _, _, _, factored = equilibrated_solution(
+        data, indices, indptr, n, np.zeros(0, dtype=np.int64), rhs, start, regularisation,
+        sweeps)
+    finite = factored and bool(np.isfinite(point).all())
+    z = np.zeros(ineq_dual.shape[0])
+    for k in range(n_tight):
+        z[tight[k]] = -point[n + n_eq + k]
+    return point[:n].copy(), point[n:n + n_eq].copy(), z, finite
+
+
 DISSECTION_MIN_UNKNOWNS = 1000
 """Unknowns from which :func:`fill_reducing_order` dissects (fewer: the identity)."""
 

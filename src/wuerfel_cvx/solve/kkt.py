@@ -41,6 +41,7 @@ from .._sparse import (
     equilibrated_solution,
     fill_reducing_order,
     kkt_matrix,
+    reduced_solution,
     refined,
     scaled_entries,
 )
@@ -744,6 +745,22 @@ def reduced_kkt(qp: StepQP, active: ActiveSet) -> tuple[sp.csc_matrix, FloatArra
     by one compiled loop (:func:`~wuerfel_cvx._sparse.kkt_matrix`; scipy's block assembly
     costs ten times the factorization on a step's small system).
     """
+    (h_ptr, h_rows, h_data), gradient_at_zero = _objective_terms(qp)
+    eq, ineq = qp.eq_matrix, qp.ineq_matrix
+    indptr, indices, data = kkt_matrix(
+        h_ptr, h_rows, h_data, eq.data, eq.indices, eq.indptr,
+        ineq.data, ineq.indices, ineq.indptr, active.rows)
+    size = indptr.size - 1
+    matrix = canonical_csc(data, indices, indptr, (size, size))
+    bounds = [qp.eq_rhs, qp.ineq_rhs[active.lower]]
+    if active.upper.size:
+        assert qp.ineq_upper is not None
+        bounds.append(qp.ineq_upper[active.upper])
+    return matrix, np.concatenate([-gradient_at_zero, *bounds])
+
+
+def _objective_terms(qp: StepQP) -> tuple[tuple[np.ndarray, np.ndarray, FloatArray], FloatArray]:
+    """``P`` (canonical CSC arrays) and ``q`` of the objective ``1/2 x' P x + q' x + c``."""
     n = qp.n_variables
     gradient_at_zero = -2.0 * qp.weights * qp.target
     h_ptr: np.ndarray
@@ -758,17 +775,7 @@ def reduced_kkt(qp: StepQP, active: ActiveSet) -> tuple[sp.csc_matrix, FloatArra
         h_ptr, h_rows, h_data = np.arange(n + 1), np.arange(n), 2.0 * qp.weights
     if qp.linear is not None:
         gradient_at_zero = gradient_at_zero + qp.linear
-    eq, ineq = qp.eq_matrix, qp.ineq_matrix
-    indptr, indices, data = kkt_matrix(
-        h_ptr, h_rows, np.asarray(h_data, dtype=np.float64), eq.data, eq.indices, eq.indptr,
-        ineq.data, ineq.indices, ineq.indptr, active.rows)
-    size = indptr.size - 1
-    matrix = canonical_csc(data, indices, indptr, (size, size))
-    bounds = [qp.eq_rhs, qp.ineq_rhs[active.lower]]
-    if active.upper.size:
-        assert qp.ineq_upper is not None
-        bounds.append(qp.ineq_upper[active.upper])
-    return matrix, np.concatenate([-gradient_at_zero, *bounds])
+    return (h_ptr, h_rows, np.asarray(h_data, dtype=np.float64)), gradient_at_zero
 
 
 def solve_reduced(matrix: sp.csc_matrix, n: int, rhs: FloatArray) -> FloatArray | None:
@@ -790,11 +797,24 @@ def _solve_on(qp: StepQP, active: ActiveSet, x: FloatArray, eq_dual: FloatArray,
               ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
     """The KKT point of ``qp`` with ``active`` rows tight, refined from ``(x, y, z)``.
 
-    ``None`` if the regularised matrix does not factor.  See :func:`polish`.  ``order``:
-    the unknowns' elimination order of a large system (:func:`_unknowns_order`), found
-    afresh for its pattern if ``None``.
+    ``None`` if the regularised matrix does not factor.  See :func:`polish`.  A small system
+    (fewer than :data:`~wuerfel_cvx._sparse.DISSECTION_MIN_UNKNOWNS` unknowns) is assembled,
+    factored and refined by one compiled call
+    (:func:`~wuerfel_cvx._sparse.reduced_solution`); a large one in ``order``, the unknowns'
+    elimination order (:func:`_unknowns_order`), found afresh for its pattern if ``None``,
+    on the last factor of its pattern where that still serves (:class:`_LargeSystem`).
     """
     n, n_eq = qp.n_variables, qp.n_equalities
+    if n < DISSECTION_MIN_UNKNOWNS:
+        hessian, gradient_at_zero = _objective_terms(qp)
+        eq, ineq = qp.eq_matrix, qp.ineq_matrix
+        x_new, y_new, z_new, finite = reduced_solution(
+            *hessian, gradient_at_zero, eq.data, eq.indices, eq.indptr, qp.eq_rhs, ineq.data,
+            ineq.indices, ineq.indptr, qp.ineq_rhs, _upper_bounds(qp), active.lower,
+            active.upper, np.asarray(x, dtype=np.float64),
+            np.asarray(eq_dual, dtype=np.float64), np.asarray(ineq_dual, dtype=np.float64),
+            REGULARISATION, REFINEMENTS)
+        return (x_new, y_new, z_new) if finite else None
     matrix, rhs = reduced_kkt(qp, active)
     tight = active.rows
     best = _refined_solution(matrix, n, rhs, np.concatenate([x, eq_dual, -ineq_dual[tight]]),
