@@ -360,16 +360,15 @@ class FrictionSettings:
     coulomb_max_iterations: int = 200
     """``friction_model="coulomb"``: most friction problems per step QP
     (:mod:`wuerfel_cvx.friction.coulomb`); a step that reaches it goes on with its last iterate and
-    is reported as not converged.  The card house's slowest steps take up to 163 (the
-    iteration contracts by about 0.97 a friction problem there; docs/coulomb.md)."""
+    is reported as not converged.  It leaves room for the slowly contracting steps of a
+    settling pile (the card house's first steps, docs/coulomb.md)."""
     coulomb_tolerance: float = 1e-4
     """``friction_model="coulomb"``: the fixed point is converged when two successive contact
-    QPs' mass-scaled velocities differ by at most this fraction of the largest mass-scaled
-    velocity change of the contact impulses, or their normal impulses summed over twin
-    contacts (rows parallel, cards face to face) by this fraction of the largest sum (1).
-    Ten times the residual check's ``VERIFY_FACTOR * eps`` at the default tolerance, so
-    solver noise does not hold it back, and far below the 1 % of the friction it may leave
-    unsettled."""
+    QPs agree to this fraction (1) of the largest, either in the bodies' mass-scaled velocity
+    change or in their normal impulses summed over twin contacts (normal rows parallel,
+    cards face to face; :func:`wuerfel_cvx.friction.coulomb._unchanged`).  Ten times the
+    residual check's ``VERIFY_FACTOR * eps`` at the default tolerance, so solver noise does
+    not hold it back, and far below the 1 % of the friction it may leave unsettled."""
     @property
     def friction(self) -> FrictionSettings:
         """These settings (a formulation with friction is its own friction settings)."""

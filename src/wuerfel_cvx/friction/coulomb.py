@@ -31,20 +31,23 @@ top of the QP's (:mod:`wuerfel_cvx.friction.problem`).
 *Iteration.* From ``lambda_t = 0``, or from the impulses the same contacts had at the end of
 the step before (``coulomb_warm_start``, :class:`FrictionMemory`): contact QP ->
 ``lambda_n`` -> friction problem -> ``lambda_t`` -> contact QP ..., until two successive
-contact QPs agree (:func:`_settled`), either in how they move the bodies (their
-mass-scaled velocities ``sqrt(w) x`` differ by at most ``tolerance`` times the largest
-mass-scaled change ``sqrt(w) (x - t)`` the contact impulses make, :func:`_motion`) or in
-their normal impulses summed over twin contacts (differ by at most ``tolerance`` times the
-largest such sum, :func:`_twin_groups`).  Twins are contacts whose rows are parallel to
-``1 - cos < 1e-6`` (cards face to face): the split of a load among them is not unique, and
-a test on per-contact impulses waited while the plain iteration moved a load from one twin
-to the other at a constant rate, the velocities settled.  The impulse test alone still
-misses slowly contracting steps the velocity test accepts; the velocity test alone asks a
-resting pile for ``tolerance * g dt`` of velocity, which costs up to 137 friction problems
-where the impulses settle in one (reports/friction/coulomb-convergence.md). The
-impulse each contact QP holds is the friction problems' answers mixed by Anderson
+contact QPs agree to ``tolerance`` (:func:`_unchanged`) in either of two measures:
+
+- how they move the bodies, ``sqrt(w) (x - t)`` (:attr:`ContactOutcome.motion`), unique
+  where the impulses are not; its scale on a resting pile is one body's ``g dt``;
+- their normal impulses summed over twin contacts (:attr:`ContactOutcome.twin_loads`), whose
+  scale is the most loaded group's load.  Twins (:func:`_twin_groups`) are contacts whose
+  normal rows are parallel (cards face to face): the split of a load among them is not
+  unique, and the iteration can move it from one twin to the other for many friction
+  problems while the bodies' motion has settled.
+
+The motion alone asks a resting pile for ``tolerance * g dt`` of velocity, the twin loads
+alone miss steps whose iteration contracts slowly; either suffices
+(``reports/friction/coulomb-convergence.md``).
+
+The impulse each contact QP holds is the friction problems' answers mixed by Anderson
 acceleration (:class:`FrictionMixer`: inside the cones, safeguarded, and the plain answer
-itself once the test passes), which reaches the plain iteration's fixed point in
+itself once the two contact QPs agree), which reaches the plain iteration's fixed point in
 fewer friction problems. The closest-approach passes of ``velocity``
 (:meth:`~wuerfel_cvx.formulations.velocity.VelocityFormulation.refine`) interleave: after
 each contact QP its rows are re-linearised about its solution when the formulation asks so,
@@ -54,7 +57,7 @@ has the passes a frictionless step has to meet the gap acceptance (a limit count
 whole iteration let steps be accepted by the limit, with penetrations beyond the bound). The
 fixed point is converged only when the formulation also accepts the last contact QP's
 solution; a settled impulse is held fixed through the formulation's further passes (a new
-friction problem only if they unsettle the test), so the step's state, always the
+friction problem only if the contact QPs no longer agree), so the step's state, always the
 last contact QP's, meets the formulation's gap acceptance (and with it the penetration
 bound) exactly as a frictionless step does. After ``max_iterations`` friction problems
 without convergence the step goes on with the last iterate: further passes, ``lambda_t``
@@ -128,9 +131,8 @@ class CoulombSettings:
     max_iterations: int
     """Most friction problems per step QP."""
     tolerance: float
-    """Converged when successive contact QPs' mass-scaled velocities, or their normal
-    impulses summed over twin contacts, differ by at most this times the largest (1,
-    :func:`_settled`)."""
+    """Converged when two successive contact QPs' motions, or their twin loads, differ by at
+    most this times the largest (1, :func:`_unchanged`)."""
     memory: int = 5
     """Past iterates the Anderson acceleration of the friction impulse mixes
     (:class:`FrictionMixer`); 0: the plain iteration."""
@@ -161,8 +163,8 @@ def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP
     friction = np.zeros(len(qp.contacts)) if initial is None else np.asarray(initial, float)
     solved: list[tuple[StepSolution, str]] = []
     answers: list[FrictionAnswer] = []
-    previous: Progress | None = None  # what the held friction was made of
-    groups: IntArray | None = None  # base's twin groups (_twin_groups); rows fixed until refined
+    previous: ContactOutcome | None = None  # the contact QP the held friction was made of
+    twins: IntArray | None = None  # base's _twin_groups, found once per set of rows
     mixer = FrictionMixer(settings.memory)
     linearisations, converged = 1, False  # passes since the friction impulse last changed
     while True:
@@ -179,10 +181,10 @@ def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP
                 np.zeros(len(refined.contacts))
             mixer.reset()
             continue
-        groups = _twin_groups(contact_qp) if groups is None else groups
-        now = _progress(contact_qp, solution, target, groups)
-        settled = previous is not None and _settled(now, previous, settings) \
-            and mixer.settled(settings.tolerance)
+        twins = _twin_groups(contact_qp) if twins is None else twins
+        outcome = ContactOutcome.of(contact_qp, solution, target, twins)
+        agree = previous is not None and _unchanged(outcome, previous, settings.tolerance)
+        settled = agree and mixer.settled(settings.tolerance)
         if refined is None and (settled or len(answers) >= settings.max_iterations):
             converged = settled
             break
@@ -191,17 +193,15 @@ def fixed_point(formulation: Formulation, model: Model, state: State, qp: StepQP
         if new_impulse:
             problem = friction_problem(contact_qp, solution, target)
             answers.append(solve_friction(problem, solve, tol))
-            friction = mixer.next(friction, answers[-1].friction, problem.bound,
-                                  plain=previous is not None
-                                  and _settled(now, previous, settings))
-            previous = now
+            friction = mixer.next(friction, answers[-1].friction, problem.bound, plain=agree)
+            previous = outcome
         # the next contact QP is the first pass of a new impulse, or the next pass of this one
         linearisations = 1 if new_impulse else linearisations + 1
         if refined is not None:
-            base, groups = dataclasses.replace(refined, target=target), None
+            base, twins = dataclasses.replace(refined, target=target), None
             if base.contacts is not contact_qp.contacts:
                 mixer.reset()
-                previous = None if previous is None else Progress(previous.motion, None)
+                previous = None if previous is None else previous.without_loads()
             friction = _carried(friction, contact_qp.contacts, base.contacts)
     return CoulombStep(contact_qp, solved, answers, converged,
                        _forces(contact_qp, solution, friction))
@@ -227,8 +227,8 @@ class FrictionMixer:
     history forgets the history and holds the plain answer.  An accelerated impulse is
     settled only when it lies within the tolerance (relative to the largest cone radius) of
     the plain answer, so that a converged step holds (to the tolerance) the friction
-    problem's own answer, as the plain iteration does; near convergence (the test
-    passed) the plain answer is held, which settles it.
+    problem's own answer, as the plain iteration does; near convergence (the two contact
+    QPs agree) the plain answer is held, which settles it.
     """
 
     def __init__(self, memory: int) -> None:
@@ -288,59 +288,55 @@ def _forces(qp: StepQP, solution: StepSolution, friction: FloatArray) -> Contact
                          friction, np.asarray(qp.cones.slip @ solution.x, dtype=np.float64))
 
 
-def _motion(qp: StepQP, x: FloatArray, target: FloatArray) -> FloatArray:
-    """``sqrt(w) (x - t)``: what the contact QP's impulses do to the bodies, per unknown.
-
-    ``t`` the step's own target (no friction impulse), so that ``W (x - t)`` is the whole
-    impulse of the contacts (normal and friction) and the constraints; scaled by
-    ``sqrt(w)`` (sqrt(J) per unknown, whatever its units) every unknown counts by its
-    kinetic energy.  Unique for a contact QP (its objective is strictly convex in ``x``),
-    where its per-contact normal impulses are not: contacts whose rows are parallel to
-    round-off (cards face to face) share a load in any split.
-    """
-    return np.asarray(np.sqrt(qp.weights) * (x - target), dtype=np.float64)
-
-
 @dataclass(frozen=True)
-class Progress:
-    """What the convergence test compares of two contact QPs (:func:`_settled`)."""
+class ContactOutcome:
+    """What the convergence test (:func:`_unchanged`) compares of two contact QPs."""
 
     motion: FloatArray
-    """``sqrt(w) (x - t)`` per unknown (sqrt(J), :func:`_motion`)."""
-    loads: FloatArray | None
-    """Normal impulse (N s) per group of twin contacts (:func:`_twin_groups`); ``None``
-    when the contacts changed since."""
+    """``sqrt(w) (x - t)`` per unknown (sqrt(J), whatever the unknown's units): the change
+    of velocity that the contact QP's impulses (normal, friction and the constraints') give
+    the bodies, ``t`` the step's own target (no friction impulse), each unknown counted by
+    its kinetic energy.  Unique for a contact QP (its objective is strictly convex in
+    ``x``), where the impulses are not."""
+    twin_loads: FloatArray | None
+    """Per contact, the normal impulse (N s) summed over its twin group
+    (:func:`_twin_groups`): unique where the split among twins is not.  ``None`` once the
+    contacts changed (the loads of other contacts are no measure of progress)."""
+
+    @classmethod
+    def of(cls, qp: StepQP, solution: StepSolution, target: FloatArray,
+           twins: IntArray) -> ContactOutcome:
+        """The outcome of ``solution`` of contact QP ``qp``; ``twins`` its :func:`_twin_groups`."""
+        loads = np.bincount(twins, weights=normal_impulses(qp, solution.ineq_dual))
+        return cls(np.asarray(np.sqrt(qp.weights) * (solution.x - target), dtype=np.float64),
+                   np.asarray(loads[twins], dtype=np.float64))
+
+    def without_loads(self) -> ContactOutcome:
+        """The same outcome with its twin loads forgotten (the contacts changed)."""
+        return dataclasses.replace(self, twin_loads=None)
 
 
-def _progress(qp: StepQP, solution: StepSolution, target: FloatArray,
-              groups: IntArray) -> Progress:
-    """The contact QP ``qp``'s :class:`Progress` at ``solution``.
-
-    ``groups``: its :func:`_twin_groups`, found once per pass (a friction impulse leaves
-    the rows alone).
-    """
-    normal = normal_impulses(qp, solution.ineq_dual)
-    return Progress(_motion(qp, solution.x, target),
-                    np.bincount(groups, weights=normal).astype(np.float64))
+TWIN_PARALLEL = 1e-6
+"""``1 - cos`` (1) below which two contacts' normal rows count as parallel and the contacts
+as twins: face-to-face cards' rows are parallel to round-off."""
 
 
 def _twin_groups(qp: StepQP) -> IntArray:
     """A group label per contact of ``qp``, shared by twins (cards face to face).
 
-    Twins: contacts with normal rows parallel to ``1 - cos < TWIN``.  The split of a load
-    among twins is not unique; their sum is.
+    Twins: contacts with normal rows parallel to ``1 - cos < TWIN_PARALLEL`` (the connected
+    components of that relation).  The split of a load among twins is not unique; its sum is.
     """
     assert qp.cones is not None
     rows = qp.cones.row_contact
-    normal_rows = sp.csr_array(qp.ineq_matrix[: len(rows)])
-    counts = np.diff(normal_rows.indptr)
-    squares = np.zeros(len(rows))
-    np.add.at(squares, np.repeat(np.arange(len(rows)), counts), normal_rows.data ** 2)
-    norms = np.sqrt(squares)
-    unit = sp.csr_array((normal_rows.data / np.repeat(np.where(norms > 0, norms, 1.0), counts),
-                         normal_rows.indices, normal_rows.indptr), shape=normal_rows.shape)
+    normal = sp.csr_array(qp.ineq_matrix[: len(rows)])
+    per_row = np.diff(normal.indptr)
+    squares = np.bincount(np.repeat(np.arange(len(rows)), per_row), weights=normal.data ** 2,
+                          minlength=len(rows))
+    norms = np.repeat(np.sqrt(np.where(squares > 0.0, squares, 1.0)), per_row)
+    unit = sp.csr_array((normal.data / norms, normal.indices, normal.indptr), shape=normal.shape)
     cosines = sp.coo_array(unit @ unit.T)
-    twin = (cosines.data > 1.0 - TWIN) & (rows[cosines.row] != rows[cosines.col])
+    twin = (cosines.data > 1.0 - TWIN_PARALLEL) & (rows[cosines.row] != rows[cosines.col])
     count = len(qp.contacts)
     if not twin.any():
         return np.arange(count, dtype=np.int64)
@@ -350,26 +346,22 @@ def _twin_groups(qp: StepQP) -> IntArray:
     return np.asarray(connected_components(links, directed=False)[1], dtype=np.int64)
 
 
-TWIN = 1e-6
-"""``1 - cos`` below which two contacts' normal rows count as parallel (1): the card
-house's face-to-face twins are parallel to round-off."""
+def _unchanged(now: ContactOutcome, previous: ContactOutcome, tolerance: float) -> bool:
+    """Whether two contact QPs agree to ``tolerance`` (relative), in motion or in twin loads.
 
-
-def _settled(now: Progress, previous: Progress, settings: CoulombSettings) -> bool:
-    """Whether two contact QPs agree to the tolerance (relative), in motion or in loads.
-
-    The bodies' motion (:func:`_motion`), or the twin-summed normal impulses.  Either
-    suffices: the motion is unique where the per-contact impulses are not, and the
-    impulses' scale (the most loaded group's load) does not shrink to one body's ``g dt``
-    on a resting step as the motion's does.
+    Either suffices: the motion settles where the twins' split of a load drifts, and the
+    twin loads' scale (the most loaded group's) does not shrink to one body's ``g dt`` on a
+    resting step as the motion's does.
     """
-    tolerance = settings.tolerance
-    if now.motion.shape == previous.motion.shape \
-            and _inf(now.motion - previous.motion) <= tolerance * _inf(now.motion):
+    if _close(now.motion, previous.motion, tolerance):
         return True
-    return bool(now.loads is not None and previous.loads is not None
-                and now.loads.shape == previous.loads.shape
-                and _inf(now.loads - previous.loads) <= tolerance * _inf(now.loads))
+    return (now.twin_loads is not None and previous.twin_loads is not None
+            and _close(now.twin_loads, previous.twin_loads, tolerance))
+
+
+def _close(now: FloatArray, previous: FloatArray, tolerance: float) -> bool:
+    """Whether ``now`` and ``previous`` differ by at most ``tolerance`` times ``now``'s largest."""
+    return now.shape == previous.shape and bool(_inf(now - previous) <= tolerance * _inf(now))
 
 
 def _carried(values: FloatArray, old: Contacts, new: Contacts) -> FloatArray:

@@ -54,14 +54,15 @@ The Jacobian ``J`` of ``F`` is not symmetric (the sliding columns); one solve wi
     dL/dmu_c = -2 sigma_c lambda_n,c S_c a_x           (sliding contacts)
 
 The run's fixed point stops within its tolerance (``coulomb_tolerance``, relative on the
-bodies' mass-scaled velocities or the twin-summed normal impulses), so its state is that of
-the equations above to that tolerance; a finite difference of runs agrees with this
-derivative to about the same relative size (tighter with a tighter ``coulomb_tolerance``). A
-contact at the stick-slip boundary (on its cone's edge and hardly slipping) makes the
-derivative one-sided: the step is flagged as for a weakly active row. The system is small
-(three unknowns per body, a row per contact) and, with dependent rows (a resting box's two
-sticking corners), rank deficient but consistent; it is solved with the polish's
-regularised, refined sparse LU (dense least squares where that does not reach round-off).
+bodies' motion or the twin contacts' normal impulses, :mod:`wuerfel_cvx.friction.coulomb`),
+so its state is that of the equations above to that tolerance; a finite
+difference of runs agrees with this derivative to about the same relative size (tighter with a
+tighter ``coulomb_tolerance``).  A contact at the stick-slip boundary (on its cone's edge and
+hardly slipping) makes the derivative one-sided: the step is flagged as for a weakly active row.
+The system is small (three unknowns per body, a row per contact) and, with dependent rows (a
+resting box's two sticking corners), rank deficient but consistent; it is solved with the
+polish's regularised, refined sparse LU (dense least squares where that does not reach
+round-off).
 """
 
 from __future__ import annotations

@@ -52,11 +52,11 @@ SOLVERS = ("CLARABEL", "OSQP", "PIQP")
 MODELS = ("ccp", "coulomb")
 FD_COULOMB_TOLERANCE = 1e-12
 """``coulomb_tolerance`` of the finite-difference runs.  A run is the fixed point only to its
-tolerance (relative on the normal impulses), and a central difference divides that error by
-its step: up to ``FD_COULOMB_TOLERANCE / EPS`` = 1e-6 relative here, below the issue's
-1e-5.  With 1e-10 (the tests') the bound is 1e-4, and the resting stack's velocities, whose
-derivative is 0, differed by 2e-5 to 6e-5 with CLARABEL and PIQP although every perturbed
-run converged (in 5 iterations, far from the cap of 50)."""
+tolerance (relative on the bodies' motion or the twin contacts' normal impulses), and a
+central difference divides that error by its step: up to ``FD_COULOMB_TOLERANCE / EPS`` =
+1e-6 relative here, below the issue's 1e-5.  With 1e-10 (the tests') the bound is 1e-4,
+and the resting stack's velocities, whose derivative is 0, differed by 2e-5 to 6e-5 with
+CLARABEL and PIQP although every perturbed run converged (in 5 iterations)."""
 
 Input = tuple[int, str, int]
 Loss = Callable[[np.ndarray], np.ndarray]
@@ -515,12 +515,13 @@ formulation; the worst over the inputs (centre, angle, velocity, angular velocit
 mass of a body; the stack: horizontal positions and velocities, friction, mass, spin), as
 |adjoint - fd| / max(|fd|, {FLOOR_SCALE:g}).  `coulomb` runs with `coulomb_tolerance`
 {FD_COULOMB_TOLERANCE:g}: a run is the fixed point only to that tolerance (relative on the
-normal impulses), and the difference divides its error by the step, so it may differ from
-the derivative by up to {FD_COULOMB_TOLERANCE / EPS:g} relative (with 1e-10 the resting
-stack's velocities, whose derivative is 0, differed by 2e-5 to 6e-5 with CLARABEL and PIQP,
-every perturbed run converged in 5 iterations).  One-sided steps: steps with a weakly active
-row or a contact at the stick-slip boundary (none here).  On the resting stack a velocity
-pushed into the sticking contacts is stopped in the first step (the derivative is 0).""",
+bodies' motion or the twin contacts' normal impulses), and the difference divides its error
+by the step, so it may differ from the derivative by up to {FD_COULOMB_TOLERANCE / EPS:g}
+relative (with 1e-10 the resting stack's velocities, whose derivative is 0, differed by 2e-5
+to 6e-5 with CLARABEL and PIQP, every perturbed run converged in 5 iterations).  One-sided
+steps: steps with a weakly active row or a contact at the stick-slip boundary (none here).
+On the resting stack a velocity pushed into the sticking contacts is stopped in the first
+step (the derivative is 0).""",
     "cvxpy": """## cvxpy's derivative
 
 One step QP of the slide, declared as a DPP problem in cvxpy and differentiated by
