@@ -20,11 +20,13 @@ from wuerfel_cvx import simulate
 from wuerfel_cvx.errors import StepFailure
 from wuerfel_cvx.formulations import StepQP, VelocityFormulation, get_formulation
 from wuerfel_cvx.friction.coulomb import (
+    ContactOutcome,
     CoulombNotConverged,
     CoulombSettings,
     CoulombStep,
     FrictionMemory,
     _twin_groups,
+    _unchanged,
     fixed_point,
     with_friction_impulse,
 )
@@ -424,12 +426,30 @@ def test_the_card_house_fixed_point_converges_where_twin_contacts_split_their_lo
 
 def test_twin_contacts_share_a_load_group_and_others_do_not() -> None:
     # contacts 0 and 1 push along the same line (row 1 = 2 x row 0 + 1e-9: 1 - cos ~ 1e-19,
-    # far below TWIN); contact 2 has the opposite lever, so its row is not parallel to them
+    # far below TWIN_PARALLEL); contact 2 has the opposite lever, so its row is not parallel to them
     rows = sp.csr_array(np.array([[0.0, 1.0, 0.5], [0.0, 2.0, 1.0 + 1e-9], [0.0, 1.0, -0.5]]))
     qp = types.SimpleNamespace(ineq_matrix=rows, contacts=[0, 1, 2],
                                cones=types.SimpleNamespace(row_contact=np.arange(3)))
     groups = _twin_groups(qp)  # type: ignore[arg-type]
     assert groups[0] == groups[1] != groups[2]
+
+
+def test_a_load_moving_between_twins_is_no_change_of_the_contact_qp() -> None:
+    # twins 0 and 1 carry 1 N s between them, split 0.7 / 0.3 and then 0.4 / 0.6 (each
+    # contact's impulse moves by 0.15 of the largest); the bodies' motion moves by 1e-3 of
+    # its largest, ten times the tolerance: only the twins' summed load says unchanged
+    qp = types.SimpleNamespace(weights=np.ones(2), contacts=[0, 1, 2],
+                               cones=types.SimpleNamespace(row_contact=np.arange(3)))
+    twins, target = np.array([0, 0, 1]), np.zeros(2)
+
+    def outcome(x: list[float], loads: list[float]) -> ContactOutcome:
+        solution = types.SimpleNamespace(x=np.array(x), ineq_dual=2.0 * np.array(loads))
+        return ContactOutcome.of(qp, solution, target, twins)  # type: ignore[arg-type]
+
+    before, after = outcome([1.0, 0.5], [0.7, 0.3, 2.0]), outcome([1.001, 0.5], [0.4, 0.6, 2.0])
+    assert _unchanged(after, before, 1e-4)
+    assert not _unchanged(after, before.without_loads(), 1e-4)  # the contacts changed
+    assert _unchanged(outcome([1.00001, 0.5], [0.4, 0.6, 2.0]), before.without_loads(), 1e-4)
 
 
 def test_a_step_reports_its_contact_forces_inside_the_cone() -> None:
