@@ -89,9 +89,9 @@ def test_an_answer_exact_to_round_off_is_kept_as_it_is() -> None:
     assert all(ours is theirs for ours, theirs in
                zip((result.x, result.eq_dual, result.ineq_dual), exact, strict=True))
     assert list(result.active.lower) == [0] and not result.active.upper.size
-    # off by ten times the round-off bound: not exact, so polished back to the exact point
-    nearly = (exact[0] + np.array([10 * kkt.ROUND_OFF, 0.0]), *exact[1:])
-    assert kkt_residuals(qp, *nearly).worst() > kkt.ROUND_OFF
+    # off by ten times the bound: not exact, so polished back to the exact point
+    nearly = (exact[0] + np.array([10 * kkt.EXACT_RESIDUAL, 0.0]), *exact[1:])
+    assert kkt_residuals(qp, *nearly).worst() > kkt.EXACT_RESIDUAL
     assert polish(qp, *nearly).outcome == POLISHED
 
 def test_a_degenerate_active_set_keeps_the_answers_split_of_the_multipliers() -> None:

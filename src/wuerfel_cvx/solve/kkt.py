@@ -58,16 +58,23 @@ POLISH_OUTCOMES = (KEPT, EXACT, REUSED, POLISHED, REJECTED)
 """What became of a QP's answer: replaced by its polished point, kept as the solver gave it
 (polishing off), or kept because the polished point was rejected (:attr:`Polish.reason`);
 ``exact``: kept as the solver gave it because it already is an exact KKT point (every
-relative residual at most :data:`ROUND_OFF`: feasible, sign-consistent and complementary to
-round-off, which is all a polish would make it; an active-set solver's answer, or OSQP's
-after its own polish); ``reused``: no solver ran, the last answer's active set gave this
-QP's exact answer (:func:`reuse_active_set`)."""
+relative residual at most :data:`EXACT_RESIDUAL`: feasible, sign-consistent and
+complementary to round-off, which is all a polish would make it; an active-set solver's
+answer, or OSQP's after its own polish); ``reused``: no solver ran, the last answer's
+active set gave this QP's exact answer (:func:`reuse_active_set`)."""
 EXACT_OUTCOMES = (POLISHED, EXACT, REUSED)
 """The outcomes whose answer is an exact KKT point of its active set (to round-off)."""
 
 REUSE_TOLERANCE = 1e-10
 """Largest relative KKT residual (1) of an answer found on a reused active set: as exact as
 a polish leaves one (polished points measured 1e-17 to 2e-13), far below any solver's."""
+
+EXACT_RESIDUAL = 1e-14
+"""Largest relative KKT residual (1) of an answer kept as it is, :data:`EXACT`: about a
+hundred unit round-offs of double precision, where a polish's refinement ends on a
+well-conditioned step.  Not :data:`ROUND_OFF`: an interior-point answer within it can still
+leave a body 1e-12 m off a resting contact, which a polish closes (and the next contact
+search sees)."""
 
 ROUND_OFF = 1e-12
 """Relative size (1) of what double-precision arithmetic leaves in a polished point's
@@ -597,7 +604,7 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     """The answer ``(x, y, z)`` with residuals ``residuals``, made exact on its active set.
 
     ``residuals`` are the answer's (:func:`kkt_residuals`; computed when not given).  An
-    answer whose own residuals are all at most :data:`ROUND_OFF` is returned as it is,
+    answer whose own residuals are all at most :data:`EXACT_RESIDUAL` is returned as it is,
     :data:`EXACT`, with the active set guessed from it (below).
 
     Guesses the tight rows (:func:`guess_active_set`) and solves the equality-constrained
@@ -635,7 +642,7 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     residuals = checked if residuals is None else residuals
     answer = (x, eq_dual, ineq_dual)
     active = guess_active_set(qp, x, ineq_dual, scales)
-    if checked.worst() <= ROUND_OFF:  # nothing for a polish to correct
+    if checked.worst() <= EXACT_RESIDUAL:  # nothing for a polish to correct
         return Polish(EXACT, "", x, eq_dual, ineq_dual, checked, active)
     first = _polished_on(qp, active, answer, scales, residuals)
     if first.outcome == POLISHED or first.reason == "singular":
