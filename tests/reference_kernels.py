@@ -24,6 +24,7 @@ from wuerfel_cvx.formulations.rigid import body_velocities
 from wuerfel_cvx.formulations.rows import n_unknown_points, unknown_index
 from wuerfel_cvx.scenes.geometry import FloatArray, corner_mean, cross, rot90, side_gradients
 from wuerfel_cvx.step.contacts import TIE_TOLERANCE, Contacts, pair_distances, tree_pairs
+from wuerfel_cvx.step.criteria import OPEN_GAP_M
 from wuerfel_cvx.step.model import IntArray, Model, State
 
 # --------------------------------------------------------------------------------------
@@ -668,3 +669,36 @@ def gaps_after(all_points: FloatArray, contacts: Contacts) -> FloatArray:
                                                      contacts.point))
     edge = p_j - p_i
     return np.asarray(cross(edge, p_k - p_i) / np.linalg.norm(edge, axis=1), dtype=np.float64)
+
+
+def row_pushes(qp: StepQP, x: FloatArray, ineq_dual: FloatArray, impulse_per_multiplier: float,
+               gap_per_slack: float) -> dict[str, float]:
+    """``criteria.row_pushes``: the largest impulse on an open row, the largest gap x impulse."""
+    lhs = qp.ineq_matrix @ x
+    slack = lhs - qp.ineq_rhs
+    if qp.upper_rows.size:
+        assert qp.ineq_upper is not None
+        slack = np.where(ineq_dual < 0.0, qp.ineq_upper - lhs, slack)
+    impulse = np.abs(ineq_dual) * impulse_per_multiplier
+    gap = np.maximum(slack, 0.0) * gap_per_slack
+    open_rows = gap > OPEN_GAP_M
+    return {"push_at_distance_Ns": float(impulse[open_rows].max()) if open_rows.any() else 0.0,
+            "push_gap_product_Nsm": float(np.max(impulse * gap))}
+
+
+def normal_impulses(count: int, ineq_dual: FloatArray,
+                    impulse_per_multiplier: float) -> FloatArray:
+    """``criteria.normal_impulses``: the multipliers of each contact's rows, summed (N s)."""
+    rows = np.arange(ineq_dual.shape[0]) % max(count, 1)
+    return np.asarray(impulse_per_multiplier * np.bincount(rows, weights=ineq_dual,
+                                                           minlength=count), dtype=np.float64)
+
+
+def signorini(all_points: FloatArray, contacts: Contacts, normal: FloatArray) -> float:
+    """``criteria.contact_criteria``'s ``signorini_violation_Nsm``: max ``|gap| lambda_n``."""
+    return float(np.max(np.abs(gaps_after(all_points, contacts)) * np.maximum(normal, 0.0)))
+
+
+def fastest_speed(velocities: FloatArray) -> float:
+    """``criteria.push_bound``'s largest corner speed (m/s), 0 for none."""
+    return float(np.max(np.linalg.norm(velocities, axis=1))) if velocities.size else 0.0

@@ -50,11 +50,23 @@ from wuerfel_cvx.formulations.velocity import (
 )
 from wuerfel_cvx.scenes.geometry import FloatArray, rectangle_corners
 from wuerfel_cvx.solve import residual_kernel
-from wuerfel_cvx.solve.paths import Residuals, StepSolution, _checked_scales, kkt_residuals
+from wuerfel_cvx.solve.paths import (
+    VERIFY_FACTOR,
+    Residuals,
+    StepSolution,
+    _checked_scales,
+    kkt_residuals,
+)
 from wuerfel_cvx.solve.scaling import data_magnitude
 from wuerfel_cvx.step import contacts
 from wuerfel_cvx.step.contacts import find_contacts
-from wuerfel_cvx.step.criteria import gaps_after
+from wuerfel_cvx.step.criteria import (
+    contact_criteria,
+    gaps_after,
+    normal_impulses,
+    push_bound,
+    row_pushes,
+)
 from wuerfel_cvx.step.model import Model, State
 
 pytestmark = pytest.mark.integration
@@ -448,5 +460,67 @@ def test_the_gaps_after_a_step_are_the_references(kind: str, key: str | int) -> 
         all_points = model.all_points(moved)
         assert_same_bits(gaps_after(all_points, found),
                          reference.gaps_after(all_points, found))
+        compared += len(found)
+    assert compared > 0
+
+
+def same_float(ours: float, theirs: float) -> None:
+    """The same number, the sign of a zero included; NaN for NaN."""
+    assert (np.isnan(ours) and np.isnan(theirs)) or (
+        ours == theirs and np.signbit(ours) == np.signbit(theirs))
+
+
+def edge_values(rng: np.random.Generator, size: int, nan: bool) -> FloatArray:
+    """Random values with zeros of both signs, negatives and (if ``nan``) a NaN."""
+    values = rng.choice([0.0, -0.0, 1.5, -2.0], size=size) * rng.uniform(0.5, 1.0, size=size)
+    if nan and size:
+        values[rng.integers(size)] = np.nan
+    return values
+
+
+@pytest.mark.parametrize(("scene", "formulation", "steps"), KKT_CASES)
+def test_the_row_pushes_are_the_references(scene: str, formulation: str, steps: int) -> None:
+    """At the solvers' answers, and at multipliers of every sign, zeros and NaN included."""
+    rng = np.random.default_rng(29)
+    units = VelocityFormulation().row_units(DT)
+    checked = 0
+    for qp, solution in step_qps(scene, formulation, steps):
+        count = len(qp.contacts)
+        for z in (solution.ineq_dual, edge_values(rng, qp.n_inequalities, nan=False),
+                  edge_values(rng, qp.n_inequalities, nan=True)):
+            if qp.n_inequalities:
+                varied = dataclasses.replace(solution, ineq_dual=z)
+                ours = row_pushes(qp, varied, units)
+                theirs = reference.row_pushes(qp, solution.x, z, units.impulse_per_multiplier,
+                                              units.gap_per_slack)
+                for column in ours:
+                    same_float(ours[column], theirs[column])
+            assert_same_bits(normal_impulses(qp, dataclasses.replace(solution, ineq_dual=z),
+                                             units),
+                             reference.normal_impulses(count, z, units.impulse_per_multiplier))
+        checked += 1
+    assert checked > 0
+
+
+@pytest.mark.parametrize(("kind", "key"), ROW_CASES[:-1])
+def test_the_signorini_column_and_the_push_bounds_speed_are_the_references(
+        kind: str, key: str | int) -> None:
+    rng = np.random.default_rng(31)
+    compared = 0
+    for model, state in row_states(kind, key):
+        found = find_contacts(model, state.points, 0.1)
+        moved = state.points + 0.01 * rng.normal(size=state.points.shape)
+        for normal in (edge_values(rng, len(found), nan=False),
+                       edge_values(rng, len(found), nan=True)):
+            if len(found):
+                ours = contact_criteria(None, normal, model, moved, found)
+                same_float(ours["signorini_violation_Nsm"],
+                           reference.signorini(model.all_points(moved), found, normal))
+        for velocities in (state.velocities, np.zeros_like(state.velocities),
+                           edge_values(rng, state.velocities.size, nan=True).reshape(-1, 2)):
+            expected = (VERIFY_FACTOR * 1e-6 * DT * (0.5 + model.total_mass * (
+                speed := model.gravity_norm * DT + reference.fastest_speed(velocities))
+                * (1.0 + speed)))
+            same_float(push_bound(model, State(state.points, velocities), DT, 1e-6), expected)
         compared += len(found)
     assert compared > 0

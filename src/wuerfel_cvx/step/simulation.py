@@ -152,6 +152,7 @@ class Simulation:
         self.formulation = with_friction_model(get_formulation(settings.formulation),
                                                settings.friction_model, has_friction)
         friction = self.formulation.friction
+        self._row_units = self.formulation.row_units(self.dt)
         self.path = SolvePath(settings.solve_path, warm_start=settings.warm_start,
                               reuse_active_sets=settings.reuse_active_sets)
         self._coulomb = (friction is not None and friction.friction_model == "coulomb"
@@ -310,7 +311,7 @@ class Simulation:
         :func:`~wuerfel_cvx.step.criteria.push_bound` is marked not verified: the step is
         then reported as any unverified step.
         """
-        units = self.formulation.row_units(self.dt)
+        units = self._row_units
         forces = ccp_forces(qp, solution) if coulomb is None else coulomb.forces
         normal = forces.normal if forces is not None else normal_impulses(qp, solution, units)
         row = (contact_criteria(forces, normal, model, moved.points, qp.contacts)
