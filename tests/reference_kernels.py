@@ -146,6 +146,22 @@ def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
             clearances(beyond[corner, pair_index], distance))
 
 
+def find_contacts(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
+    """``contacts.find_contacts`` with a reach ``(n_bodies,)`` (m): both phases, as contacts."""
+    all_points = model.all_points(points)
+    pairs = body_pairs(model, all_points, reach)
+    if len(pairs) == 0:
+        return Contacts.empty()
+    edge_body, point_body = pairs[:, 0], pairs[:, 1]
+    pair_index, corner, edge_index, distance, clearance = narrow_phase(
+        all_points.reshape(-1, 4, 2), edge_body, point_body, reach)
+    w = edge_body[pair_index]
+    return Contacts(point=4 * point_body[pair_index] + corner,
+                    edge_i=4 * w + (edge_index + 1) % 4, edge_j=4 * w + edge_index,
+                    point_body=point_body[pair_index], edge_body=w, distance=distance,
+                    clearance=clearance)
+
+
 # --------------------------------------------------------------------------------------
 # Rows (wuerfel_cvx.formulations.rows, compiled there)
 # --------------------------------------------------------------------------------------

@@ -121,6 +121,11 @@ def same_contact_search(model: Model, state: State, rng: np.random.Generator) ->
         reach = np.broadcast_to(np.asarray(margin, dtype=np.float64), (model.n_bodies,))
         pairs = contacts.body_pairs(model, all_points, reach)
         assert_same_bits(pairs, reference.body_pairs(model, all_points, reach))
+        searched, expected_contacts = (find_contacts(model, state.points, margin),
+                                       reference.find_contacts(model, state.points, reach))
+        for field in dataclasses.fields(searched):
+            assert_same_bits(getattr(searched, field.name),
+                             getattr(expected_contacts, field.name))
         if len(pairs) == 0:
             continue
         expected = reference.narrow_phase(corners, pairs[:, 0], pairs[:, 1], reach)
