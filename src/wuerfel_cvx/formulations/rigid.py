@@ -126,20 +126,24 @@ class RigidFormulation(FrictionSettings):
         if contacts is previous.contacts and approach.violation <= self._velocity.gap_tolerance:
             return None
         last = previous.linearised_about
-        damped = passes + 1 >= FIRST_DAMPED_PASS and last is not None
-        about = 0.5 * (solution + last) if damped and last is not None else solution
-        return self._along(model, state, contacts, previous.weights, previous.target, about,
-                           dt)
+        if passes + 1 >= FIRST_DAMPED_PASS and last is not None:
+            return self._along(model, state, contacts, previous.weights, previous.target,
+                               0.5 * (solution + last), dt)
+        return self._along(model, state, contacts, previous.weights, previous.target,
+                           solution, dt, approach)
 
     def _along(self, model: Model, state: State, contacts: Contacts, weights: FloatArray,
-               target: FloatArray, about: FloatArray, dt: float) -> StepQP:
+               target: FloatArray, about: FloatArray, dt: float,
+               approach: Approach | None = None) -> StepQP:
         """The QP with each contact's rows at its closest approach along ``about``'s motion.
 
-        ``about``: body velocities ``(u_x, u_y, omega)`` per body, flat (m/s, rad/s).
+        ``about``: body velocities ``(u_x, u_y, omega)`` per body, flat (m/s, rad/s);
+        ``approach``: the contacts' closest approach along it, if found already.
         """
-        corners = self.new_velocities(state, about, dt).ravel()
-        approach = closest_approach(model, state.points, contacts, corners, dt,
-                                    self._velocity.push_speed)
+        if approach is None:
+            corners = self.new_velocities(state, about, dt).ravel()
+            approach = closest_approach(model, state.points, contacts, corners, dt,
+                                        self._velocity.push_speed)
         rows = rows_along(model, contacts, approach)
         matrix, rhs, cones = self._velocity._cones(model, state.points, contacts, rows.matrix,
                                                   rows.rhs)

@@ -99,7 +99,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal, NamedTuple
+from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
@@ -210,7 +210,7 @@ class VelocityFormulation(FrictionSettings):
         With ``friction_model="coulomb"`` the rows stay normal rows; their
         :class:`ConeRows` tell the fixed point of :mod:`wuerfel_cvx.friction.coulomb` the slips.
         """
-        if not np.any(model.friction > 0.0):  # no friction: no slip rows to build
+        if not model.has_friction:  # no friction: no slip rows to build
             return normal, rhs, None
         row_contact = np.tile(np.arange(len(contacts)), normal.shape[0] // max(len(contacts),
                                                                                  1))
@@ -374,7 +374,7 @@ def approach_along(motion: BodyMotion, contacts: Contacts, about: FloatArray, dt
                         np.zeros((0, 2)))
     grid, turned = _sample_turns(motion.angle, motion.spin, dt, SAMPLES)
     cos, sin = np.cos(turned), np.sin(turned)
-    corners = _ContactCorners.of(contacts)
+    corners = _indices(contacts)
     clearance = (contacts.clearance if contacts.clearance is not None
                  else np.zeros(len(contacts)))
     sampled = _sampled_approach(motion.center, motion.velocity, motion.reference, motion.angle,
@@ -404,7 +404,7 @@ def rows_along(model: Model, contacts: Contacts, approach: Approach) -> Approach
     m = len(contacts)
     motion = approach.motion
     index, gradient = _row_blocks(motion.center, motion.velocity, motion.reference,
-                                  motion.fitted, motion.n_boxes, *_ContactCorners.of(contacts),
+                                  motion.fitted, motion.n_boxes, *_indices(contacts),
                                   approach.closest, approach.row_cos, approach.row_sin)
     rate = approach.rate
     if _same_rows(gradient, m) and np.all(approach.closest_rate <= rate):
@@ -419,19 +419,13 @@ def rows_along(model: Model, contacts: Contacts, approach: Approach) -> Approach
                                                                  approach.closest_rate)]))
 
 
-class _ContactCorners(NamedTuple):
-    """Each contact's edge body and point body, and the corners involved."""
+def _indices(contacts: Contacts) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray]:
+    """Each contact's edge body, point body, and its edge's ends' and point's all-points rows.
 
-    edge_body: IntArray
-    point_body: IntArray
-    corner_i: IntArray
-    corner_j: IntArray
-    corner_k: IntArray
-
-    @classmethod
-    def of(cls, contacts: Contacts) -> _ContactCorners:
-        return cls(contacts.edge_body, contacts.point_body, contacts.edge_i % 4,
-                   contacts.edge_j % 4, contacts.point % 4)
+    As the compiled loops take them: a corner's number in its body is its row modulo 4.
+    """
+    return (contacts.edge_body, contacts.point_body, contacts.edge_i, contacts.edge_j,
+            contacts.point)
 
 
 # ---------------------------------------------------------------------- compiled loops
@@ -575,7 +569,7 @@ def _parabola_time(mean_rate: FloatArray, best: int, dt: float) -> float:
 def _sampled_approach(center: FloatArray, velocity: FloatArray, reference: FloatArray,
                       angle: FloatArray, spin: FloatArray, cos: FloatArray, sin: FloatArray,
                       grid: FloatArray, edge_body: IntArray, point_body: IntArray,
-                      corner_i: IntArray, corner_j: IntArray, corner_k: IntArray,
+                      edge_i: IntArray, edge_j: IntArray, point: IntArray,
                       clearance: FloatArray, dt: float, push_speed: float,
                       ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
                                  FloatArray, IntArray, FloatArray, FloatArray, np.ndarray,
@@ -607,7 +601,7 @@ def _sampled_approach(center: FloatArray, velocity: FloatArray, reference: Float
         a, b = edge_body[c], point_body[c]
         for s in range(samples + 1):
             gaps[s], lines[s], where[s] = _face_gap(
-                center, velocity, reference, a, b, corner_i[c], corner_j[c], corner_k[c],
+                center, velocity, reference, a, b, edge_i[c] % 4, edge_j[c] % 4, point[c] % 4,
                 clearance[c], grid[s], cos[a, s], sin[a, s], cos[b, s], sin[b, s])
         start[c], line_start[c] = gaps[0], lines[0]
         rate[c] = (_nan_min(0.0, gaps[0] + dt * push_speed) - gaps[0]) / dt
@@ -636,8 +630,8 @@ def _sampled_approach(center: FloatArray, velocity: FloatArray, reference: Float
 def _refined_approach(center: FloatArray, velocity: FloatArray, reference: FloatArray,
                       cos: FloatArray, sin: FloatArray, refined_cos: FloatArray,
                       refined_sin: FloatArray, grid: FloatArray, edge_body: IntArray,
-                      point_body: IntArray, corner_i: IntArray, corner_j: IntArray,
-                      corner_k: IntArray, clearance: FloatArray, start: FloatArray,
+                      point_body: IntArray, edge_i: IntArray, edge_j: IntArray,
+                      point: IntArray, clearance: FloatArray, start: FloatArray,
                       rate: FloatArray, line_start: FloatArray, line_rate: FloatArray,
                       refined: FloatArray, best: IntArray, best_rate: FloatArray,
                       best_margin: FloatArray, best_line: np.ndarray,
@@ -656,8 +650,8 @@ def _refined_approach(center: FloatArray, velocity: FloatArray, reference: Float
     lowest = np.inf
     for c in range(m):
         a, b = edge_body[c], point_body[c]
-        gap, line, where = _face_gap(center, velocity, reference, a, b, corner_i[c],
-                                     corner_j[c], corner_k[c], clearance[c], refined[c],
+        gap, line, where = _face_gap(center, velocity, reference, a, b, edge_i[c] % 4,
+                                     edge_j[c] % 4, point[c] % 4, clearance[c], refined[c],
                                      refined_cos[c, 0], refined_sin[c, 0], refined_cos[c, 1],
                                      refined_sin[c, 1])
         refined_margin, on_line = _ramp_margin(gap, line, where, refined[c], start[c],
@@ -702,7 +696,7 @@ def _body_blocks(fitted: FloatArray, n_boxes: int, body: int, push_x: float, pus
 @compiled
 def _row_blocks(center: FloatArray, velocity: FloatArray, reference: FloatArray,
                 fitted: FloatArray, n_boxes: int, edge_body: IntArray, point_body: IntArray,
-                corner_i: IntArray, corner_j: IntArray, corner_k: IntArray,
+                edge_i: IntArray, edge_j: IntArray, point: IntArray,
                 closest: FloatArray, row_cos: FloatArray, row_sin: FloatArray,
                 ) -> tuple[IntArray, FloatArray]:
     """Blocks ``(2 m, 8)`` of ``d phi(tau; v) / d v / tau``: rate rows, then closest rows.
@@ -720,11 +714,11 @@ def _row_blocks(center: FloatArray, velocity: FloatArray, reference: FloatArray,
         c = r % m
         a, b = edge_body[c], point_body[c]
         tau = 0.0 if r < m else closest[c]
-        p_i = _corner_at(center, velocity, reference, a, corner_i[c], tau, row_cos[r, 0],
+        p_i = _corner_at(center, velocity, reference, a, edge_i[c] % 4, tau, row_cos[r, 0],
                          row_sin[r, 0])
-        p_j = _corner_at(center, velocity, reference, a, corner_j[c], tau, row_cos[r, 0],
+        p_j = _corner_at(center, velocity, reference, a, edge_j[c] % 4, tau, row_cos[r, 0],
                          row_sin[r, 0])
-        p_k = _corner_at(center, velocity, reference, b, corner_k[c], tau, row_cos[r, 1],
+        p_k = _corner_at(center, velocity, reference, b, point[c] % 4, tau, row_cos[r, 1],
                          row_sin[r, 1])
         # side_gradients: rot90(p_k - p_j), rot90(p_i - p_k), rot90(p_j - p_i)
         g_ix, g_iy = -(p_k[1] - p_j[1]), p_k[0] - p_j[0]

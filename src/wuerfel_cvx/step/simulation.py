@@ -148,7 +148,7 @@ class Simulation:
         self.dt, self.tol, self.solvers = settings.dt, settings.tol, list(settings.solvers)
         self.model = Model.from_scene(scene, table_mass=settings.table_mass,
                                       extra_rod=settings.extra_rod)
-        has_friction = bool(np.any(self.model.friction > 0.0))
+        has_friction = self.model.has_friction
         self.formulation = with_friction_model(get_formulation(settings.formulation),
                                                settings.friction_model, has_friction)
         friction = self.formulation.friction
