@@ -133,16 +133,25 @@ def point_rows(
 def stacked_point_rows(index: np.ndarray, grad: FloatArray, n_points: int) -> sp.csr_array:
     """:func:`point_rows` of the blocks stacked: ``index`` ``(R, B)``, ``grad`` ``(R, B, 2)``.
 
-    Written by a compiled loop (:func:`_point_rows`), each row's
+    Written by a compiled loop (:func:`csr_point_rows`), each row's
     entries sorted by column, stably; a row holding a point twice is then summed by scipy.
     """
-    shape = (index.shape[0], 2 * n_points)
-    data, indices, indptr, canonical = _point_rows(
-        index.astype(np.int64, copy=False), grad.astype(np.float64, copy=False))
+    return point_matrix(*csr_point_rows(index.astype(np.int64, copy=False),
+                                     grad.astype(np.float64, copy=False)), n_points)
+
+
+def point_matrix(data: FloatArray, indices: IntArray, indptr: IntArray, canonical: bool,
+                 n_points: int) -> sp.csr_array:
+    """The ``csr_array`` of :func:`csr_point_rows`'s arrays (``2 n_points`` columns).
+
+    Wrapped as they are when ``canonical``; else a row holding a point twice is summed by
+    scipy, a cell's entries in their blocks' order.
+    """
+    shape = (indptr.shape[0] - 1, 2 * n_points)
     if canonical:
         return canonical_csr(data, indices, indptr, shape)
     matrix = sp.csr_array((data, indices, indptr), shape=shape)
-    matrix.sum_duplicates()  # a cell's entries in their blocks' order
+    matrix.sum_duplicates()
     return matrix
 
 
@@ -181,7 +190,7 @@ def _sort_row(columns: IntArray, values: FloatArray, count: int) -> None:
 
 
 @compiled
-def _point_rows(index: IntArray, gradient: FloatArray,
+def csr_point_rows(index: IntArray, gradient: FloatArray,
                ) -> tuple[FloatArray, IntArray, IntArray, bool]:
     """CSR ``(data, indices, indptr)`` of the rows of gradient blocks.
 

@@ -113,12 +113,13 @@ from .cone import ConeRows, contact_cones
 from .motion import BodyMotion, _pairwise8, body_motion, rigid_step
 from .qp import FrictionSettings, RowUnits, StepQP, declare_qp, velocity_rows
 from .rows import (
+    csr_point_rows,
     held_table_blocks,
     n_unknown_points,
+    point_matrix,
     point_rows,
     rod_rows,
     side_rows,
-    stacked_point_rows,
     unknown_masses,
 )
 
@@ -399,24 +400,20 @@ def rows_along(model: Model, contacts: Contacts, approach: Approach) -> Approach
     closest-approach row's right-hand side is at most its rate row's, so the rate row
     implies it, and the QP keeps its feasible set with half the rows.  The rows' blocks by
     a compiled loop (:func:`_row_blocks`), written as CSR rows by
-    :func:`~wuerfel_cvx.formulations.rows.stacked_point_rows`.
+    :func:`~wuerfel_cvx.formulations.rows.point_matrix`.
     """
     m = len(contacts)
     motion = approach.motion
-    index, gradient = _row_blocks(motion.center, motion.velocity, motion.reference,
-                                  motion.fitted, motion.n_boxes, *_indices(contacts),
-                                  approach.closest, approach.row_cos, approach.row_sin)
-    rate = approach.rate
-    if _same_rows(gradient, m) and np.all(approach.closest_rate <= rate):
-        return ApproachRows(stacked_point_rows(index[:m], gradient[:m],
-                                               n_unknown_points(model)), rate)
-    matrix = stacked_point_rows(index, gradient, n_unknown_points(model))
-    # at an interior minimiser of psi / tau the right-hand side is exactly ``rate``; the
-    # minimum keeps it there where the sampled minimiser is inexact or on the boundary
-    closest = (_row_products(matrix.data, matrix.indices, matrix.indptr, m, approach.about)
-               - approach.margin / approach.closest)
-    return ApproachRows(matrix, np.concatenate([rate, np.minimum(closest,
-                                                                 approach.closest_rate)]))
+    data, indices, indptr, canonical, rhs = _approach_rows(
+        motion.center, motion.velocity, motion.reference, motion.fitted, motion.n_boxes,
+        *_indices(contacts), approach.closest, approach.row_cos, approach.row_sin,
+        approach.rate, approach.closest_rate, approach.margin, approach.about)
+    matrix = point_matrix(data, indices, indptr, canonical, n_unknown_points(model))
+    if not canonical and matrix.shape[0] > m:  # the closest rows' products of the summed rows
+        rhs[m:] = _lifted(_row_products(matrix.data, matrix.indices, matrix.indptr, m,
+                                        approach.about), approach.margin, approach.closest,
+                          approach.closest_rate)
+    return ApproachRows(matrix, rhs)
 
 
 def _indices(contacts: Contacts) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray]:
@@ -733,6 +730,57 @@ def _row_blocks(center: FloatArray, velocity: FloatArray, reference: FloatArray,
                      gradient, r, 0)
         _body_blocks(fitted, n_boxes, b, g_kx, g_ky, point_turn, index, gradient, r, 4)
     return index, gradient
+
+
+@compiled
+def _lifted(products: FloatArray, margin: FloatArray, closest: FloatArray,
+            closest_rate: FloatArray) -> FloatArray:
+    """The closest-approach rows' right-hand sides ``min(G v0 - psi / tau*, r')`` (m/s).
+
+    ``products`` ``G v0``; ``np.minimum``'s choice: the first unless it is larger, or the
+    second is NaN (the second of two equal numbers, signed zeros included).  At an interior
+    minimiser of ``psi / tau`` the right-hand side is exactly the rate; the minimum keeps it
+    there where the sampled minimiser is inexact or on the boundary.
+    """
+    lifted = np.empty(products.shape[0])
+    for c in range(products.shape[0]):
+        value = products[c] - margin[c] / closest[c]
+        lifted[c] = value if value < closest_rate[c] or value != value else closest_rate[c]
+    return lifted
+
+
+@compiled
+def _approach_rows(center: FloatArray, velocity: FloatArray, reference: FloatArray,
+                   fitted: FloatArray, n_boxes: int, edge_body: IntArray,
+                   point_body: IntArray, edge_i: IntArray, edge_j: IntArray,
+                   point: IntArray, closest: FloatArray, row_cos: FloatArray,
+                   row_sin: FloatArray, rate: FloatArray, closest_rate: FloatArray,
+                   margin: FloatArray, about: FloatArray,
+                   ) -> tuple[FloatArray, IntArray, IntArray, bool, FloatArray]:
+    """:func:`rows_along`'s CSR rows (as :func:`~.rows.csr_point_rows`) and right-hand sides.
+
+    The blocks of :func:`_row_blocks`; the rate rows alone where :func:`_same_rows` and
+    every ``closest_rate <= rate`` (NaN: not), else both blocks of rows, the closest rows'
+    right-hand sides by :func:`_lifted` (left to the caller, as ``rate``'s, where the rows
+    are not canonical: their products are then those of the summed rows).
+    """
+    m = edge_body.shape[0]
+    index, gradient = _row_blocks(center, velocity, reference, fitted, n_boxes, edge_body,
+                                  point_body, edge_i, edge_j, point, closest, row_cos,
+                                  row_sin)
+    one = _same_rows(gradient, m)
+    for c in range(m):
+        if not closest_rate[c] <= rate[c]:
+            one = False
+    rows = m if one else 2 * m
+    data, indices, indptr, canonical = csr_point_rows(index[:rows], gradient[:rows])
+    rhs = np.empty(rows)
+    rhs[:m] = rate
+    rhs[m:] = rate[: rows - m]
+    if rows > m and canonical:
+        rhs[m:] = _lifted(_row_products(data, indices, indptr, m, about), margin, closest,
+                          closest_rate)
+    return data, indices, indptr, canonical, rhs
 
 
 @compiled
