@@ -326,6 +326,15 @@ def same_approach(model: Model, state: State, about: FloatArray) -> tuple[int, i
         model, state.points, found, about, DT, formulation.push_speed)
     for field in dataclasses.fields(motion):
         assert_same_bits(getattr(ours.motion, field.name), getattr(motion, field.name))
+    pose = closest_approach(model, state.points, found, 2.0 - about, DT,  # another motion
+                            formulation.push_speed).motion
+    posed = closest_approach(model, state.points, found, about, DT, formulation.push_speed,
+                             pose)  # a later pass's: the first pass's fitted bodies
+    for field in dataclasses.fields(posed):
+        if field.name != "motion":
+            assert_same_bits(getattr(posed, field.name), getattr(ours, field.name))
+    for field in dataclasses.fields(motion):
+        assert_same_bits(getattr(posed.motion, field.name), getattr(motion, field.name))
     if len(found) == 0:
         return 0, 0
     for compiled, expected in ((ours.closest, closest), (ours.margin, margin),

@@ -234,14 +234,15 @@ class VelocityFormulation(FrictionSettings):
         if self.linearisation == "start" or passes >= self.max_passes:
             return None
         contacts = self._reached_contacts(model, state, previous.contacts, solution, dt)
+        pose = previous.approach.motion if previous.approach is not None else None
         approach = closest_approach(model, state.points, contacts, solution, dt,
-                                    self.push_speed)
+                                    self.push_speed, pose)
         if contacts is previous.contacts and approach.violation <= self.gap_tolerance:
             return None
         last = previous.linearised_about
         if passes + 1 >= FIRST_DAMPED_PASS and last is not None:
             approach = closest_approach(model, state.points, contacts, 0.5 * (solution + last),
-                                        dt, self.push_speed)
+                                        dt, self.push_speed, pose)
         rows = rows_along(model, contacts, approach)
         matrix, rhs, cones = self._cones(model, state.points, contacts, rows.matrix, rows.rhs)
         return declare_qp(previous.weights, previous.target, previous.eq_matrix,
@@ -352,7 +353,7 @@ class Approach:
 
 
 def closest_approach(model: Model, points: FloatArray, contacts: Contacts, about: FloatArray,
-                     dt: float, push_speed: float) -> Approach:
+                     dt: float, push_speed: float, pose: BodyMotion | None = None) -> Approach:
     """The contacts' closest approaches along the motion of the unknowns ``about``.
 
     ``points`` ``(4 n, 2)`` (m) is the state at the start of the step; ``about`` the QP's
@@ -360,9 +361,11 @@ def closest_approach(model: Model, points: FloatArray, contacts: Contacts, about
     mean rate ``psi(tau) / tau`` (m/s), sampled on :data:`SAMPLES` intervals and refined by
     a parabola; the violation (m) is the largest ``-psi`` over the samples and refined
     times.  By compiled loops (:func:`_sampled_approach`, :func:`_refined_approach`), the
-    angles' ``cos`` and ``sin`` by NumPy between them.
+    angles' ``cos`` and ``sin`` by NumPy between them.  ``pose``: a motion of the same
+    ``points`` whose fitted bodies are taken (:func:`~.motion.body_motion`), as a later pass
+    takes its first pass's.
     """
-    motion = body_motion(model, points, about.reshape(-1, 2)[: model.n_points])
+    motion = body_motion(model, points, about.reshape(-1, 2)[: model.n_points], pose)
     return approach_along(motion, contacts, about, dt, push_speed)
 
 
