@@ -355,6 +355,16 @@ def body_reach(model: Model, state: State, dt: float, contact_margin: float) -> 
     return np.concatenate([reach_squares, np.full(model.n_tables, 0.5 * contact_margin)])
 
 
+def reaches(model: Model, state: State, solution: FloatArray, dt: float,
+            contact_margin: float) -> tuple[FloatArray, FloatArray, bool]:
+    """``VelocityFormulation._reached_contacts``'s reach searched, travel and their test."""
+    searched = body_reach(model, state, dt, contact_margin)
+    moving = State(state.points, solution.reshape(-1, 2)[: model.n_points])
+    travel = (body_reach(model, moving, dt, contact_margin)
+              - dt * dt * float(np.linalg.norm(model.gravity)))
+    return searched, travel, bool(np.all(travel <= searched))
+
+
 # --------------------------------------------------------------------------------------
 # Closest approach (wuerfel_cvx.formulations.velocity and .motion, compiled there)
 # --------------------------------------------------------------------------------------

@@ -48,6 +48,9 @@ from wuerfel_cvx.formulations.velocity import (
     closest_approach,
     rows_along,
 )
+from wuerfel_cvx.formulations.velocity import (
+    _reaches as velocity_reaches,
+)
 from wuerfel_cvx.scenes.geometry import FloatArray, rectangle_corners
 from wuerfel_cvx.solve import residual_kernel
 from wuerfel_cvx.solve.paths import (
@@ -368,6 +371,22 @@ def approach_estimates(model: Model, state: State,
                                * turned[..., ::-1] * np.array([-1.0, 1.0])).reshape(-1, 2)
     return [free.ravel(), rng.normal(scale=3.0, size=2 * n_unknown), spins.ravel(),
             -np.zeros(2 * n_unknown)]
+
+
+@pytest.mark.parametrize(("kind", "key"), MOTION_CASES)
+def test_the_reach_of_a_pass_is_the_references(kind: str, key: str | int) -> None:
+    """The reach searched and a solution's travel, at the estimates of the approach tests."""
+    rng = np.random.default_rng(37)
+    formulation = VelocityFormulation()
+    for model, state in row_states(kind, key):
+        for about in approach_estimates(model, state, rng):
+            ours = velocity_reaches(state.velocities, about.reshape(-1, 2)[: model.n_points],
+                                    model.n_tables, 0.5 * formulation.contact_margin, DT,
+                                    DT * model.gravity_norm, DT * DT * model.gravity_norm)
+            theirs = reference.reaches(model, state, about, DT, formulation.contact_margin)
+            assert_same_bits(ours[0], theirs[0])
+            assert_same_bits(ours[1], theirs[1])
+            assert ours[2] == theirs[2]
 
 
 APPROACH_CASES = ([("library", name) for name in sorted(LIBRARY)]

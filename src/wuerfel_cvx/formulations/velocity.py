@@ -256,10 +256,11 @@ class VelocityFormulation(FrictionSettings):
         A body's corners travel at most ``dt`` times their fastest speed in ``solution``;
         its contacts were searched within :meth:`body_reach` of the start speeds.
         """
-        searched = self.body_reach(model, state, dt)
-        moving = State(state.points, solution.reshape(-1, 2)[: model.n_points])
-        travel = self.body_reach(model, moving, dt) - dt * dt * model.gravity_norm
-        if np.all(travel <= searched):
+        searched, travel, within = _reaches(
+            state.velocities, solution.reshape(-1, 2)[: model.n_points], model.n_tables,
+            0.5 * self.contact_margin, dt, dt * model.gravity_norm,
+            dt * dt * model.gravity_norm)
+        if within:
             return contacts
         wider = find_contacts(model, state.points, np.maximum(searched, travel))
         same = len(wider) == len(contacts) and all(
@@ -292,6 +293,25 @@ class VelocityFormulation(FrictionSettings):
         if self.position_update == "linear":
             return State(state.points + dt * velocities, velocities)
         return rigid_step(model.reference_corners, state.points, velocities, dt)
+
+
+@compiled
+def _reaches(start: FloatArray, moving: FloatArray, n_tables: int, half_margin: float,
+             dt: float, fall: float, drop: float) -> tuple[FloatArray, FloatArray, bool]:
+    """The reach searched (m), the travel of ``moving``'s speeds (m), and whether it is within.
+
+    :meth:`VelocityFormulation.body_reach` of the ``start`` corner velocities and of the
+    ``moving`` ones less ``drop`` (the fall's ``dt^2 |g|``, m), both by
+    :func:`~.motion.body_reach`; within: every travel at most its reach (NaN: not).
+    """
+    searched = motion.body_reach(start, n_tables, half_margin, dt, fall)
+    travel = motion.body_reach(moving, n_tables, half_margin, dt, fall)
+    within = True
+    for b in range(travel.shape[0]):
+        travel[b] = travel[b] - drop
+        if not travel[b] <= searched[b]:
+            within = False
+    return searched, travel, within
 
 
 # ---------------------------------------------------------------------- closest-approach rows
