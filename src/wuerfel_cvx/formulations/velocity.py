@@ -401,15 +401,13 @@ def approach_along(motion: BodyMotion, contacts: Contacts, about: FloatArray, dt
     corners = _indices(contacts)
     clearance = (contacts.clearance if contacts.clearance is not None
                  else np.zeros(len(contacts)))
-    sampled = _sampled_approach(motion.center, motion.velocity, motion.reference, motion.angle,
-                                motion.spin, cos, sin, grid, *corners, clearance, dt,
-                                push_speed)
-    (start, rate, line_start, line_rate, start_rate, refined, best, best_rate, best_margin,
-     best_line, lowest, refined_turns) = sampled
-    closest, margin, closest_rate, lowest_refined, row_cos, row_sin = _refined_approach(
-        motion.center, motion.velocity, motion.reference, cos, sin,
-        np.cos(refined_turns), np.sin(refined_turns), grid, *corners, clearance, start, rate,
-        line_start, line_rate, refined, best, best_rate, best_margin, best_line)
+    results, best, lowest, refined_turns = _sampled_approach(
+        motion.center, motion.velocity, motion.reference, motion.angle, motion.spin, cos, sin,
+        grid, *corners, clearance, dt, push_speed)
+    closest, margin, start_rate, closest_rate, lowest_refined, row_cos, row_sin = (
+        _refined_approach(motion.center, motion.velocity, motion.reference, cos, sin,
+                          np.cos(refined_turns), np.sin(refined_turns), grid, *corners,
+                          clearance, results, best))
     violation = float(max(0.0, -lowest, -lowest_refined))
     return Approach(about, motion, closest, margin, start_rate, closest_rate, violation,
                     row_cos, row_sin)
@@ -585,33 +583,35 @@ def _parabola_time(mean_rate: FloatArray, best: int, dt: float) -> float:
     return time
 
 
+START, RATE, LINE_START, LINE_RATE, START_RATE, REFINED, BEST_RATE, BEST_MARGIN, BEST_LINE = (
+    range(9))
+"""The columns of :func:`_sampled_approach`'s per-contact results (one row per contact), which
+:func:`_refined_approach` takes: the start gap (m), the ramp's rate (m/s), the start line
+distance (m) and its ramp's rate (m/s) (:func:`_ramp_margin`), the rate row's right-hand
+side (m/s; the line's ramp's rate where ``psi`` is the line distance's from the first
+sample on, else the ramp's), the refined time (s), the best sample's mean rate (m/s) and
+margin (m), and 1.0 where the best sample's point is over the face it started past (else
+0.0).  One array for nine: each array a compiled call returns or takes costs a conversion."""
+
+
 @compiled
 def _sampled_approach(center: FloatArray, velocity: FloatArray, reference: FloatArray,
                       angle: FloatArray, spin: FloatArray, cos: FloatArray, sin: FloatArray,
                       grid: FloatArray, edge_body: IntArray, point_body: IntArray,
                       edge_i: IntArray, edge_j: IntArray, point: IntArray,
                       clearance: FloatArray, dt: float, push_speed: float,
-                      ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
-                                 FloatArray, IntArray, FloatArray, FloatArray, np.ndarray,
-                                 float, FloatArray]:
+                      ) -> tuple[FloatArray, IntArray, float, FloatArray]:
     """Each contact's ramp margins on the samples, their minimiser and its refinement.
 
     ``cos`` and ``sin`` ``(B, samples + 1)`` of each body's angle at the sample times
-    ``grid`` (s).  Returns the start gaps (m), the ramps' rates (m/s), the start line
-    distances (m) and their ramps' rates (m/s) (:func:`_ramp_margin`), the rate rows'
-    right-hand sides (m/s; the line's ramp's rate where ``psi`` is the line distance's
-    from the first sample on, else the ramp's), the refined times
-    (s), the best samples, their mean rates (m/s) and margins (m), whether the best sample's
-    point is over the face it started past, the lowest sampled margin (m; NaN if any is)
-    and the angles ``(m, 2)`` (rad) of the contacts' edge and point bodies at their refined
+    ``grid`` (s).  Returns the per-contact results ``(m, 9)`` (columns :data:`START` to
+    :data:`BEST_LINE`), the best samples, the lowest sampled margin (m; NaN if any is) and
+    the angles ``(m, 2)`` (rad) of the contacts' edge and point bodies at their refined
     times.
     """
     m, samples = edge_body.shape[0], grid.shape[0] - 1
-    start, rate, refined = np.empty(m), np.empty(m), np.empty(m)
-    line_start, line_rate, start_rate = np.empty(m), np.empty(m), np.empty(m)
+    results = np.empty((m, 9))
     best = np.empty(m, dtype=np.int64)
-    best_rate, best_margin = np.empty(m), np.empty(m)
-    best_line = np.empty(m, dtype=np.bool_)
     refined_turns = np.empty((m, 2))
     gaps, lines = np.empty(samples + 1), np.empty(samples + 1)
     where, on_line = np.empty(samples + 1, dtype=np.int64), np.empty(samples + 1, dtype=np.bool_)
@@ -623,27 +623,29 @@ def _sampled_approach(center: FloatArray, velocity: FloatArray, reference: Float
             gaps[s], lines[s], where[s] = _face_gap(
                 center, velocity, reference, a, b, edge_i[c] % 4, edge_j[c] % 4, point[c] % 4,
                 clearance[c], grid[s], cos[a, s], sin[a, s], cos[b, s], sin[b, s])
-        start[c], line_start[c] = gaps[0], lines[0]
-        rate[c] = (_nan_min(0.0, gaps[0] + dt * push_speed) - gaps[0]) / dt
-        line_rate[c] = (_nan_min(0.0, lines[0] + dt * push_speed) - lines[0]) / dt
+        start, line_start = gaps[0], lines[0]
+        rate = (_nan_min(0.0, gaps[0] + dt * push_speed) - gaps[0]) / dt
+        line_rate = (_nan_min(0.0, lines[0] + dt * push_speed) - lines[0]) / dt
         for s in range(samples + 1):
             margin, on_line[s] = _ramp_margin(gaps[s], lines[s], where[s], grid[s],
-                                              start[c], rate[c], line_start[c], line_rate[c])
+                                              start, rate, line_start, line_rate)
             lowest = _nan_min(lowest, margin)
             gaps[s] = margin  # the gaps are not needed further
             if s > 0:
                 mean_rate[s] = margin / grid[s]
         mean_rate[0] = 2.0 * mean_rate[1] - mean_rate[2]  # for the parabola only
         best[c] = _best_sample(mean_rate)
-        best_rate[c], best_margin[c] = mean_rate[best[c]], gaps[best[c]]
-        best_line[c] = on_line[best[c]]
+        refined = _parabola_time(mean_rate, best[c], dt)
+        results[c, START], results[c, RATE] = start, rate
+        results[c, LINE_START], results[c, LINE_RATE] = line_start, line_rate
         # the rate row's: the line's where psi is the line distance's from the first sample
-        start_rate[c] = line_rate[c] if on_line[1] else rate[c]
-        refined[c] = _parabola_time(mean_rate, best[c], dt)
-        refined_turns[c, 0] = angle[a] + spin[a] * refined[c]
-        refined_turns[c, 1] = angle[b] + spin[b] * refined[c]
-    return (start, rate, line_start, line_rate, start_rate, refined, best, best_rate,
-            best_margin, best_line, lowest, refined_turns)
+        results[c, START_RATE] = line_rate if on_line[1] else rate
+        results[c, REFINED] = refined
+        results[c, BEST_RATE], results[c, BEST_MARGIN] = mean_rate[best[c]], gaps[best[c]]
+        results[c, BEST_LINE] = 1.0 if on_line[best[c]] else 0.0
+        refined_turns[c, 0] = angle[a] + spin[a] * refined
+        refined_turns[c, 1] = angle[b] + spin[b] * refined
+    return results, best, lowest, refined_turns
 
 
 @compiled
@@ -651,46 +653,49 @@ def _refined_approach(center: FloatArray, velocity: FloatArray, reference: Float
                       cos: FloatArray, sin: FloatArray, refined_cos: FloatArray,
                       refined_sin: FloatArray, grid: FloatArray, edge_body: IntArray,
                       point_body: IntArray, edge_i: IntArray, edge_j: IntArray,
-                      point: IntArray, clearance: FloatArray, start: FloatArray,
-                      rate: FloatArray, line_start: FloatArray, line_rate: FloatArray,
-                      refined: FloatArray, best: IntArray, best_rate: FloatArray,
-                      best_margin: FloatArray, best_line: np.ndarray,
-                      ) -> tuple[FloatArray, FloatArray, FloatArray, float, FloatArray,
-                                 FloatArray]:
+                      point: IntArray, clearance: FloatArray, results: FloatArray,
+                      best: IntArray,
+                      ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, float,
+                                 FloatArray, FloatArray]:
     """Each contact's closest approach: the refined time where its mean rate is lower.
 
-    ``refined_cos`` and ``refined_sin`` ``(m, 2)`` of the angles at the refined times.
-    Returns ``tau*`` (s), ``psi(tau*)`` (m), the rate (m/s) of the ramp ``psi`` is taken
-    from there (:func:`_ramp_margin`), the lowest refined margin (m; NaN if any is), and
-    ``cos`` and ``sin`` ``(2 m, 2)`` of the bodies' angles at the rows' times.
+    ``results`` and ``best`` of :func:`_sampled_approach`; ``refined_cos`` and
+    ``refined_sin`` ``(m, 2)`` of the angles at the refined times.  Returns ``tau*`` (s),
+    ``psi(tau*)`` (m), the rate rows' right-hand sides (m/s, :data:`START_RATE`), the rate
+    (m/s) of the ramp ``psi`` is taken from at ``tau*`` (:func:`_ramp_margin`), the lowest
+    refined margin (m; NaN if any is), and ``cos`` and ``sin`` ``(2 m, 2)`` of the bodies'
+    angles at the rows' times.
     """
     m = edge_body.shape[0]
     closest, margin, closest_rate = np.empty(m), np.empty(m), np.empty(m)
+    start_rate = np.empty(m)
     row_cos, row_sin = np.empty((2 * m, 2)), np.empty((2 * m, 2))
     lowest = np.inf
     for c in range(m):
         a, b = edge_body[c], point_body[c]
+        refined, rate, line_rate = results[c, REFINED], results[c, RATE], results[c, LINE_RATE]
+        start_rate[c] = results[c, START_RATE]
         gap, line, where = _face_gap(center, velocity, reference, a, b, edge_i[c] % 4,
-                                     edge_j[c] % 4, point[c] % 4, clearance[c], refined[c],
+                                     edge_j[c] % 4, point[c] % 4, clearance[c], refined,
                                      refined_cos[c, 0], refined_sin[c, 0], refined_cos[c, 1],
                                      refined_sin[c, 1])
-        refined_margin, on_line = _ramp_margin(gap, line, where, refined[c], start[c],
-                                               rate[c], line_start[c], line_rate[c])
+        refined_margin, on_line = _ramp_margin(gap, line, where, refined, results[c, START],
+                                               rate, results[c, LINE_START], line_rate)
         lowest = _nan_min(lowest, refined_margin)
         row_cos[c, 0], row_sin[c, 0] = cos[a, 0], sin[a, 0]
         row_cos[c, 1], row_sin[c, 1] = cos[b, 0], sin[b, 0]
-        if refined_margin / refined[c] < best_rate[c]:
-            closest[c], margin[c] = refined[c], refined_margin
-            closest_rate[c] = line_rate[c] if on_line else rate[c]
+        if refined_margin / refined < results[c, BEST_RATE]:
+            closest[c], margin[c] = refined, refined_margin
+            closest_rate[c] = line_rate if on_line else rate
             row_cos[m + c, 0], row_sin[m + c, 0] = refined_cos[c, 0], refined_sin[c, 0]
             row_cos[m + c, 1], row_sin[m + c, 1] = refined_cos[c, 1], refined_sin[c, 1]
         else:
             s = best[c]
-            closest[c], margin[c] = grid[s], best_margin[c]
-            closest_rate[c] = line_rate[c] if best_line[c] else rate[c]
+            closest[c], margin[c] = grid[s], results[c, BEST_MARGIN]
+            closest_rate[c] = line_rate if results[c, BEST_LINE] == 1.0 else rate
             row_cos[m + c, 0], row_sin[m + c, 0] = cos[a, s], sin[a, s]
             row_cos[m + c, 1], row_sin[m + c, 1] = cos[b, s], sin[b, s]
-    return closest, margin, closest_rate, lowest, row_cos, row_sin
+    return closest, margin, start_rate, closest_rate, lowest, row_cos, row_sin
 
 
 @compiled
