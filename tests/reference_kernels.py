@@ -728,3 +728,13 @@ def signorini(all_points: FloatArray, contacts: Contacts, normal: FloatArray) ->
 def fastest_speed(velocities: FloatArray) -> float:
     """``criteria.push_bound``'s largest corner speed (m/s), 0 for none."""
     return float(np.max(np.linalg.norm(velocities, axis=1))) if velocities.size else 0.0
+
+
+def deepest_penetration(contacts: Contacts) -> float:
+    """``Contacts.deepest_penetration``: the deepest point behind its edge's line (m), or 0."""
+    return 0.0 if len(contacts) == 0 else float(max(0.0, -np.min(contacts.distance)))
+
+
+def finite(state: State) -> bool:
+    """The simulation's check of a new state: every coordinate finite."""
+    return bool(np.isfinite(state.points).all() and np.isfinite(state.velocities).all())

@@ -71,6 +71,7 @@ from wuerfel_cvx.step.criteria import (
     row_pushes,
 )
 from wuerfel_cvx.step.model import Model, State
+from wuerfel_cvx.step.simulation import _finite as simulation_finite
 
 pytestmark = pytest.mark.integration
 
@@ -129,6 +130,8 @@ def same_contact_search(model: Model, state: State, rng: np.random.Generator) ->
         for field in dataclasses.fields(searched):
             assert_same_bits(getattr(searched, field.name),
                              getattr(expected_contacts, field.name))
+        same_float(searched.deepest_penetration(),
+                   reference.deepest_penetration(expected_contacts))
         if len(pairs) == 0:
             continue
         expected = reference.narrow_phase(corners, pairs[:, 0], pairs[:, 1], reach)
@@ -557,3 +560,19 @@ def test_the_signorini_column_and_the_push_bounds_speed_are_the_references(
             same_float(push_bound(model, State(state.points, velocities), DT, 1e-6), expected)
         compared += len(found)
     assert compared > 0
+
+
+def test_the_deepest_penetration_and_the_finite_check_are_the_references() -> None:
+    """Distances and states with zeros of both signs, NaN and infinities."""
+    rng = np.random.default_rng(41)
+    for size in (0, 1, 3, 9):
+        for nan in (False, True):
+            distance = edge_values(rng, size, nan)
+            index = np.zeros(size, dtype=np.int64)
+            found = contacts.Contacts(index, index, index, index, index, distance)
+            same_float(found.deepest_penetration(), reference.deepest_penetration(found))
+            points = edge_values(rng, 2 * size, nan).reshape(-1, 2)
+            for velocities in (np.zeros_like(points), np.full_like(points, np.inf)):
+                state = State(points, velocities)
+                assert simulation_finite(state.points, state.velocities) == reference.finite(
+                    state)

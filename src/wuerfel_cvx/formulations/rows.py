@@ -172,7 +172,7 @@ def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
     n_rows = corner_rows.shape[0]
     n_cols = 3 * (corner_rows.shape[1] // 8)
     return canonical_csr(*_body_rows(corner_rows.data, corner_rows.indices, corner_rows.indptr,
-                                     turned_offsets(points)),
+                                     points),
                          shape=(n_rows, n_cols))
 
 
@@ -222,16 +222,18 @@ def csr_point_rows(index: IntArray, gradient: FloatArray,
 
 
 @compiled
-def _body_rows(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, turned: FloatArray,
+def _body_rows(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, points: FloatArray,
               ) -> tuple[FloatArray, IntArray, IntArray]:
     """CSR ``(data, indices, indptr)`` (int32 indices) of corner rows times the corner map.
 
     ``data``, ``indices``, ``indptr``: canonical CSR rows over corner coordinates;
-    ``turned`` ``(8 n,)``: ``rot90(r_c)`` per corner coordinate.  An entry ``v`` in column
-    ``c`` (square ``c // 8``, axis ``c % 2``) adds ``v`` to column ``3 (c // 8) + c % 2``
-    and ``v turned[c]`` to column ``3 (c // 8) + 2``; a cell sums its entries from 0.0 in
-    the row's column order (see :func:`body_rows`).
+    ``points`` ``(4 n, 2)``: the corners, whose ``turned = rot90(r_c)`` per corner coordinate
+    (:func:`~.motion.turned_offsets`) the map takes.  An entry ``v`` in column ``c``
+    (square ``c // 8``, axis ``c % 2``) adds ``v`` to column ``3 (c // 8) + c % 2`` and
+    ``v turned[c]`` to column ``3 (c // 8) + 2``; a cell sums its entries from 0.0 in the
+    row's column order (see :func:`body_rows`).
     """
+    turned = turned_offsets(points)
     n_rows = indptr.shape[0] - 1
     out_data = np.empty(2 * data.shape[0])
     out_indices = np.empty(2 * data.shape[0], dtype=np.int32)
