@@ -231,35 +231,41 @@ def _body_rows(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, points
     (:func:`~.motion.turned_offsets`) the map takes.  An entry ``v`` in column ``c``
     (square ``c // 8``, axis ``c % 2``) adds ``v`` to column ``3 (c // 8) + c % 2`` and
     ``v turned[c]`` to column ``3 (c // 8) + 2``; a cell sums its entries from 0.0 in the
-    row's column order (see :func:`body_rows`).
+    row's column order (see :func:`body_rows`).  A row's columns ascend, so each square's
+    entries are one run, and its three cells are summed over the run: the cells of a
+    stable sort of the row's entries by their new column, in a pass instead of a sort.
     """
     turned = turned_offsets(points)
     n_rows = indptr.shape[0] - 1
     out_data = np.empty(2 * data.shape[0])
     out_indices = np.empty(2 * data.shape[0], dtype=np.int32)
     out_indptr = np.zeros(n_rows + 1, dtype=np.int32)
-    width = 2 * int(np.max(np.diff(indptr))) if n_rows else 0
-    columns = np.empty(max(width, 1), dtype=np.int64)
-    values = np.empty(max(width, 1))
     count = 0
     for r in range(n_rows):
-        m = 0
-        for k in range(indptr[r], indptr[r + 1]):  # the translation entries, then the turns
-            columns[m], values[m] = 3 * (indices[k] // 8) + indices[k] % 2, data[k] * 1.0
-            m += 1
-        for k in range(indptr[r], indptr[r + 1]):
-            columns[m], values[m] = 3 * (indices[k] // 8) + 2, data[k] * turned[indices[k]]
-            m += 1
-        _sort_row(columns, values, m)
-        k = 0
-        while k < m:
+        first, last = indptr[r], indptr[r + 1]
+        for k in range(first + 1, last):
+            if indices[k] <= indices[k - 1]:
+                raise ValueError("body_rows takes canonical corner rows")
+        k = first
+        while k < last:  # a square's entries, one run: its columns x, y, then the turn
+            square, end = indices[k] // 8, k
+            while end < last and indices[end] // 8 == square:
+                end += 1
+            for axis in range(2):
+                total, found = 0.0, False
+                for e in range(k, end):
+                    if indices[e] % 2 == axis:
+                        total += data[e] * 1.0
+                        found = True
+                if found:
+                    out_indices[count], out_data[count] = 3 * square + axis, total
+                    count += 1
             total = 0.0
-            column = columns[k]
-            while k < m and columns[k] == column:
-                total += values[k]
-                k += 1
-            out_indices[count], out_data[count] = column, total
+            for e in range(k, end):
+                total += data[e] * turned[indices[e]]
+            out_indices[count], out_data[count] = 3 * square + 2, total
             count += 1
+            k = end
         out_indptr[r + 1] = count
     return out_data[:count], out_indices[:count], out_indptr
 
