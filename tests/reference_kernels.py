@@ -3,7 +3,7 @@
 Each function here is the batched NumPy code a stage ran before the compiled kernel
 replaced it (the compiled loops in the stage's own module: ``step/contacts.py``,
 ``formulations/rows.py``, ``formulations/motion.py``, ``formulations/velocity.py``,
-``solve/residual_kernel.py``); the
+``step/criteria.py``, ``solve/residual_kernel.py``); the
 product runs the kernels only, and ``tests/test_kernels.py`` checks them against these, bit
 for bit.  The KKT check keeps its
 general NumPy code in the product (QPs with a coupling cost or upper bounds):

@@ -2,7 +2,7 @@
 
 The product runs the compiled kernels only (each in its stage's module: ``step/contacts.py``,
 ``formulations/rows.py``, ``formulations/motion.py``, ``formulations/velocity.py``,
-``solve/residual_kernel.py``); the
+``step/criteria.py``, ``solve/residual_kernel.py``); the
 batched NumPy code they replaced is kept in ``tests/reference_kernels.py``.  One test per stage
 compares the two on the same inputs: the states of ``tests/test_contacts_fast.py``
 (library scenes, random overlapping squares of random size and angle against random
