@@ -3,7 +3,7 @@
 Each function here is the batched NumPy code a stage ran before the compiled kernel
 replaced it (the compiled loops in the stage's own module: ``step/contacts.py``,
 ``formulations/rows.py``, ``formulations/motion.py``, ``formulations/velocity.py``,
-``solve/residual_kernel.py``); the
+``step/criteria.py``, ``solve/residual_kernel.py``); the
 product runs the kernels only, and ``tests/test_kernels.py`` checks them against these, bit
 for bit.  The KKT check keeps its
 general NumPy code in the product (QPs with a coupling cost or upper bounds):
@@ -24,6 +24,7 @@ from wuerfel_cvx.formulations.rigid import body_velocities
 from wuerfel_cvx.formulations.rows import n_unknown_points, unknown_index
 from wuerfel_cvx.scenes.geometry import FloatArray, corner_mean, cross, rot90, side_gradients
 from wuerfel_cvx.step.contacts import TIE_TOLERANCE, Contacts, pair_distances, tree_pairs
+from wuerfel_cvx.step.criteria import OPEN_GAP_M
 from wuerfel_cvx.step.model import IntArray, Model, State
 
 # --------------------------------------------------------------------------------------
@@ -143,6 +144,22 @@ def narrow_phase(corners: FloatArray, edge_body: IntArray, point_body: IntArray,
     distance = chosen[corner, pair_index]
     return (pair_index, corner, edge[corner, pair_index], distance,
             clearances(beyond[corner, pair_index], distance))
+
+
+def find_contacts(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
+    """``contacts.find_contacts`` with a reach ``(n_bodies,)`` (m): both phases, as contacts."""
+    all_points = model.all_points(points)
+    pairs = body_pairs(model, all_points, reach)
+    if len(pairs) == 0:
+        return Contacts.empty()
+    edge_body, point_body = pairs[:, 0], pairs[:, 1]
+    pair_index, corner, edge_index, distance, clearance = narrow_phase(
+        all_points.reshape(-1, 4, 2), edge_body, point_body, reach)
+    w = edge_body[pair_index]
+    return Contacts(point=4 * point_body[pair_index] + corner,
+                    edge_i=4 * w + (edge_index + 1) % 4, edge_j=4 * w + edge_index,
+                    point_body=point_body[pair_index], edge_body=w, distance=distance,
+                    clearance=clearance)
 
 
 # --------------------------------------------------------------------------------------
@@ -336,6 +353,16 @@ def body_reach(model: Model, state: State, dt: float, contact_margin: float) -> 
     speeds = np.linalg.norm(state.velocities, axis=1).reshape(-1, 4).max(axis=1)
     reach_squares = 0.5 * contact_margin + dt * (speeds + dt * np.linalg.norm(model.gravity))
     return np.concatenate([reach_squares, np.full(model.n_tables, 0.5 * contact_margin)])
+
+
+def reaches(model: Model, state: State, solution: FloatArray, dt: float,
+            contact_margin: float) -> tuple[FloatArray, FloatArray, bool]:
+    """``VelocityFormulation._reached_contacts``'s reach searched, travel and their test."""
+    searched = body_reach(model, state, dt, contact_margin)
+    moving = State(state.points, solution.reshape(-1, 2)[: model.n_points])
+    travel = (body_reach(model, moving, dt, contact_margin)
+              - dt * dt * float(np.linalg.norm(model.gravity)))
+    return searched, travel, bool(np.all(travel <= searched))
 
 
 # --------------------------------------------------------------------------------------
@@ -668,3 +695,46 @@ def gaps_after(all_points: FloatArray, contacts: Contacts) -> FloatArray:
                                                      contacts.point))
     edge = p_j - p_i
     return np.asarray(cross(edge, p_k - p_i) / np.linalg.norm(edge, axis=1), dtype=np.float64)
+
+
+def row_pushes(qp: StepQP, x: FloatArray, ineq_dual: FloatArray, impulse_per_multiplier: float,
+               gap_per_slack: float) -> dict[str, float]:
+    """``criteria.row_pushes``: the largest impulse on an open row, the largest gap x impulse."""
+    lhs = qp.ineq_matrix @ x
+    slack = lhs - qp.ineq_rhs
+    if qp.upper_rows.size:
+        assert qp.ineq_upper is not None
+        slack = np.where(ineq_dual < 0.0, qp.ineq_upper - lhs, slack)
+    impulse = np.abs(ineq_dual) * impulse_per_multiplier
+    gap = np.maximum(slack, 0.0) * gap_per_slack
+    open_rows = gap > OPEN_GAP_M
+    return {"push_at_distance_Ns": float(impulse[open_rows].max()) if open_rows.any() else 0.0,
+            "push_gap_product_Nsm": float(np.max(impulse * gap))}
+
+
+def normal_impulses(count: int, ineq_dual: FloatArray,
+                    impulse_per_multiplier: float) -> FloatArray:
+    """``criteria.normal_impulses``: the multipliers of each contact's rows, summed (N s)."""
+    rows = np.arange(ineq_dual.shape[0]) % max(count, 1)
+    return np.asarray(impulse_per_multiplier * np.bincount(rows, weights=ineq_dual,
+                                                           minlength=count), dtype=np.float64)
+
+
+def signorini(all_points: FloatArray, contacts: Contacts, normal: FloatArray) -> float:
+    """``criteria.contact_criteria``'s ``signorini_violation_Nsm``: max ``|gap| lambda_n``."""
+    return float(np.max(np.abs(gaps_after(all_points, contacts)) * np.maximum(normal, 0.0)))
+
+
+def fastest_speed(velocities: FloatArray) -> float:
+    """``criteria.push_bound``'s largest corner speed (m/s), 0 for none."""
+    return float(np.max(np.linalg.norm(velocities, axis=1))) if velocities.size else 0.0
+
+
+def deepest_penetration(contacts: Contacts) -> float:
+    """``Contacts.deepest_penetration``: the deepest point behind its edge's line (m), or 0."""
+    return 0.0 if len(contacts) == 0 else float(max(0.0, -np.min(contacts.distance)))
+
+
+def finite(state: State) -> bool:
+    """The simulation's check of a new state: every coordinate finite."""
+    return bool(np.isfinite(state.points).all() and np.isfinite(state.velocities).all())

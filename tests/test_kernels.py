@@ -2,7 +2,7 @@
 
 The product runs the compiled kernels only (each in its stage's module: ``step/contacts.py``,
 ``formulations/rows.py``, ``formulations/motion.py``, ``formulations/velocity.py``,
-``solve/residual_kernel.py``); the
+``step/criteria.py``, ``solve/residual_kernel.py``); the
 batched NumPy code they replaced is kept in ``tests/reference_kernels.py``.  One test per stage
 compares the two on the same inputs: the states of ``tests/test_contacts_fast.py``
 (library scenes, random overlapping squares of random size and angle against random
@@ -48,14 +48,30 @@ from wuerfel_cvx.formulations.velocity import (
     closest_approach,
     rows_along,
 )
+from wuerfel_cvx.formulations.velocity import (
+    _reaches as velocity_reaches,
+)
 from wuerfel_cvx.scenes.geometry import FloatArray, rectangle_corners
 from wuerfel_cvx.solve import residual_kernel
-from wuerfel_cvx.solve.paths import Residuals, StepSolution, _checked_scales, kkt_residuals
+from wuerfel_cvx.solve.paths import (
+    VERIFY_FACTOR,
+    Residuals,
+    StepSolution,
+    _checked_scales,
+    kkt_residuals,
+)
 from wuerfel_cvx.solve.scaling import data_magnitude
 from wuerfel_cvx.step import contacts
 from wuerfel_cvx.step.contacts import find_contacts
-from wuerfel_cvx.step.criteria import gaps_after
+from wuerfel_cvx.step.criteria import (
+    contact_criteria,
+    gaps_after,
+    normal_impulses,
+    push_bound,
+    row_pushes,
+)
 from wuerfel_cvx.step.model import Model, State
+from wuerfel_cvx.step.simulation import _finite as simulation_finite
 
 pytestmark = pytest.mark.integration
 
@@ -109,6 +125,13 @@ def same_contact_search(model: Model, state: State, rng: np.random.Generator) ->
         reach = np.broadcast_to(np.asarray(margin, dtype=np.float64), (model.n_bodies,))
         pairs = contacts.body_pairs(model, all_points, reach)
         assert_same_bits(pairs, reference.body_pairs(model, all_points, reach))
+        searched, expected_contacts = (find_contacts(model, state.points, margin),
+                                       reference.find_contacts(model, state.points, reach))
+        for field in dataclasses.fields(searched):
+            assert_same_bits(getattr(searched, field.name),
+                             getattr(expected_contacts, field.name))
+        same_float(searched.deepest_penetration(),
+                   reference.deepest_penetration(expected_contacts))
         if len(pairs) == 0:
             continue
         expected = reference.narrow_phase(corners, pairs[:, 0], pairs[:, 1], reach)
@@ -309,6 +332,15 @@ def same_approach(model: Model, state: State, about: FloatArray) -> tuple[int, i
         model, state.points, found, about, DT, formulation.push_speed)
     for field in dataclasses.fields(motion):
         assert_same_bits(getattr(ours.motion, field.name), getattr(motion, field.name))
+    pose = closest_approach(model, state.points, found, 2.0 - about, DT,  # another motion
+                            formulation.push_speed).motion
+    posed = closest_approach(model, state.points, found, about, DT, formulation.push_speed,
+                             pose)  # a later pass's: the first pass's fitted bodies
+    for field in dataclasses.fields(posed):
+        if field.name != "motion":
+            assert_same_bits(getattr(posed, field.name), getattr(ours, field.name))
+    for field in dataclasses.fields(motion):
+        assert_same_bits(getattr(posed.motion, field.name), getattr(motion, field.name))
     if len(found) == 0:
         return 0, 0
     for compiled, expected in ((ours.closest, closest), (ours.margin, margin),
@@ -342,6 +374,22 @@ def approach_estimates(model: Model, state: State,
                                * turned[..., ::-1] * np.array([-1.0, 1.0])).reshape(-1, 2)
     return [free.ravel(), rng.normal(scale=3.0, size=2 * n_unknown), spins.ravel(),
             -np.zeros(2 * n_unknown)]
+
+
+@pytest.mark.parametrize(("kind", "key"), MOTION_CASES)
+def test_the_reach_of_a_pass_is_the_references(kind: str, key: str | int) -> None:
+    """The reach searched and a solution's travel, at the estimates of the approach tests."""
+    rng = np.random.default_rng(37)
+    formulation = VelocityFormulation()
+    for model, state in row_states(kind, key):
+        for about in approach_estimates(model, state, rng):
+            ours = velocity_reaches(state.velocities, about.reshape(-1, 2)[: model.n_points],
+                                    model.n_tables, 0.5 * formulation.contact_margin, DT,
+                                    DT * model.gravity_norm, DT * DT * model.gravity_norm)
+            theirs = reference.reaches(model, state, about, DT, formulation.contact_margin)
+            assert_same_bits(ours[0], theirs[0])
+            assert_same_bits(ours[1], theirs[1])
+            assert ours[2] == theirs[2]
 
 
 APPROACH_CASES = ([("library", name) for name in sorted(LIBRARY)]
@@ -450,3 +498,81 @@ def test_the_gaps_after_a_step_are_the_references(kind: str, key: str | int) -> 
                          reference.gaps_after(all_points, found))
         compared += len(found)
     assert compared > 0
+
+
+def same_float(ours: float, theirs: float) -> None:
+    """The same number, the sign of a zero included; NaN for NaN."""
+    assert (np.isnan(ours) and np.isnan(theirs)) or (
+        ours == theirs and np.signbit(ours) == np.signbit(theirs))
+
+
+def edge_values(rng: np.random.Generator, size: int, nan: bool) -> FloatArray:
+    """Random values with zeros of both signs, negatives and (if ``nan``) a NaN."""
+    values = rng.choice([0.0, -0.0, 1.5, -2.0], size=size) * rng.uniform(0.5, 1.0, size=size)
+    if nan and size:
+        values[rng.integers(size)] = np.nan
+    return values
+
+
+@pytest.mark.parametrize(("scene", "formulation", "steps"), KKT_CASES)
+def test_the_row_pushes_are_the_references(scene: str, formulation: str, steps: int) -> None:
+    """At the solvers' answers, and at multipliers of every sign, zeros and NaN included."""
+    rng = np.random.default_rng(29)
+    units = VelocityFormulation().row_units(DT)
+    checked = 0
+    for qp, solution in step_qps(scene, formulation, steps):
+        count = len(qp.contacts)
+        for z in (solution.ineq_dual, edge_values(rng, qp.n_inequalities, nan=False),
+                  edge_values(rng, qp.n_inequalities, nan=True)):
+            if qp.n_inequalities:
+                varied = dataclasses.replace(solution, ineq_dual=z)
+                ours = row_pushes(qp, varied, units)
+                theirs = reference.row_pushes(qp, solution.x, z, units.impulse_per_multiplier,
+                                              units.gap_per_slack)
+                for column in ours:
+                    same_float(ours[column], theirs[column])
+            assert_same_bits(normal_impulses(qp, dataclasses.replace(solution, ineq_dual=z),
+                                             units),
+                             reference.normal_impulses(count, z, units.impulse_per_multiplier))
+        checked += 1
+    assert checked > 0
+
+
+@pytest.mark.parametrize(("kind", "key"), ROW_CASES[:-1])
+def test_the_signorini_column_and_the_push_bounds_speed_are_the_references(
+        kind: str, key: str | int) -> None:
+    rng = np.random.default_rng(31)
+    compared = 0
+    for model, state in row_states(kind, key):
+        found = find_contacts(model, state.points, 0.1)
+        moved = state.points + 0.01 * rng.normal(size=state.points.shape)
+        for normal in (edge_values(rng, len(found), nan=False),
+                       edge_values(rng, len(found), nan=True)):
+            if len(found):
+                ours = contact_criteria(None, normal, model, moved, found)
+                same_float(ours["signorini_violation_Nsm"],
+                           reference.signorini(model.all_points(moved), found, normal))
+        for velocities in (state.velocities, np.zeros_like(state.velocities),
+                           edge_values(rng, state.velocities.size, nan=True).reshape(-1, 2)):
+            expected = (VERIFY_FACTOR * 1e-6 * DT * (0.5 + model.total_mass * (
+                speed := model.gravity_norm * DT + reference.fastest_speed(velocities))
+                * (1.0 + speed)))
+            same_float(push_bound(model, State(state.points, velocities), DT, 1e-6), expected)
+        compared += len(found)
+    assert compared > 0
+
+
+def test_the_deepest_penetration_and_the_finite_check_are_the_references() -> None:
+    """Distances and states with zeros of both signs, NaN and infinities."""
+    rng = np.random.default_rng(41)
+    for size in (0, 1, 3, 9):
+        for nan in (False, True):
+            distance = edge_values(rng, size, nan)
+            index = np.zeros(size, dtype=np.int64)
+            found = contacts.Contacts(index, index, index, index, index, distance)
+            same_float(found.deepest_penetration(), reference.deepest_penetration(found))
+            points = edge_values(rng, 2 * size, nan).reshape(-1, 2)
+            for velocities in (np.zeros_like(points), np.full_like(points, np.inf)):
+                state = State(points, velocities)
+                assert simulation_finite(state.points, state.velocities) == reference.finite(
+                    state)

@@ -48,3 +48,15 @@ def test_a_runs_metrics_hold_its_states_energies() -> None:
     assert row["kinetic_energy_J"] == kinetic_energy(model, last)
     assert row["rod_drift"] == rod_length_drift(model, last.points)
     assert run.metrics["total_energy_J"].dtype == np.float64
+
+
+def test_a_state_with_a_nan_corner_drifts_nan_as_the_per_state_function() -> None:
+    run = simulate("stack-10", steps=2)
+    model = run.model()
+    assert model is not None
+    points = run.points.copy()
+    points[1, 5, 0] = np.nan  # a rod of the second box in the second state
+    drift = state_metrics(model, points, run.velocities)["rod_drift"]
+    assert np.isnan(drift[1]) and np.isnan(rod_length_drift(model, points[1]))
+    assert drift[0] == rod_length_drift(model, points[0])
+    assert drift[2] == rod_length_drift(model, points[2])

@@ -33,20 +33,20 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
 def count_searches(monkeypatch: pytest.MonkeyPatch) -> list[str]:
-    """Record every contact search (each runs the broad phase once) and who asked for it.
+    """Record every contact search (each runs ``contacts._search`` once) and who asked for it.
 
     ``"pass"`` for a Gauss-Newton pass whose solution outran the searched reach
     (``VelocityFormulation._reached_contacts``), ``"state"`` for every other search.
     """
     calls: list[str] = []
-    broad_phase = contacts_module.body_pairs
+    search = contacts_module._search
 
-    def counting(*args: object) -> np.ndarray:
+    def counting(*args: object) -> contacts_module.Contacts:
         callers = {frame.function for frame in inspect.stack()[1:8]}
         calls.append("pass" if "_reached_contacts" in callers else "state")
-        return broad_phase(*args)  # type: ignore[arg-type]
+        return search(*args)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(contacts_module, "body_pairs", counting)
+    monkeypatch.setattr(contacts_module, "_search", counting)
     return calls
 
 

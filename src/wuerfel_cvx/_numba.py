@@ -3,9 +3,10 @@
 The kernels (the compiled loops of :mod:`~wuerfel_cvx.step.contacts`, the contact search and
 the contact matcher, of :mod:`~wuerfel_cvx.formulations.rows`,
 :mod:`~wuerfel_cvx.formulations.motion` and :mod:`~wuerfel_cvx.formulations.velocity` (the
-closest approach), :mod:`~wuerfel_cvx.solve.residual_kernel`,
-:func:`~wuerfel_cvx._sparse.add_rows` and the polish's sparse ``L D L'``) are plain Python
-functions over arrays;
+closest approach), of :mod:`~wuerfel_cvx.step.criteria` and
+:mod:`~wuerfel_cvx.step.simulation` (the physical check, the new state's finite check),
+:mod:`~wuerfel_cvx.solve.residual_kernel`, :func:`~wuerfel_cvx._sparse.add_rows` and the
+polish's sparse ``L D L'``) are plain Python functions over arrays;
 :func:`compiled` hands them to ``numba.njit`` with its default strict IEEE semantics (no
 fast-math: no reassociation, no fused multiply-add), so each operation rounds as NumPy's
 does.  The machine code is cached on disk (next to the sources, or in ``NUMBA_CACHE_DIR``),

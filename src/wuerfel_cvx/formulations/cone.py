@@ -123,7 +123,7 @@ def contact_cones(model: Model, all_points: FloatArray, contacts: Contacts,
     normal rows unchanged but still returns their :class:`ConeRows` (no ``-`` edges), for
     a friction model that treats friction apart from the contact QP.
     """
-    if not np.any(model.friction > 0.0):  # a frictionless scene: no contact has friction
+    if not model.has_friction:  # a frictionless scene: no contact has friction
         return normal, rhs, None
     coefficient = contact_friction(model.friction, contacts)
     if not np.any(coefficient > 0.0):

@@ -79,24 +79,33 @@ class BodyMotion:
                 + self.offsets(body, corner, tau))
 
 
-def body_motion(model: Model, points: FloatArray, velocities: FloatArray) -> BodyMotion:
+def body_motion(model: Model, points: FloatArray, velocities: FloatArray,
+                pose: BodyMotion | None = None) -> BodyMotion:
     """The rigid motion of every body for corner ``points`` and ``velocities`` ``(4 n, 2)``.
 
     Boxes are fitted as in the module docstring; tables keep their corners and do not move.
-    By the compiled loops of :func:`rigid_step` (:func:`fit_sums`, :func:`fit_motion`) and
-    :func:`_bodies`, with NumPy's ``arctan2``, ``cos`` and ``sin`` between them.
+    ``pose``: a motion of the same ``points`` (any velocities), whose fitted bodies (centres,
+    angles, reference and fitted corners, which do not depend on the velocities) are taken
+    as they are; ``None``: fitted here, by :func:`fit_sums`, NumPy's ``arctan2``, ``cos``
+    and ``sin`` and :func:`_bodies`.  The velocities' centre velocities and spins by
+    :func:`_body_velocities` (as :func:`fit_motion`).
     """
-    reference = model.reference_corners
-    center, cross_sum, dot_sum = fit_sums(reference, points)
-    angle = np.concatenate([np.arctan2(cross_sum, dot_sum), np.zeros(model.n_tables)])
-    cos, sin = np.cos(angle), np.sin(angle)
-    n = model.n_boxes
-    center_velocity, spin, _ = fit_motion(reference, cos[:n], sin[:n], velocities,
-                                          angle[:n], 0.0)
-    all_center, all_velocity, all_spin, all_reference, fitted = _bodies(
-        reference, model.table_points, center, center_velocity, spin, cos, sin)
-    return BodyMotion(center=all_center, angle=angle, velocity=all_velocity, spin=all_spin,
-                      reference=all_reference, fitted=fitted, n_boxes=n)
+    if pose is None:
+        reference = model.reference_corners
+        center, cross_sum, dot_sum = fit_sums(reference, points)
+        angle = np.concatenate([np.arctan2(cross_sum, dot_sum), np.zeros(model.n_tables)])
+        all_center, all_reference, fitted = _bodies(reference, model.table_points, center,
+                                                    np.cos(angle), np.sin(angle))
+        pose = BodyMotion(center=all_center, angle=angle, velocity=_NO_MOTION,
+                          spin=_NO_MOTION, reference=all_reference, fitted=fitted,
+                          n_boxes=model.n_boxes)
+    velocity, spin = _body_velocities(pose.fitted, velocities, model.n_boxes)
+    return BodyMotion(center=pose.center, angle=pose.angle, velocity=velocity, spin=spin,
+                      reference=pose.reference, fitted=pose.fitted, n_boxes=model.n_boxes)
+
+
+_NO_MOTION = np.zeros(0)
+"""A fitted pose's velocities before :func:`body_motion` gives it some."""
 
 
 def rigid_step(reference: FloatArray, points: FloatArray, velocities: FloatArray,
@@ -225,30 +234,21 @@ def moved(reference: FloatArray, cos: FloatArray, sin: FloatArray, center: Float
 
 @compiled
 def _bodies(reference: FloatArray, table_points: FloatArray, center: FloatArray,
-            center_velocity: FloatArray, spin: FloatArray, cos: FloatArray, sin: FloatArray,
-            ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The boxes' fitted motion and the tables, as :class:`BodyMotion` holds them.
+            cos: FloatArray, sin: FloatArray,
+            ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The boxes' fitted poses and the tables, as :class:`BodyMotion` holds them.
 
-    ``center``, ``center_velocity`` ``(n, 2)`` and ``spin`` ``(n,)`` of the boxes;
-    ``cos`` and ``sin`` ``(n + t,)`` of every body's angle (0 for the tables).  Returns
-    centres, velocities, spins, reference corners and fitted corners of all bodies; a
-    table's centre is the mean of its corners, its reference its corners about it.
+    ``center`` ``(n, 2)`` of the boxes; ``cos`` and ``sin`` ``(n + t,)`` of every body's
+    angle (0 for the tables).  Returns centres, reference corners and fitted corners of all
+    bodies; a table's centre is the mean of its corners, its reference its corners about it.
     """
     n, t = reference.shape[0], table_points.shape[0] // 4
     all_center = np.empty((n + t, 2))
-    all_velocity = np.zeros((n + t, 2))
-    all_spin = np.zeros(n + t)
     all_reference = np.empty((n + t, 4, 2))
     fitted = np.empty((n + t, 4, 2))
     for b in range(n + t):
         for d in range(2):
-            if b < n:
-                all_center[b, d] = center[b, d]
-                all_velocity[b, d] = center_velocity[b, d]
-            else:
-                all_center[b, d] = _centre(table_points, b - n, d)
-        if b < n:
-            all_spin[b] = spin[b]
+            all_center[b, d] = center[b, d] if b < n else _centre(table_points, b - n, d)
         for k in range(4):
             for d in range(2):
                 all_reference[b, k, d] = (reference[b, k, d] if b < n else
@@ -256,7 +256,35 @@ def _bodies(reference: FloatArray, table_points: FloatArray, center: FloatArray,
             x, y = all_reference[b, k, 0], all_reference[b, k, 1]
             fitted[b, k, 0] = cos[b] * x - sin[b] * y
             fitted[b, k, 1] = sin[b] * x + cos[b] * y
-    return all_center, all_velocity, all_spin, all_reference, fitted
+    return all_center, all_reference, fitted
+
+
+@compiled
+def _body_velocities(fitted: FloatArray, velocities: FloatArray,
+                     n_boxes: int) -> tuple[FloatArray, FloatArray]:
+    """Every body's centre velocity ``(B, 2)`` and spin ``(B,)``; 0 for the tables.
+
+    The boxes' as :func:`fit_motion` computes them, from their ``fitted`` corners
+    ``(B, 4, 2)`` (the same products of the reference corners and the angle's ``cos`` and
+    ``sin``) and the corner ``velocities`` ``(4 n, 2)``.
+    """
+    bodies = fitted.shape[0]
+    center_velocity = np.zeros((bodies, 2))
+    spin = np.zeros(bodies)
+    squares = np.empty(8)
+    for b in range(n_boxes):
+        for d in range(2):
+            center_velocity[b, d] = _centre(velocities, b, d)
+        total = 0.0
+        for k in range(4):
+            relative_x = velocities[4 * b + k, 0] - center_velocity[b, 0]
+            relative_y = velocities[4 * b + k, 1] - center_velocity[b, 1]
+            total += fitted[b, k, 0] * relative_y - fitted[b, k, 1] * relative_x
+        for k in range(4):
+            for d in range(2):
+                squares[2 * k + d] = fitted[b, k, d] * fitted[b, k, d]
+        spin[b] = total / _pairwise8(squares)
+    return center_velocity, spin
 
 
 @compiled

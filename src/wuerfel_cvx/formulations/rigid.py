@@ -33,7 +33,7 @@ from ..step.contacts import Contacts
 from ..step.model import Model, State
 from . import motion
 from .cone import ConeRows, contact_cones
-from .motion import rigid_step
+from .motion import BodyMotion, rigid_step
 from .qp import FrictionSettings, RowUnits, StepQP, declare_qp, velocity_rows
 from .rows import body_rows
 from .velocity import (
@@ -121,25 +121,31 @@ class RigidFormulation(FrictionSettings):
         corners = self.new_velocities(state, solution, dt).ravel()
         contacts = self._velocity._reached_contacts(model, state, previous.contacts, corners,
                                                     dt)
+        pose = previous.approach.motion if previous.approach is not None else None
         approach = closest_approach(model, state.points, contacts, corners, dt,
-                                    self._velocity.push_speed)
+                                    self._velocity.push_speed, pose)
         if contacts is previous.contacts and approach.violation <= self._velocity.gap_tolerance:
             return None
         last = previous.linearised_about
-        damped = passes + 1 >= FIRST_DAMPED_PASS and last is not None
-        about = 0.5 * (solution + last) if damped and last is not None else solution
-        return self._along(model, state, contacts, previous.weights, previous.target, about,
-                           dt)
+        if passes + 1 >= FIRST_DAMPED_PASS and last is not None:
+            return self._along(model, state, contacts, previous.weights, previous.target,
+                               0.5 * (solution + last), dt, pose=pose)
+        return self._along(model, state, contacts, previous.weights, previous.target,
+                           solution, dt, approach)
 
     def _along(self, model: Model, state: State, contacts: Contacts, weights: FloatArray,
-               target: FloatArray, about: FloatArray, dt: float) -> StepQP:
+               target: FloatArray, about: FloatArray, dt: float,
+               approach: Approach | None = None, pose: BodyMotion | None = None) -> StepQP:
         """The QP with each contact's rows at its closest approach along ``about``'s motion.
 
-        ``about``: body velocities ``(u_x, u_y, omega)`` per body, flat (m/s, rad/s).
+        ``about``: body velocities ``(u_x, u_y, omega)`` per body, flat (m/s, rad/s);
+        ``approach``: the contacts' closest approach along it, if found already; ``pose``:
+        the state's fitted bodies, if fitted already (:func:`~.motion.body_motion`).
         """
-        corners = self.new_velocities(state, about, dt).ravel()
-        approach = closest_approach(model, state.points, contacts, corners, dt,
-                                    self._velocity.push_speed)
+        if approach is None:
+            corners = self.new_velocities(state, about, dt).ravel()
+            approach = closest_approach(model, state.points, contacts, corners, dt,
+                                        self._velocity.push_speed, pose)
         rows = rows_along(model, contacts, approach)
         matrix, rhs, cones = self._velocity._cones(model, state.points, contacts, rows.matrix,
                                                   rows.rhs)

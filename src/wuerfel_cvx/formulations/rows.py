@@ -133,16 +133,25 @@ def point_rows(
 def stacked_point_rows(index: np.ndarray, grad: FloatArray, n_points: int) -> sp.csr_array:
     """:func:`point_rows` of the blocks stacked: ``index`` ``(R, B)``, ``grad`` ``(R, B, 2)``.
 
-    Written by a compiled loop (:func:`_point_rows`), each row's
+    Written by a compiled loop (:func:`csr_point_rows`), each row's
     entries sorted by column, stably; a row holding a point twice is then summed by scipy.
     """
-    shape = (index.shape[0], 2 * n_points)
-    data, indices, indptr, canonical = _point_rows(
-        index.astype(np.int64, copy=False), grad.astype(np.float64, copy=False))
+    return point_matrix(*csr_point_rows(index.astype(np.int64, copy=False),
+                                     grad.astype(np.float64, copy=False)), n_points)
+
+
+def point_matrix(data: FloatArray, indices: IntArray, indptr: IntArray, canonical: bool,
+                 n_points: int) -> sp.csr_array:
+    """The ``csr_array`` of :func:`csr_point_rows`'s arrays (``2 n_points`` columns).
+
+    Wrapped as they are when ``canonical``; else a row holding a point twice is summed by
+    scipy, a cell's entries in their blocks' order.
+    """
+    shape = (indptr.shape[0] - 1, 2 * n_points)
     if canonical:
         return canonical_csr(data, indices, indptr, shape)
     matrix = sp.csr_array((data, indices, indptr), shape=shape)
-    matrix.sum_duplicates()  # a cell's entries in their blocks' order
+    matrix.sum_duplicates()
     return matrix
 
 
@@ -163,7 +172,7 @@ def body_rows(corner_rows: sp.csr_array, points: FloatArray) -> sp.csr_array:
     n_rows = corner_rows.shape[0]
     n_cols = 3 * (corner_rows.shape[1] // 8)
     return canonical_csr(*_body_rows(corner_rows.data, corner_rows.indices, corner_rows.indptr,
-                                     turned_offsets(points)),
+                                     points),
                          shape=(n_rows, n_cols))
 
 
@@ -181,7 +190,7 @@ def _sort_row(columns: IntArray, values: FloatArray, count: int) -> None:
 
 
 @compiled
-def _point_rows(index: IntArray, gradient: FloatArray,
+def csr_point_rows(index: IntArray, gradient: FloatArray,
                ) -> tuple[FloatArray, IntArray, IntArray, bool]:
     """CSR ``(data, indices, indptr)`` of the rows of gradient blocks.
 
@@ -213,42 +222,50 @@ def _point_rows(index: IntArray, gradient: FloatArray,
 
 
 @compiled
-def _body_rows(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, turned: FloatArray,
+def _body_rows(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, points: FloatArray,
               ) -> tuple[FloatArray, IntArray, IntArray]:
     """CSR ``(data, indices, indptr)`` (int32 indices) of corner rows times the corner map.
 
     ``data``, ``indices``, ``indptr``: canonical CSR rows over corner coordinates;
-    ``turned`` ``(8 n,)``: ``rot90(r_c)`` per corner coordinate.  An entry ``v`` in column
-    ``c`` (square ``c // 8``, axis ``c % 2``) adds ``v`` to column ``3 (c // 8) + c % 2``
-    and ``v turned[c]`` to column ``3 (c // 8) + 2``; a cell sums its entries from 0.0 in
-    the row's column order (see :func:`body_rows`).
+    ``points`` ``(4 n, 2)``: the corners, whose ``turned = rot90(r_c)`` per corner coordinate
+    (:func:`~.motion.turned_offsets`) the map takes.  An entry ``v`` in column ``c``
+    (square ``c // 8``, axis ``c % 2``) adds ``v`` to column ``3 (c // 8) + c % 2`` and
+    ``v turned[c]`` to column ``3 (c // 8) + 2``; a cell sums its entries from 0.0 in the
+    row's column order (see :func:`body_rows`).  A row's columns ascend, so each square's
+    entries are one run, and its three cells are summed over the run: the cells of a
+    stable sort of the row's entries by their new column, in a pass instead of a sort.
     """
+    turned = turned_offsets(points)
     n_rows = indptr.shape[0] - 1
     out_data = np.empty(2 * data.shape[0])
     out_indices = np.empty(2 * data.shape[0], dtype=np.int32)
     out_indptr = np.zeros(n_rows + 1, dtype=np.int32)
-    width = 2 * int(np.max(np.diff(indptr))) if n_rows else 0
-    columns = np.empty(max(width, 1), dtype=np.int64)
-    values = np.empty(max(width, 1))
     count = 0
     for r in range(n_rows):
-        m = 0
-        for k in range(indptr[r], indptr[r + 1]):  # the translation entries, then the turns
-            columns[m], values[m] = 3 * (indices[k] // 8) + indices[k] % 2, data[k] * 1.0
-            m += 1
-        for k in range(indptr[r], indptr[r + 1]):
-            columns[m], values[m] = 3 * (indices[k] // 8) + 2, data[k] * turned[indices[k]]
-            m += 1
-        _sort_row(columns, values, m)
-        k = 0
-        while k < m:
+        first, last = indptr[r], indptr[r + 1]
+        for k in range(first + 1, last):
+            if indices[k] <= indices[k - 1]:
+                raise ValueError("body_rows takes canonical corner rows")
+        k = first
+        while k < last:  # a square's entries, one run: its columns x, y, then the turn
+            square, end = indices[k] // 8, k
+            while end < last and indices[end] // 8 == square:
+                end += 1
+            for axis in range(2):
+                total, found = 0.0, False
+                for e in range(k, end):
+                    if indices[e] % 2 == axis:
+                        total += data[e] * 1.0
+                        found = True
+                if found:
+                    out_indices[count], out_data[count] = 3 * square + axis, total
+                    count += 1
             total = 0.0
-            column = columns[k]
-            while k < m and columns[k] == column:
-                total += values[k]
-                k += 1
-            out_indices[count], out_data[count] = column, total
+            for e in range(k, end):
+                total += data[e] * turned[indices[e]]
+            out_indices[count], out_data[count] = 3 * square + 2, total
             count += 1
+            k = end
         out_indptr[r + 1] = count
     return out_data[:count], out_indices[:count], out_indptr
 

@@ -99,7 +99,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal, NamedTuple
+from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
@@ -110,15 +110,16 @@ from ..step.contacts import Contacts, find_contacts
 from ..step.model import IntArray, Model, State
 from . import motion
 from .cone import ConeRows, contact_cones
-from .motion import BodyMotion, _pairwise8, body_motion, rigid_step
+from .motion import BodyMotion, body_motion, rigid_step
 from .qp import FrictionSettings, RowUnits, StepQP, declare_qp, velocity_rows
 from .rows import (
+    csr_point_rows,
     held_table_blocks,
     n_unknown_points,
+    point_matrix,
     point_rows,
     rod_rows,
     side_rows,
-    stacked_point_rows,
     unknown_masses,
 )
 
@@ -210,7 +211,7 @@ class VelocityFormulation(FrictionSettings):
         With ``friction_model="coulomb"`` the rows stay normal rows; their
         :class:`ConeRows` tell the fixed point of :mod:`wuerfel_cvx.friction.coulomb` the slips.
         """
-        if not np.any(model.friction > 0.0):  # no friction: no slip rows to build
+        if not model.has_friction:  # no friction: no slip rows to build
             return normal, rhs, None
         row_contact = np.tile(np.arange(len(contacts)), normal.shape[0] // max(len(contacts),
                                                                                  1))
@@ -233,14 +234,15 @@ class VelocityFormulation(FrictionSettings):
         if self.linearisation == "start" or passes >= self.max_passes:
             return None
         contacts = self._reached_contacts(model, state, previous.contacts, solution, dt)
+        pose = previous.approach.motion if previous.approach is not None else None
         approach = closest_approach(model, state.points, contacts, solution, dt,
-                                    self.push_speed)
+                                    self.push_speed, pose)
         if contacts is previous.contacts and approach.violation <= self.gap_tolerance:
             return None
         last = previous.linearised_about
         if passes + 1 >= FIRST_DAMPED_PASS and last is not None:
             approach = closest_approach(model, state.points, contacts, 0.5 * (solution + last),
-                                        dt, self.push_speed)
+                                        dt, self.push_speed, pose)
         rows = rows_along(model, contacts, approach)
         matrix, rhs, cones = self._cones(model, state.points, contacts, rows.matrix, rows.rhs)
         return declare_qp(previous.weights, previous.target, previous.eq_matrix,
@@ -254,10 +256,11 @@ class VelocityFormulation(FrictionSettings):
         A body's corners travel at most ``dt`` times their fastest speed in ``solution``;
         its contacts were searched within :meth:`body_reach` of the start speeds.
         """
-        searched = self.body_reach(model, state, dt)
-        moving = State(state.points, solution.reshape(-1, 2)[: model.n_points])
-        travel = self.body_reach(model, moving, dt) - dt * dt * model.gravity_norm
-        if np.all(travel <= searched):
+        searched, travel, within = _reaches(
+            state.velocities, solution.reshape(-1, 2)[: model.n_points], model.n_tables,
+            0.5 * self.contact_margin, dt, dt * model.gravity_norm,
+            dt * dt * model.gravity_norm)
+        if within:
             return contacts
         wider = find_contacts(model, state.points, np.maximum(searched, travel))
         same = len(wider) == len(contacts) and all(
@@ -290,6 +293,25 @@ class VelocityFormulation(FrictionSettings):
         if self.position_update == "linear":
             return State(state.points + dt * velocities, velocities)
         return rigid_step(model.reference_corners, state.points, velocities, dt)
+
+
+@compiled
+def _reaches(start: FloatArray, moving: FloatArray, n_tables: int, half_margin: float,
+             dt: float, fall: float, drop: float) -> tuple[FloatArray, FloatArray, bool]:
+    """The reach searched (m), the travel of ``moving``'s speeds (m), and whether it is within.
+
+    :meth:`VelocityFormulation.body_reach` of the ``start`` corner velocities and of the
+    ``moving`` ones less ``drop`` (the fall's ``dt^2 |g|``, m), both by
+    :func:`~.motion.body_reach`; within: every travel at most its reach (NaN: not).
+    """
+    searched = motion.body_reach(start, n_tables, half_margin, dt, fall)
+    travel = motion.body_reach(moving, n_tables, half_margin, dt, fall)
+    within = True
+    for b in range(travel.shape[0]):
+        travel[b] = travel[b] - drop
+        if not travel[b] <= searched[b]:
+            within = False
+    return searched, travel, within
 
 
 # ---------------------------------------------------------------------- closest-approach rows
@@ -351,7 +373,7 @@ class Approach:
 
 
 def closest_approach(model: Model, points: FloatArray, contacts: Contacts, about: FloatArray,
-                     dt: float, push_speed: float) -> Approach:
+                     dt: float, push_speed: float, pose: BodyMotion | None = None) -> Approach:
     """The contacts' closest approaches along the motion of the unknowns ``about``.
 
     ``points`` ``(4 n, 2)`` (m) is the state at the start of the step; ``about`` the QP's
@@ -359,9 +381,11 @@ def closest_approach(model: Model, points: FloatArray, contacts: Contacts, about
     mean rate ``psi(tau) / tau`` (m/s), sampled on :data:`SAMPLES` intervals and refined by
     a parabola; the violation (m) is the largest ``-psi`` over the samples and refined
     times.  By compiled loops (:func:`_sampled_approach`, :func:`_refined_approach`), the
-    angles' ``cos`` and ``sin`` by NumPy between them.
+    angles' ``cos`` and ``sin`` by NumPy between them.  ``pose``: a motion of the same
+    ``points`` whose fitted bodies are taken (:func:`~.motion.body_motion`), as a later pass
+    takes its first pass's.
     """
-    motion = body_motion(model, points, about.reshape(-1, 2)[: model.n_points])
+    motion = body_motion(model, points, about.reshape(-1, 2)[: model.n_points], pose)
     return approach_along(motion, contacts, about, dt, push_speed)
 
 
@@ -374,18 +398,16 @@ def approach_along(motion: BodyMotion, contacts: Contacts, about: FloatArray, dt
                         np.zeros((0, 2)))
     grid, turned = _sample_turns(motion.angle, motion.spin, dt, SAMPLES)
     cos, sin = np.cos(turned), np.sin(turned)
-    corners = _ContactCorners.of(contacts)
+    corners = _indices(contacts)
     clearance = (contacts.clearance if contacts.clearance is not None
                  else np.zeros(len(contacts)))
-    sampled = _sampled_approach(motion.center, motion.velocity, motion.reference, motion.angle,
-                                motion.spin, cos, sin, grid, *corners, clearance, dt,
-                                push_speed)
-    (start, rate, line_start, line_rate, start_rate, refined, best, best_rate, best_margin,
-     best_line, lowest, refined_turns) = sampled
-    closest, margin, closest_rate, lowest_refined, row_cos, row_sin = _refined_approach(
-        motion.center, motion.velocity, motion.reference, cos, sin,
-        np.cos(refined_turns), np.sin(refined_turns), grid, *corners, clearance, start, rate,
-        line_start, line_rate, refined, best, best_rate, best_margin, best_line)
+    results, best, lowest, refined_turns = _sampled_approach(
+        motion.center, motion.velocity, motion.reference, motion.angle, motion.spin, cos, sin,
+        grid, *corners, clearance, dt, push_speed)
+    closest, margin, start_rate, closest_rate, lowest_refined, row_cos, row_sin = (
+        _refined_approach(motion.center, motion.velocity, motion.reference, cos, sin,
+                          np.cos(refined_turns), np.sin(refined_turns), grid, *corners,
+                          clearance, results, best))
     violation = float(max(0.0, -lowest, -lowest_refined))
     return Approach(about, motion, closest, margin, start_rate, closest_rate, violation,
                     row_cos, row_sin)
@@ -399,39 +421,29 @@ def rows_along(model: Model, contacts: Contacts, approach: Approach) -> Approach
     closest-approach row's right-hand side is at most its rate row's, so the rate row
     implies it, and the QP keeps its feasible set with half the rows.  The rows' blocks by
     a compiled loop (:func:`_row_blocks`), written as CSR rows by
-    :func:`~wuerfel_cvx.formulations.rows.stacked_point_rows`.
+    :func:`~wuerfel_cvx.formulations.rows.point_matrix`.
     """
     m = len(contacts)
     motion = approach.motion
-    index, gradient = _row_blocks(motion.center, motion.velocity, motion.reference,
-                                  motion.fitted, motion.n_boxes, *_ContactCorners.of(contacts),
-                                  approach.closest, approach.row_cos, approach.row_sin)
-    rate = approach.rate
-    if _same_rows(gradient, m) and np.all(approach.closest_rate <= rate):
-        return ApproachRows(stacked_point_rows(index[:m], gradient[:m],
-                                               n_unknown_points(model)), rate)
-    matrix = stacked_point_rows(index, gradient, n_unknown_points(model))
-    # at an interior minimiser of psi / tau the right-hand side is exactly ``rate``; the
-    # minimum keeps it there where the sampled minimiser is inexact or on the boundary
-    closest = (_row_products(matrix.data, matrix.indices, matrix.indptr, m, approach.about)
-               - approach.margin / approach.closest)
-    return ApproachRows(matrix, np.concatenate([rate, np.minimum(closest,
-                                                                 approach.closest_rate)]))
+    data, indices, indptr, canonical, rhs = _approach_rows(
+        motion.center, motion.velocity, motion.reference, motion.fitted, motion.n_boxes,
+        *_indices(contacts), approach.closest, approach.row_cos, approach.row_sin,
+        approach.rate, approach.closest_rate, approach.margin, approach.about)
+    matrix = point_matrix(data, indices, indptr, canonical, n_unknown_points(model))
+    if not canonical and matrix.shape[0] > m:  # the closest rows' products of the summed rows
+        rhs[m:] = _lifted(_row_products(matrix.data, matrix.indices, matrix.indptr, m,
+                                        approach.about), approach.margin, approach.closest,
+                          approach.closest_rate)
+    return ApproachRows(matrix, rhs)
 
 
-class _ContactCorners(NamedTuple):
-    """Each contact's edge body and point body, and the corners involved."""
+def _indices(contacts: Contacts) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray]:
+    """Each contact's edge body, point body, and its edge's ends' and point's all-points rows.
 
-    edge_body: IntArray
-    point_body: IntArray
-    corner_i: IntArray
-    corner_j: IntArray
-    corner_k: IntArray
-
-    @classmethod
-    def of(cls, contacts: Contacts) -> _ContactCorners:
-        return cls(contacts.edge_body, contacts.point_body, contacts.edge_i % 4,
-                   contacts.edge_j % 4, contacts.point % 4)
+    As the compiled loops take them: a corner's number in its body is its row modulo 4.
+    """
+    return (contacts.edge_body, contacts.point_body, contacts.edge_i, contacts.edge_j,
+            contacts.point)
 
 
 # ---------------------------------------------------------------------- compiled loops
@@ -571,33 +583,35 @@ def _parabola_time(mean_rate: FloatArray, best: int, dt: float) -> float:
     return time
 
 
+START, RATE, LINE_START, LINE_RATE, START_RATE, REFINED, BEST_RATE, BEST_MARGIN, BEST_LINE = (
+    range(9))
+"""The columns of :func:`_sampled_approach`'s per-contact results (one row per contact), which
+:func:`_refined_approach` takes: the start gap (m), the ramp's rate (m/s), the start line
+distance (m) and its ramp's rate (m/s) (:func:`_ramp_margin`), the rate row's right-hand
+side (m/s; the line's ramp's rate where ``psi`` is the line distance's from the first
+sample on, else the ramp's), the refined time (s), the best sample's mean rate (m/s) and
+margin (m), and 1.0 where the best sample's point is over the face it started past (else
+0.0).  One array for nine: each array a compiled call returns or takes costs a conversion."""
+
+
 @compiled
 def _sampled_approach(center: FloatArray, velocity: FloatArray, reference: FloatArray,
                       angle: FloatArray, spin: FloatArray, cos: FloatArray, sin: FloatArray,
                       grid: FloatArray, edge_body: IntArray, point_body: IntArray,
-                      corner_i: IntArray, corner_j: IntArray, corner_k: IntArray,
+                      edge_i: IntArray, edge_j: IntArray, point: IntArray,
                       clearance: FloatArray, dt: float, push_speed: float,
-                      ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
-                                 FloatArray, IntArray, FloatArray, FloatArray, np.ndarray,
-                                 float, FloatArray]:
+                      ) -> tuple[FloatArray, IntArray, float, FloatArray]:
     """Each contact's ramp margins on the samples, their minimiser and its refinement.
 
     ``cos`` and ``sin`` ``(B, samples + 1)`` of each body's angle at the sample times
-    ``grid`` (s).  Returns the start gaps (m), the ramps' rates (m/s), the start line
-    distances (m) and their ramps' rates (m/s) (:func:`_ramp_margin`), the rate rows'
-    right-hand sides (m/s; the line's ramp's rate where ``psi`` is the line distance's
-    from the first sample on, else the ramp's), the refined times
-    (s), the best samples, their mean rates (m/s) and margins (m), whether the best sample's
-    point is over the face it started past, the lowest sampled margin (m; NaN if any is)
-    and the angles ``(m, 2)`` (rad) of the contacts' edge and point bodies at their refined
+    ``grid`` (s).  Returns the per-contact results ``(m, 9)`` (columns :data:`START` to
+    :data:`BEST_LINE`), the best samples, the lowest sampled margin (m; NaN if any is) and
+    the angles ``(m, 2)`` (rad) of the contacts' edge and point bodies at their refined
     times.
     """
     m, samples = edge_body.shape[0], grid.shape[0] - 1
-    start, rate, refined = np.empty(m), np.empty(m), np.empty(m)
-    line_start, line_rate, start_rate = np.empty(m), np.empty(m), np.empty(m)
+    results = np.empty((m, 9))
     best = np.empty(m, dtype=np.int64)
-    best_rate, best_margin = np.empty(m), np.empty(m)
-    best_line = np.empty(m, dtype=np.bool_)
     refined_turns = np.empty((m, 2))
     gaps, lines = np.empty(samples + 1), np.empty(samples + 1)
     where, on_line = np.empty(samples + 1, dtype=np.int64), np.empty(samples + 1, dtype=np.bool_)
@@ -607,76 +621,97 @@ def _sampled_approach(center: FloatArray, velocity: FloatArray, reference: Float
         a, b = edge_body[c], point_body[c]
         for s in range(samples + 1):
             gaps[s], lines[s], where[s] = _face_gap(
-                center, velocity, reference, a, b, corner_i[c], corner_j[c], corner_k[c],
+                center, velocity, reference, a, b, edge_i[c] % 4, edge_j[c] % 4, point[c] % 4,
                 clearance[c], grid[s], cos[a, s], sin[a, s], cos[b, s], sin[b, s])
-        start[c], line_start[c] = gaps[0], lines[0]
-        rate[c] = (_nan_min(0.0, gaps[0] + dt * push_speed) - gaps[0]) / dt
-        line_rate[c] = (_nan_min(0.0, lines[0] + dt * push_speed) - lines[0]) / dt
+        start, line_start = gaps[0], lines[0]
+        rate = (_nan_min(0.0, gaps[0] + dt * push_speed) - gaps[0]) / dt
+        line_rate = (_nan_min(0.0, lines[0] + dt * push_speed) - lines[0]) / dt
         for s in range(samples + 1):
             margin, on_line[s] = _ramp_margin(gaps[s], lines[s], where[s], grid[s],
-                                              start[c], rate[c], line_start[c], line_rate[c])
+                                              start, rate, line_start, line_rate)
             lowest = _nan_min(lowest, margin)
             gaps[s] = margin  # the gaps are not needed further
             if s > 0:
                 mean_rate[s] = margin / grid[s]
         mean_rate[0] = 2.0 * mean_rate[1] - mean_rate[2]  # for the parabola only
         best[c] = _best_sample(mean_rate)
-        best_rate[c], best_margin[c] = mean_rate[best[c]], gaps[best[c]]
-        best_line[c] = on_line[best[c]]
+        refined = _parabola_time(mean_rate, best[c], dt)
+        results[c, START], results[c, RATE] = start, rate
+        results[c, LINE_START], results[c, LINE_RATE] = line_start, line_rate
         # the rate row's: the line's where psi is the line distance's from the first sample
-        start_rate[c] = line_rate[c] if on_line[1] else rate[c]
-        refined[c] = _parabola_time(mean_rate, best[c], dt)
-        refined_turns[c, 0] = angle[a] + spin[a] * refined[c]
-        refined_turns[c, 1] = angle[b] + spin[b] * refined[c]
-    return (start, rate, line_start, line_rate, start_rate, refined, best, best_rate,
-            best_margin, best_line, lowest, refined_turns)
+        results[c, START_RATE] = line_rate if on_line[1] else rate
+        results[c, REFINED] = refined
+        results[c, BEST_RATE], results[c, BEST_MARGIN] = mean_rate[best[c]], gaps[best[c]]
+        results[c, BEST_LINE] = 1.0 if on_line[best[c]] else 0.0
+        refined_turns[c, 0] = angle[a] + spin[a] * refined
+        refined_turns[c, 1] = angle[b] + spin[b] * refined
+    return results, best, lowest, refined_turns
 
 
 @compiled
 def _refined_approach(center: FloatArray, velocity: FloatArray, reference: FloatArray,
                       cos: FloatArray, sin: FloatArray, refined_cos: FloatArray,
                       refined_sin: FloatArray, grid: FloatArray, edge_body: IntArray,
-                      point_body: IntArray, corner_i: IntArray, corner_j: IntArray,
-                      corner_k: IntArray, clearance: FloatArray, start: FloatArray,
-                      rate: FloatArray, line_start: FloatArray, line_rate: FloatArray,
-                      refined: FloatArray, best: IntArray, best_rate: FloatArray,
-                      best_margin: FloatArray, best_line: np.ndarray,
-                      ) -> tuple[FloatArray, FloatArray, FloatArray, float, FloatArray,
-                                 FloatArray]:
+                      point_body: IntArray, edge_i: IntArray, edge_j: IntArray,
+                      point: IntArray, clearance: FloatArray, results: FloatArray,
+                      best: IntArray,
+                      ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, float,
+                                 FloatArray, FloatArray]:
     """Each contact's closest approach: the refined time where its mean rate is lower.
 
-    ``refined_cos`` and ``refined_sin`` ``(m, 2)`` of the angles at the refined times.
-    Returns ``tau*`` (s), ``psi(tau*)`` (m), the rate (m/s) of the ramp ``psi`` is taken
-    from there (:func:`_ramp_margin`), the lowest refined margin (m; NaN if any is), and
-    ``cos`` and ``sin`` ``(2 m, 2)`` of the bodies' angles at the rows' times.
+    ``results`` and ``best`` of :func:`_sampled_approach`; ``refined_cos`` and
+    ``refined_sin`` ``(m, 2)`` of the angles at the refined times.  Returns ``tau*`` (s),
+    ``psi(tau*)`` (m), the rate rows' right-hand sides (m/s, :data:`START_RATE`), the rate
+    (m/s) of the ramp ``psi`` is taken from at ``tau*`` (:func:`_ramp_margin`), the lowest
+    refined margin (m; NaN if any is), and ``cos`` and ``sin`` ``(2 m, 2)`` of the bodies'
+    angles at the rows' times.
     """
     m = edge_body.shape[0]
     closest, margin, closest_rate = np.empty(m), np.empty(m), np.empty(m)
+    start_rate = np.empty(m)
     row_cos, row_sin = np.empty((2 * m, 2)), np.empty((2 * m, 2))
     lowest = np.inf
     for c in range(m):
         a, b = edge_body[c], point_body[c]
-        gap, line, where = _face_gap(center, velocity, reference, a, b, corner_i[c],
-                                     corner_j[c], corner_k[c], clearance[c], refined[c],
+        refined, rate, line_rate = results[c, REFINED], results[c, RATE], results[c, LINE_RATE]
+        start_rate[c] = results[c, START_RATE]
+        gap, line, where = _face_gap(center, velocity, reference, a, b, edge_i[c] % 4,
+                                     edge_j[c] % 4, point[c] % 4, clearance[c], refined,
                                      refined_cos[c, 0], refined_sin[c, 0], refined_cos[c, 1],
                                      refined_sin[c, 1])
-        refined_margin, on_line = _ramp_margin(gap, line, where, refined[c], start[c],
-                                               rate[c], line_start[c], line_rate[c])
+        refined_margin, on_line = _ramp_margin(gap, line, where, refined, results[c, START],
+                                               rate, results[c, LINE_START], line_rate)
         lowest = _nan_min(lowest, refined_margin)
         row_cos[c, 0], row_sin[c, 0] = cos[a, 0], sin[a, 0]
         row_cos[c, 1], row_sin[c, 1] = cos[b, 0], sin[b, 0]
-        if refined_margin / refined[c] < best_rate[c]:
-            closest[c], margin[c] = refined[c], refined_margin
-            closest_rate[c] = line_rate[c] if on_line else rate[c]
+        if refined_margin / refined < results[c, BEST_RATE]:
+            closest[c], margin[c] = refined, refined_margin
+            closest_rate[c] = line_rate if on_line else rate
             row_cos[m + c, 0], row_sin[m + c, 0] = refined_cos[c, 0], refined_sin[c, 0]
             row_cos[m + c, 1], row_sin[m + c, 1] = refined_cos[c, 1], refined_sin[c, 1]
         else:
             s = best[c]
-            closest[c], margin[c] = grid[s], best_margin[c]
-            closest_rate[c] = line_rate[c] if best_line[c] else rate[c]
+            closest[c], margin[c] = grid[s], results[c, BEST_MARGIN]
+            closest_rate[c] = line_rate if results[c, BEST_LINE] == 1.0 else rate
             row_cos[m + c, 0], row_sin[m + c, 0] = cos[a, s], sin[a, s]
             row_cos[m + c, 1], row_sin[m + c, 1] = cos[b, s], sin[b, s]
-    return closest, margin, closest_rate, lowest, row_cos, row_sin
+    return closest, margin, start_rate, closest_rate, lowest, row_cos, row_sin
+
+
+@compiled
+def _squared_sum(fitted: FloatArray, body: int) -> float:
+    """``S = sum |f|^2`` (m^2) of ``body``'s fitted corners, without an array.
+
+    The eight squares summed as :func:`~.motion._pairwise8` sums them; an array to hold
+    them would be allocated once per row.
+    """
+    f = fitted
+    total: float = 0.0 + (
+        ((f[body, 0, 0] * f[body, 0, 0] + f[body, 0, 1] * f[body, 0, 1])
+         + (f[body, 1, 0] * f[body, 1, 0] + f[body, 1, 1] * f[body, 1, 1]))
+        + ((f[body, 2, 0] * f[body, 2, 0] + f[body, 2, 1] * f[body, 2, 1])
+           + (f[body, 3, 0] * f[body, 3, 0] + f[body, 3, 1] * f[body, 3, 1])))
+    return total
 
 
 @compiled
@@ -688,11 +723,7 @@ def _body_blocks(fitted: FloatArray, n_boxes: int, body: int, push_x: float, pus
     One block per corner ``q`` of ``body`` (``f`` its fitted corners, ``S = sum |f|^2``),
     in the column of the corner, ``-1`` for a table.
     """
-    squares = np.empty(8)
-    for q in range(4):
-        for d in range(2):
-            squares[2 * q + d] = fitted[body, q, d] * fitted[body, q, d]
-    weight = turn / _pairwise8(squares)
+    weight = turn / _squared_sum(fitted, body)
     for q in range(4):
         index[row, first + q] = 4 * body + q if body < n_boxes else -1
         gradient[row, first + q, 0] = 0.25 * push_x + weight * -fitted[body, q, 1]
@@ -702,7 +733,7 @@ def _body_blocks(fitted: FloatArray, n_boxes: int, body: int, push_x: float, pus
 @compiled
 def _row_blocks(center: FloatArray, velocity: FloatArray, reference: FloatArray,
                 fitted: FloatArray, n_boxes: int, edge_body: IntArray, point_body: IntArray,
-                corner_i: IntArray, corner_j: IntArray, corner_k: IntArray,
+                edge_i: IntArray, edge_j: IntArray, point: IntArray,
                 closest: FloatArray, row_cos: FloatArray, row_sin: FloatArray,
                 ) -> tuple[IntArray, FloatArray]:
     """Blocks ``(2 m, 8)`` of ``d phi(tau; v) / d v / tau``: rate rows, then closest rows.
@@ -720,11 +751,11 @@ def _row_blocks(center: FloatArray, velocity: FloatArray, reference: FloatArray,
         c = r % m
         a, b = edge_body[c], point_body[c]
         tau = 0.0 if r < m else closest[c]
-        p_i = _corner_at(center, velocity, reference, a, corner_i[c], tau, row_cos[r, 0],
+        p_i = _corner_at(center, velocity, reference, a, edge_i[c] % 4, tau, row_cos[r, 0],
                          row_sin[r, 0])
-        p_j = _corner_at(center, velocity, reference, a, corner_j[c], tau, row_cos[r, 0],
+        p_j = _corner_at(center, velocity, reference, a, edge_j[c] % 4, tau, row_cos[r, 0],
                          row_sin[r, 0])
-        p_k = _corner_at(center, velocity, reference, b, corner_k[c], tau, row_cos[r, 1],
+        p_k = _corner_at(center, velocity, reference, b, point[c] % 4, tau, row_cos[r, 1],
                          row_sin[r, 1])
         # side_gradients: rot90(p_k - p_j), rot90(p_i - p_k), rot90(p_j - p_i)
         g_ix, g_iy = -(p_k[1] - p_j[1]), p_k[0] - p_j[0]
@@ -739,6 +770,57 @@ def _row_blocks(center: FloatArray, velocity: FloatArray, reference: FloatArray,
                      gradient, r, 0)
         _body_blocks(fitted, n_boxes, b, g_kx, g_ky, point_turn, index, gradient, r, 4)
     return index, gradient
+
+
+@compiled
+def _lifted(products: FloatArray, margin: FloatArray, closest: FloatArray,
+            closest_rate: FloatArray) -> FloatArray:
+    """The closest-approach rows' right-hand sides ``min(G v0 - psi / tau*, r')`` (m/s).
+
+    ``products`` ``G v0``; ``np.minimum``'s choice: the first unless it is larger, or the
+    second is NaN (the second of two equal numbers, signed zeros included).  At an interior
+    minimiser of ``psi / tau`` the right-hand side is exactly the rate; the minimum keeps it
+    there where the sampled minimiser is inexact or on the boundary.
+    """
+    lifted = np.empty(products.shape[0])
+    for c in range(products.shape[0]):
+        value = products[c] - margin[c] / closest[c]
+        lifted[c] = value if value < closest_rate[c] or value != value else closest_rate[c]
+    return lifted
+
+
+@compiled
+def _approach_rows(center: FloatArray, velocity: FloatArray, reference: FloatArray,
+                   fitted: FloatArray, n_boxes: int, edge_body: IntArray,
+                   point_body: IntArray, edge_i: IntArray, edge_j: IntArray,
+                   point: IntArray, closest: FloatArray, row_cos: FloatArray,
+                   row_sin: FloatArray, rate: FloatArray, closest_rate: FloatArray,
+                   margin: FloatArray, about: FloatArray,
+                   ) -> tuple[FloatArray, IntArray, IntArray, bool, FloatArray]:
+    """:func:`rows_along`'s CSR rows (as :func:`~.rows.csr_point_rows`) and right-hand sides.
+
+    The blocks of :func:`_row_blocks`; the rate rows alone where :func:`_same_rows` and
+    every ``closest_rate <= rate`` (NaN: not), else both blocks of rows, the closest rows'
+    right-hand sides by :func:`_lifted` (left to the caller, as ``rate``'s, where the rows
+    are not canonical: their products are then those of the summed rows).
+    """
+    m = edge_body.shape[0]
+    index, gradient = _row_blocks(center, velocity, reference, fitted, n_boxes, edge_body,
+                                  point_body, edge_i, edge_j, point, closest, row_cos,
+                                  row_sin)
+    one = _same_rows(gradient, m)
+    for c in range(m):
+        if not closest_rate[c] <= rate[c]:
+            one = False
+    rows = m if one else 2 * m
+    data, indices, indptr, canonical = csr_point_rows(index[:rows], gradient[:rows])
+    rhs = np.empty(rows)
+    rhs[:m] = rate
+    rhs[m:] = rate[: rows - m]
+    if rows > m and canonical:
+        rhs[m:] = _lifted(_row_products(data, indices, indptr, m, about), margin, closest,
+                          closest_rate)
+    return data, indices, indptr, canonical, rhs
 
 
 @compiled

@@ -160,9 +160,7 @@ class Contacts:
         any search margin >= 0: the chosen edges do not depend on the margin, and a point
         behind its edge (distance < 0) is within every such margin.
         """
-        if len(self) == 0:
-            return 0.0
-        return float(max(0.0, -np.min(self.distance)))
+        return _deepest(self.distance)
 
     def selected(self, keep: NDArray[np.bool_]) -> Contacts:
         """The contacts where ``keep`` ``(len,)`` is true, in their order, every field kept."""
@@ -271,31 +269,44 @@ def find_contacts(
     ordered by pair (as from :func:`body_pairs`), then by corner.  A pure function of its
     arguments: the simulation loop calls it once per state and hands the result on.
     """
-    reach = np.broadcast_to(np.asarray(margin, dtype=np.float64), (model.n_bodies,))
-    return _search(model, points, reach)
+    if not (isinstance(margin, np.ndarray) and margin.shape == (model.n_bodies,)
+            and margin.dtype == np.float64 and margin.flags.c_contiguous):
+        margin = np.full(model.n_bodies, margin, dtype=np.float64)
+    return _search(model, points, margin)
 
 
 def _search(model: Model, points: FloatArray, reach: FloatArray) -> Contacts:
-    all_points = model.all_points(points)
-    pairs = body_pairs(model, all_points, reach)
+    """:func:`body_pairs`, then :func:`narrow_phase`, as contacts.
+
+    Up to :data:`ALL_PAIRS_LIMIT` squares both phases run in one compiled call
+    (:func:`_search_all_pairs`, the same loops), so a small scene pays one call.
+    """
+    corners = model.all_points(points).reshape(-1, 4, 2)
+    if model.n_boxes <= ALL_PAIRS_LIMIT:
+        return Contacts(*_search_all_pairs(corners, reach, model.n_boxes))
+    pairs = body_pairs(model, corners.reshape(-1, 2), reach)
     if len(pairs) == 0:
         return Contacts.empty()
-    edge_body, point_body = pairs[:, 0], pairs[:, 1]
-    pair_index, corner, edge_index, distance, clearance = narrow_phase(
-        all_points.reshape(-1, 4, 2), edge_body, point_body, reach)
-    w = edge_body[pair_index]
-    return Contacts(
-        point=4 * point_body[pair_index] + corner,
-        edge_i=4 * w + (edge_index + 1) % 4,
-        edge_j=4 * w + edge_index,
-        point_body=point_body[pair_index],
-        edge_body=w,
-        distance=distance,
-        clearance=clearance,
-    )
+    return Contacts(*_contacts_of(pairs, *narrow_phase(corners, pairs[:, 0], pairs[:, 1],
+                                                       reach)))
 
 
 # ---------------------------------------------------------------------- compiled loops
+@compiled
+def _deepest(distance: FloatArray) -> float:
+    """``max(0.0, -np.min(distance))`` (m), 0 for no distance.
+
+    Python's ``max`` keeps its first argument unless the second is larger, so a NaN (which
+    ``np.min`` returns if any distance is NaN) and a zero of either sign give +0.
+    """
+    lowest = np.inf
+    for c in range(distance.shape[0]):
+        if distance[c] != distance[c]:
+            return 0.0
+        lowest = min(lowest, distance[c])
+    return -lowest if -lowest > 0.0 else 0.0
+
+
 ALL_PAIRS_LIMIT = 64
 """Up to this many squares the broad phase checks every pair (a compiled loop) rather than
 build a tree: on 20 to 64 squares the loop took 1 to 5 us, the tree query 18 to 22 us."""
@@ -495,6 +506,53 @@ def _all_pairs(centers: FloatArray, radius: float) -> IntArray:
                 found[count, 0], found[count, 1] = i, j
                 count += 1
     return found[:count]
+
+
+@compiled
+def _contacts_of(pairs: IntArray, pair_index: IntArray, corner: IntArray, edge_index: IntArray,
+                 distance: FloatArray, clearance: FloatArray,
+                 ) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray,
+                            FloatArray]:
+    """The fields of :class:`Contacts` from the ordered ``pairs`` and the held contacts.
+
+    ``pair_index``, ``corner``, ``edge_index``, ``distance`` and ``clearance`` as
+    :func:`narrow_phase` returns them: a held contact's point is corner ``corner`` of the
+    point body, its edge ``(edge_index + 1, edge_index)`` of the edge body (contact order).
+    """
+    count = pair_index.shape[0]
+    point, edge_i, edge_j = np.empty(count, np.int64), np.empty(count, np.int64), np.empty(
+        count, np.int64)
+    point_body, edge_body = np.empty(count, np.int64), np.empty(count, np.int64)
+    for c in range(count):
+        w, q = pairs[pair_index[c], 0], pairs[pair_index[c], 1]
+        point[c] = 4 * q + corner[c]
+        edge_i[c] = 4 * w + (edge_index[c] + 1) % 4
+        edge_j[c] = 4 * w + edge_index[c]
+        point_body[c], edge_body[c] = q, w
+    return point, edge_i, edge_j, point_body, edge_body, distance, clearance
+
+
+@compiled
+def _search_all_pairs(corners: FloatArray, reach: FloatArray, n_boxes: int,
+                      ) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray,
+                                 FloatArray]:
+    """:func:`_search` of up to :data:`ALL_PAIRS_LIMIT` squares in one call.
+
+    The loops of :func:`bounds`, :func:`candidate_pairs` (all pairs within twice the
+    largest square bound), :func:`pairs_within`, :func:`narrow_phase` and
+    :func:`_contacts_of`, one after another.  The largest bound is NumPy's ``max``: the
+    bounds (circumradius plus reach) are not -0 unless a reach is, and a NaN is kept.
+    """
+    centers, bound = _bounds(corners, reach)
+    largest = bound[0] if n_boxes else 0.0
+    for b in range(1, n_boxes):
+        if largest == largest and (bound[b] > largest or bound[b] != bound[b]):
+            largest = bound[b]
+    candidates = (_all_pairs(centers[:n_boxes], 2.0 * largest) if n_boxes > 1
+                  else np.zeros((0, 2), dtype=np.int64))
+    pairs = _pairs(centers, bound, candidates, n_boxes)
+    held = _narrow_phase(corners, pairs[:, 0].copy(), pairs[:, 1].copy(), reach)
+    return _contacts_of(pairs, *held)
 
 
 def tree_pairs(centers: FloatArray, radius: float) -> IntArray:

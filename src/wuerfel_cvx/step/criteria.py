@@ -49,7 +49,6 @@ from .._numba import compiled
 from ..formulations.qp import RowUnits, StepQP
 from ..friction.forces import ContactForces
 from ..scenes.geometry import FloatArray
-from ..solve import residual_kernel
 from ..solve.paths import VERIFY_FACTOR, StepSolution
 from .contacts import Contacts
 from .model import IntArray, Model, State
@@ -71,24 +70,66 @@ def row_pushes(qp: StepQP, solution: StepSolution, units: RowUnits) -> dict[str,
     """``push_at_distance_Ns`` and ``push_gap_product_Nsm`` of a QP's rows (module docstring).
 
     A row's slack is measured on the bound its multiplier rests on: ``G x - h`` for
-    ``z > 0``, ``u - G x`` for ``z < 0``.
+    ``z > 0``, ``u - G x`` for ``z < 0``.  By a compiled loop (:func:`_pushes`).
     """
     if not qp.n_inequalities:
         return {"push_at_distance_Ns": 0.0, "push_gap_product_Nsm": 0.0}
-    rows = qp.ineq_matrix  # G x: scipy's product, bit for bit, without its per-call checks
-    lhs = residual_kernel.csr_product(rows.data, rows.indices, rows.indptr,
-                                      np.asarray(solution.x, dtype=np.float64))
-    multiplier = solution.ineq_dual
-    slack = lhs - qp.ineq_rhs
-    if qp.upper_rows.size:
-        assert qp.ineq_upper is not None
-        on_upper = multiplier < 0.0
-        slack = np.where(on_upper, qp.ineq_upper - lhs, slack)
-    impulse = np.abs(multiplier) * units.impulse_per_multiplier
-    gap = np.maximum(slack, 0.0) * units.gap_per_slack
-    open_rows = gap > OPEN_GAP_M
-    return {"push_at_distance_Ns": float(impulse[open_rows].max()) if open_rows.any() else 0.0,
-            "push_gap_product_Nsm": float(np.max(impulse * gap))}
+    rows = qp.ineq_matrix
+    upper = (qp.ineq_upper if qp.ineq_upper is not None and qp.upper_rows.size
+             else _NO_UPPER)
+    push, product = _pushes(rows.data, rows.indices, rows.indptr,
+                            np.asarray(solution.x, dtype=np.float64), solution.ineq_dual,
+                            qp.ineq_rhs, upper, units.impulse_per_multiplier,
+                            units.gap_per_slack)
+    return {"push_at_distance_Ns": push, "push_gap_product_Nsm": product}
+
+
+_NO_UPPER = np.zeros(0)
+"""The upper bounds handed to :func:`_pushes` for a QP without a finite one."""
+
+
+@compiled
+def _largest(largest: float, value: float) -> float:
+    """``np.max`` of ``largest`` and ``value`` when neither is below +0: NaN kept.
+
+    Of numbers that are +0, positive or NaN the maximum is one number whatever the order
+    (no two signed zeros to choose from), so a running maximum gives NumPy's.
+    """
+    if largest != largest:
+        return largest
+    return value if value > largest or value != value else largest
+
+
+@compiled
+def _pushes(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, x: FloatArray,
+            multiplier: FloatArray, lower: FloatArray, upper: FloatArray,
+            impulse_per_multiplier: float, gap_per_slack: float) -> tuple[float, float]:
+    """The largest impulse (N s) on an open row (0 if none), and the largest gap times impulse.
+
+    ``G x`` summed as scipy's product sums it (as
+    :func:`~wuerfel_cvx.solve.residual_kernel.csr_product`); the slack ``G x - h``, or
+    ``u - G x`` where ``z < 0`` when ``upper`` has one entry per row (empty: no finite
+    upper bound); the impulse ``|z|`` times ``impulse_per_multiplier``, the gap
+    ``np.maximum(slack, 0.0)`` (+0 for a slack of -0) times ``gap_per_slack``.  Impulses and
+    gaps are +0, positive or NaN, so are their products: the maxima are NumPy's
+    (:func:`_largest`).
+    """
+    push, product = 0.0, -np.inf
+    any_open = False
+    for r in range(indptr.shape[0] - 1):
+        lhs = 0.0
+        for k in range(indptr[r], indptr[r + 1]):
+            lhs += data[k] * x[indices[k]]
+        slack = lhs - lower[r]
+        if upper.shape[0] and multiplier[r] < 0.0:
+            slack = upper[r] - lhs
+        impulse = abs(multiplier[r]) * impulse_per_multiplier
+        gap = (slack if slack > 0.0 or slack != slack else 0.0) * gap_per_slack
+        product = _largest(product, impulse * gap)
+        if gap > OPEN_GAP_M:
+            push = _largest(push, impulse) if any_open else impulse
+            any_open = True
+    return push, product
 
 
 def push_bound(model: Model, state: State, dt: float, eps: float) -> float:
@@ -104,9 +145,23 @@ def push_bound(model: Model, state: State, dt: float, eps: float) -> float:
     solver's answer that the residuals let through and the physics does not.
     """
     mass = model.total_mass
-    speed = model.gravity_norm * dt + (
-        float(np.max(np.linalg.norm(state.velocities, axis=1))) if state.velocities.size else 0.0)
+    speed = model.gravity_norm * dt + _fastest(state.velocities)
     return VERIFY_FACTOR * eps * dt * (0.5 + mass * speed * (1.0 + speed))
+
+
+@compiled
+def _fastest(velocities: FloatArray) -> float:
+    """The largest corner speed (m/s) of ``velocities`` ``(N, 2)``, 0 for none.
+
+    ``np.max(np.linalg.norm(velocities, axis=1))``: each ``sqrt(x x + y y)``, +0, positive
+    or NaN, so the running maximum is NumPy's (:func:`_largest`).
+    """
+    fastest = 0.0
+    for p in range(velocities.shape[0]):
+        x, y = velocities[p, 0], velocities[p, 1]
+        speed = math.sqrt(x * x + y * y)
+        fastest = speed if p == 0 else _largest(fastest, speed)
+    return fastest
 
 
 def normal_impulses(qp: StepQP, solution: StepSolution, units: RowUnits) -> FloatArray:
@@ -117,10 +172,25 @@ def normal_impulses(qp: StepQP, solution: StepSolution, units: RowUnits) -> Floa
     ``units.impulse_per_multiplier`` of impulse.  (A QP with friction cones has its contacts'
     :class:`~wuerfel_cvx.friction.forces.ContactForces`: :func:`ccp_forces`.)
     """
-    count = len(qp.contacts)
-    rows = np.arange(qp.n_inequalities) % max(count, 1)
-    return np.asarray(units.impulse_per_multiplier * np.bincount(
-        rows, weights=solution.ineq_dual, minlength=count), dtype=np.float64)
+    return _normal_impulses(solution.ineq_dual, len(qp.contacts),
+                            units.impulse_per_multiplier)
+
+
+@compiled
+def _normal_impulses(multiplier: FloatArray, count: int,
+                     impulse_per_multiplier: float) -> FloatArray:
+    """Each contact's multipliers summed, times ``impulse_per_multiplier`` (N s).
+
+    Row ``r``'s multiplier is summed into contact ``r % count`` from 0.0 in row order, as
+    ``np.bincount`` sums them (one bin for rows without contacts).
+    """
+    bins = max(count, 1) if multiplier.shape[0] else count
+    impulses = np.zeros(bins)
+    for r in range(multiplier.shape[0]):
+        impulses[r % max(count, 1)] += multiplier[r]
+    for c in range(bins):
+        impulses[c] = impulse_per_multiplier * impulses[c]
+    return impulses
 
 
 def ccp_forces(qp: StepQP, solution: StepSolution) -> ContactForces | None:
@@ -161,6 +231,22 @@ def _gaps(points: FloatArray, edge_i: IntArray, edge_j: IntArray,
     return gaps
 
 
+@compiled
+def _signorini(points: FloatArray, edge_i: IntArray, edge_j: IntArray, point: IntArray,
+               normal: FloatArray) -> float:
+    """``np.max(np.abs(gaps) * np.maximum(normal, 0.0))`` (N s m), the gaps as :func:`_gaps`.
+
+    Each product is +0, positive or NaN (``np.maximum`` gives +0 for a normal of -0), so the
+    running maximum is NumPy's (:func:`_largest`).
+    """
+    gaps = _gaps(points, edge_i, edge_j, point)
+    largest = -np.inf
+    for c in range(gaps.shape[0]):
+        pushed = normal[c] if normal[c] > 0.0 or normal[c] != normal[c] else 0.0
+        largest = _largest(largest, abs(gaps[c]) * pushed)
+    return largest
+
+
 def contact_criteria(forces: ContactForces | None, normal: FloatArray, model: Model,
                      points_after: FloatArray, contacts: Contacts) -> dict[str, float]:
     """The Signorini and friction columns (module docstring) of one QP's ``contacts``.
@@ -171,8 +257,8 @@ def contact_criteria(forces: ContactForces | None, normal: FloatArray, model: Mo
     """
     if not len(contacts):
         return dict.fromkeys(("signorini_violation_Nsm", *FRICTION_COLUMNS), 0.0)
-    gaps = gaps_after(model.all_points(points_after), contacts)
-    signorini = float(np.max(np.abs(gaps) * np.maximum(normal, 0.0)))
+    signorini = _signorini(model.all_points(points_after), contacts.edge_i, contacts.edge_j,
+                           contacts.point, np.asarray(normal, dtype=np.float64))
     if forces is None:
         return {"signorini_violation_Nsm": signorini} | dict.fromkeys(FRICTION_COLUMNS, math.nan)
     cone = forces.coefficient * forces.normal

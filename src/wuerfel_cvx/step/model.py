@@ -112,6 +112,11 @@ class Model:
         """``|g|`` (m/s^2)."""
         return float(np.linalg.norm(self.gravity))
 
+    @cached_property
+    def has_friction(self) -> bool:
+        """Whether any body has a Coulomb coefficient above 0 (else no contact has friction)."""
+        return bool(np.any(self.friction > 0.0))
+
     @property
     def n_points(self) -> int:
         """Number of square corners (the moving points)."""

@@ -16,12 +16,14 @@ Nothing is kept between calls but the object's own state: no module-level memo.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from .._numba import compiled
 from ..errors import InputError, StepFailure
 from ..formulations import (
     DEFAULT_FORMULATION,
@@ -39,6 +41,7 @@ from ..friction.coulomb import (
 )
 from ..friction.forces import ContactForces
 from ..gradients.tape import GradientTape
+from ..scenes.geometry import FloatArray
 from ..scenes.scene import Scene
 from ..settings import Settings
 from ..solve.paths import (
@@ -148,10 +151,11 @@ class Simulation:
         self.dt, self.tol, self.solvers = settings.dt, settings.tol, list(settings.solvers)
         self.model = Model.from_scene(scene, table_mass=settings.table_mass,
                                       extra_rod=settings.extra_rod)
-        has_friction = bool(np.any(self.model.friction > 0.0))
+        has_friction = self.model.has_friction
         self.formulation = with_friction_model(get_formulation(settings.formulation),
                                                settings.friction_model, has_friction)
         friction = self.formulation.friction
+        self._row_units = self.formulation.row_units(self.dt)
         self.path = SolvePath(settings.solve_path, warm_start=settings.warm_start,
                               reuse_active_sets=settings.reuse_active_sets)
         self._coulomb = (friction is not None and friction.friction_model == "coulomb"
@@ -203,7 +207,7 @@ class Simulation:
             primary_statuses.append(primary)
             clock.lap("update")
         state = merge(self.state, parts)
-        if not (np.isfinite(state.points).all() and np.isfinite(state.velocities).all()):
+        if not _finite(state.points, state.velocities):
             raise StepFailure(step, self.solvers[0], solutions[-1].status, "non-finite state")
         self.planner.record(state.velocities, self.dt)
         self._friction_memory.remember(remembered)
@@ -310,7 +314,7 @@ class Simulation:
         :func:`~wuerfel_cvx.step.criteria.push_bound` is marked not verified: the step is
         then reported as any unverified step.
         """
-        units = self.formulation.row_units(self.dt)
+        units = self._row_units
         forces = ccp_forces(qp, solution) if coulomb is None else coulomb.forces
         normal = forces.normal if forces is not None else normal_impulses(qp, solution, units)
         row = (contact_criteria(forces, normal, model, moved.points, qp.contacts)
@@ -383,6 +387,16 @@ def _asleep_row() -> dict[str, Any]:
         verified=True, solve_wall_time=0.0, solver_time=np.nan, iterations=0, path="none")
     return (_solved_row([], nothing_solved, ASLEEP, 0)
             | combine_criteria([]))
+
+
+@compiled
+def _finite(points: FloatArray, velocities: FloatArray) -> bool:
+    """Whether every coordinate of ``points`` and ``velocities`` ``(N, 2)`` is finite."""
+    for p in range(points.shape[0]):
+        for d in range(2):
+            if not (math.isfinite(points[p, d]) and math.isfinite(velocities[p, d])):
+                return False
+    return True
 
 
 def checked_steps(steps: int) -> int:
