@@ -616,7 +616,7 @@ def _power_of_two(values: FloatArray) -> FloatArray:
 
 
 def equilibration(matrix: sp.csc_matrix, n: int) -> FloatArray:
-    """The power-of-two scales of a reduced KKT matrix (``kkt._equilibration``)."""
+    """The power-of-two scales of a reduced KKT matrix (``_sparse.equilibration``)."""
     size = matrix.shape[0]
     column = np.repeat(np.arange(size), np.diff(matrix.indptr))
     scale = np.ones(size)
@@ -639,7 +639,7 @@ def scaled(matrix: sp.csc_matrix, scale: FloatArray) -> FloatArray:
 
 def regularisation(matrix: sp.csc_matrix, n: int, regularisation: float
                    ) -> tuple[IntArray, FloatArray]:
-    """The elimination order and the shifts of ``kkt._regularised_factor`` (own order).
+    """The elimination order and the shifts of ``_sparse.equilibrated_solution`` (own order).
 
     The new position of each index, and the shifts in the new order.
     """

@@ -414,3 +414,16 @@ def test_a_resting_stack_reuses_its_active_set_without_a_solver() -> None:
     fresh = solve_step_qp(record.qps[0], "CLARABEL", "default", path=SolvePath())
     assert fresh.polish == POLISHED
     np.testing.assert_allclose(record.solutions[0].x, fresh.x, rtol=0, atol=1e-14)
+
+
+def test_a_step_counts_as_reused_only_if_no_solver_ran_for_any_of_its_qps() -> None:
+    from wuerfel_cvx.solve.paths import StepSolution, polish_of
+
+    def answer(outcome: str) -> StepSolution:
+        return StepSolution(x=np.zeros(1), solver="OSQP", status="optimal",
+                            residuals=kkt.Residuals(0.0, 0.0, 0.0), verified=True,
+                            solve_wall_time=0.0, solver_time=0.0, iterations=0, polish=outcome)
+
+    assert polish_of([answer(kkt.EXACT), answer(REUSED)])[0] == kkt.EXACT
+    assert polish_of([answer(REUSED), answer(REUSED)])[0] == REUSED
+    assert polish_of([answer(POLISHED), answer(kkt.EXACT)])[0] == POLISHED

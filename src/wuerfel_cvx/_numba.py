@@ -3,8 +3,9 @@
 The kernels (the compiled loops of :mod:`~wuerfel_cvx.step.contacts`, the contact search and
 the contact matcher, of :mod:`~wuerfel_cvx.formulations.rows`,
 :mod:`~wuerfel_cvx.formulations.motion` and :mod:`~wuerfel_cvx.formulations.velocity` (the
-closest approach), of :mod:`~wuerfel_cvx.step.criteria` and
-:mod:`~wuerfel_cvx.step.simulation` (the physical check, the new state's finite check),
+closest approach), of :mod:`~wuerfel_cvx.step.criteria`,
+:mod:`~wuerfel_cvx.step.simulation` and :mod:`~wuerfel_cvx.step.metrics` (the physical
+check, the new state's finite check, the rod drifts),
 :mod:`~wuerfel_cvx.solve.residual_kernel`, :func:`~wuerfel_cvx._sparse.add_rows` and the
 polish's sparse ``L D L'``) are plain Python functions over arrays;
 :func:`compiled` hands them to ``numba.njit`` with its default strict IEEE semantics (no

@@ -777,8 +777,8 @@ def _lifted(products: FloatArray, margin: FloatArray, closest: FloatArray,
             closest_rate: FloatArray) -> FloatArray:
     """The closest-approach rows' right-hand sides ``min(G v0 - psi / tau*, r')`` (m/s).
 
-    ``products`` ``G v0``; ``np.minimum``'s choice: the first unless it is larger, or the
-    second is NaN (the second of two equal numbers, signed zeros included).  At an interior
+    ``products`` ``G v0``; ``np.minimum``'s choice: the first where it is smaller or NaN,
+    else the second (the second of two equal numbers, signed zeros included).  At an interior
     minimiser of ``psi / tau`` the right-hand side is exactly the rate; the minimum keeps it
     there where the sampled minimiser is inexact or on the boundary.
     """

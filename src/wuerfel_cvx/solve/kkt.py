@@ -54,7 +54,7 @@ __all__ = ["EXACT_OUTCOMES", "POLISH_OUTCOMES", "ActiveSet", "Polish", "Residual
            "solve_reduced"]
 
 POLISHED, KEPT, REJECTED, REUSED, EXACT = "polished", "kept", "rejected", "reused", "exact"
-POLISH_OUTCOMES = (KEPT, EXACT, REUSED, POLISHED, REJECTED)
+POLISH_OUTCOMES = (KEPT, REUSED, EXACT, POLISHED, REJECTED)
 """What became of a QP's answer: replaced by its polished point, kept as the solver gave it
 (polishing off), or kept because the polished point was rejected (:attr:`Polish.reason`);
 ``exact``: kept as the solver gave it because it already is an exact KKT point (every
@@ -63,7 +63,10 @@ complementary to round-off, which is all a polish would make it; an active-set s
 answer, or OSQP's after its own polish); ``reused``: no solver ran, the last answer's
 active set gave this QP's exact answer (:func:`reuse_active_set`)."""
 EXACT_OUTCOMES = (POLISHED, EXACT, REUSED)
-"""The outcomes whose answer is an exact KKT point of its active set (to round-off)."""
+"""The outcomes whose answer is an exact KKT point of its active set (to round-off).  An
+``exact`` answer's active set is guessed from it (no solve on it behind the guess): with
+residuals at most :data:`EXACT_RESIDUAL` the guess is consistent with the point, and a reuse
+of it is checked again (:data:`REUSE_TOLERANCE`)."""
 
 REUSE_TOLERANCE = 1e-10
 """Largest relative KKT residual (1) of an answer found on a reused active set: as exact as
@@ -253,7 +256,7 @@ class Polish:
     """:data:`POLISHED` (the point below replaces the answer), :data:`EXACT` (the answer
     itself) or :data:`REJECTED`."""
     reason: str
-    """Why a polish was rejected (``""`` when polished): ``singular`` (the reduced KKT
+    """Why a polish was rejected (``""`` when polished or exact): ``singular`` (the reduced KKT
     matrix did not factor), ``active set`` (no sign-consistent, feasible active set within
     :data:`REPAIRS` corrections, nor :data:`MERGED_REPAIRS` after merging parallel rows,
     nor from the exact crossover's set) or ``worse`` (residuals above the answer's)."""

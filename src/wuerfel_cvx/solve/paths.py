@@ -170,7 +170,7 @@ class SolvePath:
         """QPs answered on the last polished answer's active set, without a solver."""
 
     def reuse_active_set(self, qp: StepQP, step: int | None = None) -> Polish | None:
-        """``qp``'s exact answer on its structure's last polished active set, or ``None``.
+        """``qp``'s exact answer on its structure's last exact active set, or ``None``.
 
         With :attr:`reuse_active_sets` any remembered set is tried; without, only one
         remembered in step ``step`` (``None``: none), for a QP that repeats the structure of
@@ -287,7 +287,7 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
                                               polishing, repeated)  # reused or staged: polished
     wall = time.perf_counter() - started
     outcome, reason, active = KEPT, "", None
-    solved = _answer_on_qp(answer, step, spec.name)  # in the solver's units, checked
+    solved = _checked_answer(answer, step, spec.name)  # in the solver's units, checked
     if polishing:  # in the solver's units: a power-of-two change of units changes no bit
         if polished is None:
             polished = polish(seen, *solved)
@@ -328,8 +328,8 @@ def _solve_or_reuse(seen: StepQP, spec: SolverSpec, eps: float, path: SolvePath,
     With ``polishing``: the last polished answer's active set may give ``seen``'s exact
     answer, and no solver runs (its polish is :data:`REUSED`); a solver that runs in stages
     stops at a stage whose answer's polish is an exact KKT point within ``eps``
-    (:func:`_stage_check`; its polish is :data:`POLISHED`); the polish is ``None`` when
-    neither happened.  Raises :class:`StepFailure` for a solver that raises.
+    (:func:`_stage_check`; its polish is :data:`POLISHED` or :data:`EXACT`); the polish is
+    ``None`` when neither happened.  Raises :class:`StepFailure` for a solver that raises.
     """
     reused = path.reuse_active_set(seen, step if repeated else None) if polishing else None
     if reused is not None:
@@ -371,7 +371,7 @@ def _stage_check(seen: StepQP, eps: float, accepted: list[Polish]) -> Accept:
     return accept
 
 
-def _answer_on_qp(answer: Answer, step: int, solver: str
+def _checked_answer(answer: Answer, step: int, solver: str
                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The solver's ``(x, y, z)`` as float arrays, in the units it saw.
 
@@ -533,7 +533,8 @@ def polish_of(solutions: Sequence[StepSolution]) -> tuple[str, str]:
     """``polish`` and ``polish_reason`` of several answers taken as one.
 
     The last of :data:`~wuerfel_cvx.solve.kkt.POLISH_OUTCOMES` any had (``rejected`` over
-    ``polished`` over ``reused`` over ``exact`` over ``kept``), and their reasons joined by
+    ``polished`` over ``exact`` over ``reused`` over ``kept``: a step counts as reused only
+    if no solver ran for any of its QPs), and their reasons joined by
     ``+``.
     """
     return (max((solution.polish for solution in solutions), key=POLISH_OUTCOMES.index),

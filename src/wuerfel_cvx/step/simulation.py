@@ -391,10 +391,16 @@ def _asleep_row() -> dict[str, Any]:
 
 @compiled
 def _finite(points: FloatArray, velocities: FloatArray) -> bool:
-    """Whether every coordinate of ``points`` and ``velocities`` ``(N, 2)`` is finite."""
-    for p in range(points.shape[0]):
-        for d in range(2):
-            if not (math.isfinite(points[p, d]) and math.isfinite(velocities[p, d])):
+    """Whether every coordinate of ``points`` and ``velocities`` (each ``(N, 2)``) is finite."""
+    return _all_finite(points) and _all_finite(velocities)
+
+
+@compiled
+def _all_finite(values: FloatArray) -> bool:
+    """Whether every entry of the 2-D array ``values`` is finite."""
+    for p in range(values.shape[0]):
+        for d in range(values.shape[1]):
+            if not math.isfinite(values[p, d]):
                 return False
     return True
 
