@@ -31,3 +31,16 @@ def compiled(function: _Function) -> _Function:
         return numba.njit(cache=True, nogil=True)(function)  # type: ignore[return-value]
     except RuntimeError:  # pragma: no cover - no writable cache directory: compile per process
         return numba.njit(cache=False, nogil=True)(function)  # type: ignore[return-value]
+
+
+@compiled
+def running_max(largest: float, value: float) -> float:
+    """``np.max`` of ``largest`` and ``value`` when neither is below +0: a NaN is kept.
+
+    The kernels' running maxima: of numbers that are +0, positive or NaN the maximum is one
+    number whatever the order (no two signed zeros to choose from), so a running maximum
+    gives NumPy's.
+    """
+    if largest != largest:
+        return largest
+    return value if value > largest or value != value else largest

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._numba import compiled
+from .._numba import compiled, running_max
 from ..scenes.geometry import FloatArray
 from ..step.model import IntArray, Model, State
 
@@ -137,6 +137,37 @@ def _pairwise8(values: FloatArray) -> float:
 
 
 @compiled
+def squared_sum(corners: FloatArray) -> float:
+    """``sum |f|^2`` (m^2) of four fitted corners ``(4, 2)``, without an array.
+
+    The eight squares ``f_kd^2`` (corner by corner, x then y) summed as :func:`_pairwise8`
+    sums eight contiguous numbers.
+    """
+    f = corners
+    total: float = 0.0 + (
+        ((f[0, 0] * f[0, 0] + f[0, 1] * f[0, 1]) + (f[1, 0] * f[1, 0] + f[1, 1] * f[1, 1]))
+        + ((f[2, 0] * f[2, 0] + f[2, 1] * f[2, 1]) + (f[3, 0] * f[3, 0] + f[3, 1] * f[3, 1])))
+    return total
+
+
+@compiled
+def _spin(corners: FloatArray, velocities: FloatArray, body: int, center_x: float,
+          center_y: float) -> float:
+    """Box ``body``'s least-squares spin (rad/s) from its fitted ``corners`` ``(4, 2)``.
+
+    ``sum f x (v - u) / sum |f|^2`` over its corner ``velocities`` (rows ``4 body`` on),
+    ``u`` = ``(center_x, center_y)`` its centre velocity.
+    """
+    total = 0.0
+    for k in range(4):
+        relative_x = velocities[4 * body + k, 0] - center_x
+        relative_y = velocities[4 * body + k, 1] - center_y
+        total += corners[k, 0] * relative_y - corners[k, 1] * relative_x
+    spin: float = total / squared_sum(corners)
+    return spin
+
+
+@compiled
 def _centre(points: FloatArray, body: int, axis: int) -> float:
     """Mean of body ``body``'s four corners (rows ``4 body`` on of ``points``) on ``axis``."""
     total = 0.0
@@ -188,7 +219,6 @@ def fit_motion(reference: FloatArray, cos: FloatArray, sin: FloatArray,
     center_velocity = np.empty((n, 2))
     spin = np.empty(n)
     fitted = np.empty((4, 2))
-    squares = np.empty(8)
     for b in range(n):
         for k in range(4):
             x, y = reference[b, k, 0], reference[b, k, 1]
@@ -196,15 +226,7 @@ def fit_motion(reference: FloatArray, cos: FloatArray, sin: FloatArray,
             fitted[k, 1] = sin[b] * x + cos[b] * y
         for d in range(2):
             center_velocity[b, d] = _centre(velocities, b, d)
-        total = 0.0
-        for k in range(4):
-            relative_x = velocities[4 * b + k, 0] - center_velocity[b, 0]
-            relative_y = velocities[4 * b + k, 1] - center_velocity[b, 1]
-            total += fitted[k, 0] * relative_y - fitted[k, 1] * relative_x
-        for k in range(4):
-            for d in range(2):
-                squares[2 * k + d] = fitted[k, d] * fitted[k, d]
-        spin[b] = total / _pairwise8(squares)
+        spin[b] = _spin(fitted, velocities, b, center_velocity[b, 0], center_velocity[b, 1])
     return center_velocity, spin, angle + spin * dt
 
 
@@ -271,19 +293,10 @@ def _body_velocities(fitted: FloatArray, velocities: FloatArray,
     bodies = fitted.shape[0]
     center_velocity = np.zeros((bodies, 2))
     spin = np.zeros(bodies)
-    squares = np.empty(8)
     for b in range(n_boxes):
         for d in range(2):
             center_velocity[b, d] = _centre(velocities, b, d)
-        total = 0.0
-        for k in range(4):
-            relative_x = velocities[4 * b + k, 0] - center_velocity[b, 0]
-            relative_y = velocities[4 * b + k, 1] - center_velocity[b, 1]
-            total += fitted[b, k, 0] * relative_y - fitted[b, k, 1] * relative_x
-        for k in range(4):
-            for d in range(2):
-                squares[2 * k + d] = fitted[b, k, d] * fitted[b, k, d]
-        spin[b] = total / _pairwise8(squares)
+        spin[b] = _spin(fitted[b], velocities, b, center_velocity[b, 0], center_velocity[b, 1])
     return center_velocity, spin
 
 
@@ -395,8 +408,7 @@ def body_reach(velocities: FloatArray, n_tables: int, half_margin: float, dt: fl
         fastest = _speed(velocities, 4 * b)
         for k in range(1, 4):
             speed = _speed(velocities, 4 * b + k)
-            if fastest == fastest and (speed > fastest or speed != speed):
-                fastest = speed
+            fastest = running_max(fastest, speed)
         reach[b] = half_margin + dt * (fastest + fall)
     for t in range(n_tables):
         reach[n + t] = half_margin

@@ -110,7 +110,7 @@ from ..step.contacts import Contacts, find_contacts
 from ..step.model import IntArray, Model, State
 from . import motion
 from .cone import ConeRows, contact_cones
-from .motion import BodyMotion, body_motion, rigid_step
+from .motion import BodyMotion, body_motion, rigid_step, squared_sum
 from .qp import FrictionSettings, RowUnits, StepQP, declare_qp, velocity_rows
 from .rows import (
     csr_point_rows,
@@ -699,22 +699,6 @@ def _refined_approach(center: FloatArray, velocity: FloatArray, reference: Float
 
 
 @compiled
-def _squared_sum(fitted: FloatArray, body: int) -> float:
-    """``S = sum |f|^2`` (m^2) of ``body``'s fitted corners, without an array.
-
-    The eight squares summed as :func:`~.motion._pairwise8` sums them; an array to hold
-    them would be allocated once per row.
-    """
-    f = fitted
-    total: float = 0.0 + (
-        ((f[body, 0, 0] * f[body, 0, 0] + f[body, 0, 1] * f[body, 0, 1])
-         + (f[body, 1, 0] * f[body, 1, 0] + f[body, 1, 1] * f[body, 1, 1]))
-        + ((f[body, 2, 0] * f[body, 2, 0] + f[body, 2, 1] * f[body, 2, 1])
-           + (f[body, 3, 0] * f[body, 3, 0] + f[body, 3, 1] * f[body, 3, 1])))
-    return total
-
-
-@compiled
 def _body_blocks(fitted: FloatArray, n_boxes: int, body: int, push_x: float, push_y: float,
                  turn: float, index: IntArray, gradient: FloatArray, row: int,
                  first: int) -> None:
@@ -723,7 +707,7 @@ def _body_blocks(fitted: FloatArray, n_boxes: int, body: int, push_x: float, pus
     One block per corner ``q`` of ``body`` (``f`` its fitted corners, ``S = sum |f|^2``),
     in the column of the corner, ``-1`` for a table.
     """
-    weight = turn / _squared_sum(fitted, body)
+    weight = turn / squared_sum(fitted[body])
     for q in range(4):
         index[row, first + q] = 4 * body + q if body < n_boxes else -1
         gradient[row, first + q, 0] = 0.25 * push_x + weight * -fitted[body, q, 1]

@@ -102,7 +102,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from .._numba import compiled
+from .._numba import compiled, running_max
 from ..scenes.geometry import FloatArray
 from .model import IntArray, Model
 
@@ -546,8 +546,7 @@ def _search_all_pairs(corners: FloatArray, reach: FloatArray, n_boxes: int,
     centers, bound = _bounds(corners, reach)
     largest = bound[0] if n_boxes else 0.0
     for b in range(1, n_boxes):
-        if largest == largest and (bound[b] > largest or bound[b] != bound[b]):
-            largest = bound[b]
+        largest = running_max(largest, bound[b])
     candidates = (_all_pairs(centers[:n_boxes], 2.0 * largest) if n_boxes > 1
                   else np.zeros((0, 2), dtype=np.int64))
     pairs = _pairs(centers, bound, candidates, n_boxes)

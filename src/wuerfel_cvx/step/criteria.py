@@ -45,7 +45,7 @@ import math
 
 import numpy as np
 
-from .._numba import compiled
+from .._numba import compiled, running_max
 from ..formulations.qp import RowUnits, StepQP
 from ..friction.forces import ContactForces
 from ..scenes.geometry import FloatArray
@@ -89,18 +89,6 @@ _NO_UPPER = np.zeros(0)
 
 
 @compiled
-def _largest(largest: float, value: float) -> float:
-    """``np.max`` of ``largest`` and ``value`` when neither is below +0: NaN kept.
-
-    Of numbers that are +0, positive or NaN the maximum is one number whatever the order
-    (no two signed zeros to choose from), so a running maximum gives NumPy's.
-    """
-    if largest != largest:
-        return largest
-    return value if value > largest or value != value else largest
-
-
-@compiled
 def _pushes(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, x: FloatArray,
             multiplier: FloatArray, lower: FloatArray, upper: FloatArray,
             impulse_per_multiplier: float, gap_per_slack: float) -> tuple[float, float]:
@@ -112,7 +100,7 @@ def _pushes(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, x: FloatA
     upper bound); the impulse ``|z|`` times ``impulse_per_multiplier``, the gap
     ``np.maximum(slack, 0.0)`` (+0 for a slack of -0) times ``gap_per_slack``.  Impulses and
     gaps are +0, positive or NaN, so are their products: the maxima are NumPy's
-    (:func:`_largest`).
+    (:func:`~wuerfel_cvx._numba.running_max`).
     """
     push, product = 0.0, -np.inf
     any_open = False
@@ -125,9 +113,9 @@ def _pushes(data: FloatArray, indices: np.ndarray, indptr: np.ndarray, x: FloatA
             slack = upper[r] - lhs
         impulse = abs(multiplier[r]) * impulse_per_multiplier
         gap = (slack if slack > 0.0 or slack != slack else 0.0) * gap_per_slack
-        product = _largest(product, impulse * gap)
+        product = running_max(product, impulse * gap)
         if gap > OPEN_GAP_M:
-            push = _largest(push, impulse) if any_open else impulse
+            push = running_max(push, impulse) if any_open else impulse
             any_open = True
     return push, product
 
@@ -154,13 +142,13 @@ def _fastest(velocities: FloatArray) -> float:
     """The largest corner speed (m/s) of ``velocities`` ``(N, 2)``, 0 for none.
 
     ``np.max(np.linalg.norm(velocities, axis=1))``: each ``sqrt(x x + y y)``, +0, positive
-    or NaN, so the running maximum is NumPy's (:func:`_largest`).
+    or NaN, so the running maximum is NumPy's (:func:`~wuerfel_cvx._numba.running_max`).
     """
     fastest = 0.0
     for p in range(velocities.shape[0]):
         x, y = velocities[p, 0], velocities[p, 1]
         speed = math.sqrt(x * x + y * y)
-        fastest = speed if p == 0 else _largest(fastest, speed)
+        fastest = speed if p == 0 else running_max(fastest, speed)
     return fastest
 
 
@@ -237,13 +225,13 @@ def _signorini(points: FloatArray, edge_i: IntArray, edge_j: IntArray, point: In
     """``np.max(np.abs(gaps) * np.maximum(normal, 0.0))`` (N s m), the gaps as :func:`_gaps`.
 
     Each product is +0, positive or NaN (``np.maximum`` gives +0 for a normal of -0), so the
-    running maximum is NumPy's (:func:`_largest`).
+    running maximum is NumPy's (:func:`~wuerfel_cvx._numba.running_max`).
     """
     gaps = _gaps(points, edge_i, edge_j, point)
     largest = -np.inf
     for c in range(gaps.shape[0]):
         pushed = normal[c] if normal[c] > 0.0 or normal[c] != normal[c] else 0.0
-        largest = _largest(largest, abs(gaps[c]) * pushed)
+        largest = running_max(largest, abs(gaps[c]) * pushed)
     return largest
 
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .._numba import compiled
+from .._numba import compiled, running_max
 from ..scenes.geometry import FloatArray
 from .contacts import find_contacts
 from .model import IntArray, Model, State
@@ -81,8 +81,7 @@ def _rod_drifts(points: FloatArray, rods: IntArray, rest: FloatArray) -> FloatAr
             x = points[t, rods[r, 0], 0] - points[t, rods[r, 1], 0]
             y = points[t, rods[r, 0], 1] - points[t, rods[r, 1], 1]
             error = abs(math.sqrt(x * x + y * y) - rest[r]) / rest[r]
-            if largest == largest and (error > largest or error != error):
-                largest = error
+            largest = running_max(largest, error)
         drifts[t] = largest
     return drifts
 
