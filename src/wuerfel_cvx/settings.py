@@ -16,8 +16,7 @@ from typing import Any
 from .errors import InputError
 from .formulations import DEFAULT_FORMULATION, FRICTION_MODELS, Formulation, get_formulation
 from .gradients.tape import check_supported
-from .solve.cvxpy_forms import NATIVE
-from .solve.paths import SOLVE_PATHS
+from .solve.paths import NATIVE, SOLVE_PATHS
 from .solve.registry import get_solver, tolerance_value
 from .step.sleep import SleepSettings
 
