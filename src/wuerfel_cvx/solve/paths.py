@@ -54,7 +54,7 @@ from .scaling import (
 )
 from .warm_start import WarmStart, WarmStarts
 
-if TYPE_CHECKING:  # cvxpy is imported by the paths through it only (it takes a second)
+if TYPE_CHECKING:  # imported by the compiled and declared paths only: cvxpy takes a second
     from .cvxpy_forms import CompiledQPCache
 
 #: A solution is verified when its relative residuals are below this multiple of ``eps``.
