@@ -7,8 +7,10 @@ import pytest
 
 from qp_bank import AGREEMENT
 from wuerfel_cvx import Scene, Square, simulate
+from wuerfel_cvx.errors import InputError
 from wuerfel_cvx.formulations import get_formulation, step_qp
 from wuerfel_cvx.scenes.library import FLOOR
+from wuerfel_cvx.settings import Settings
 from wuerfel_cvx.simulate import ASLEEP
 from wuerfel_cvx.solve.paths import solve_step_qp
 from wuerfel_cvx.step.contacts import find_contacts
@@ -131,3 +133,10 @@ def test_a_settled_stack_sleeps_and_stays_exactly_still() -> None:
     frozen = traj.points[51:]
     assert np.array_equal(frozen, np.broadcast_to(frozen[0], frozen.shape))
     assert not traj.velocities[51:].any()
+
+
+def test_sleep_true_means_the_default_sleep_settings_and_a_wrong_type_is_named() -> None:
+    assert Settings(sleep=True).sleep == SleepSettings()
+    assert Settings(sleep=False).sleep is None
+    with pytest.raises(InputError, match="sleep"):
+        Settings(sleep="yes")  # type: ignore[arg-type]

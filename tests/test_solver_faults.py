@@ -20,7 +20,7 @@ import pytest
 import scipy.sparse as sp
 from scipy.optimize import linprog
 
-import wuerfel_cvx.solve.paths as solve_module
+import wuerfel_cvx.solve.cvxpy_forms as cvxpy_forms
 from wuerfel_cvx import Scene, simulate
 from wuerfel_cvx.cli import main
 from wuerfel_cvx.errors import InputError, StepFailure
@@ -270,7 +270,7 @@ def test_nan_multipliers_make_a_step_unverified(monkeypatch: pytest.MonkeyPatch)
     model = Model.from_scene(Scene.named(SCENE))
     qp = step_qp(VelocityFormulation(), model, State.initial(Scene.named(SCENE)), 0.01)
     assert solve_step_qp(qp, "CLARABEL").verified
-    monkeypatch.setattr(solve_module, "_dual", lambda constraint, size: np.full(size, np.nan))
+    monkeypatch.setattr(cvxpy_forms, "_dual", lambda constraint, size: np.full(size, np.nan))
     solution = solve_step_qp(qp, "CLARABEL", path=SolvePath("declared"))  # through _dual
     assert solution.status == cp.OPTIMAL and not solution.verified
     assert solution.residuals.worst() == np.inf

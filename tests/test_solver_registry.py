@@ -83,3 +83,14 @@ def test_clarabel_runs_on_one_thread_so_that_forked_workers_do_not_hang() -> Non
     """
     assert all(SOLVERS["CLARABEL"].options(eps)["max_threads"] == 1
                for eps in (1e-4, 1e-7, 1e-9))
+
+
+def test_the_registry_finds_the_solvers_cvxpy_finds_and_names_statuses_as_cvxpy() -> None:
+    import cvxpy as cp
+
+    from wuerfel_cvx.solve.paths import OPTIMAL, OPTIMAL_INACCURATE
+
+    in_cvxpy = set(cp.installed_solvers())
+    assert available_solvers() == [name for name, spec in SOLVERS.items()
+                                   if spec.cvxpy_name in in_cvxpy]
+    assert (OPTIMAL, OPTIMAL_INACCURATE) == (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 from .__main__ import PROG
 from .formulations import DEFAULT_FORMULATION, FORMULATIONS, FRICTION_MODELS
-from .solve.registry import TOLERANCE_PRESETS, available_solvers
+from .solve.registry import TOLERANCE_PRESETS
 
 DEFAULT_SOLVER = "CLARABEL"
 """The solver of ``simulate`` when ``--solver`` is not given (as :func:`simulate`'s)."""
@@ -56,8 +56,8 @@ def _add_simulate_parser(commands: Commands) -> None:
     run.add_argument("--dt", type=float, default=0.01, help="time step in s (default 0.01)")
     run.add_argument("--steps", type=int, default=200, help="number of steps (default 200)")
     run.add_argument("--solver", default=DEFAULT_SOLVER,
-                     help=f"solver, case-insensitive (installed: "
-                          f"{', '.join(available_solvers())}; default {DEFAULT_SOLVER})")
+                     help=f"solver, case-insensitive (those installed: 'wuerfel-cvx solvers'; "
+                          f"default {DEFAULT_SOLVER})")
     run.add_argument("--formulation", default=DEFAULT_FORMULATION,
                      help=f"formulation ({', '.join(FORMULATIONS)}; default "
                           f"{DEFAULT_FORMULATION})")

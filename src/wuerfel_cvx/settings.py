@@ -16,8 +16,7 @@ from typing import Any
 from .errors import InputError
 from .formulations import DEFAULT_FORMULATION, FRICTION_MODELS, Formulation, get_formulation
 from .gradients.tape import check_supported
-from .solve.cvxpy_forms import NATIVE
-from .solve.paths import SOLVE_PATHS
+from .solve.paths import NATIVE, SOLVE_PATHS
 from .solve.registry import get_solver, tolerance_value
 from .step.sleep import SleepSettings
 
@@ -57,7 +56,8 @@ class Settings:
     extra_rod: bool = False
     """Add the redundant second diagonal (a sixth rod) to every square."""
     sleep: SleepSettings | None = None
-    """``None``: every body takes part in every step; else when islands fall asleep."""
+    """``None`` (or ``False``): every body takes part in every step; else when islands fall
+    asleep (``True``: the default :class:`~wuerfel_cvx.step.sleep.SleepSettings`)."""
     islands: bool = False
     """Solve each island of touching bodies as its own QP."""
     fallback: tuple[str, ...] = ()
@@ -85,6 +85,7 @@ class Settings:
     def __post_init__(self) -> None:
         set_field = object.__setattr__  # normalised once, on a frozen object
         set_field(self, "dt", checked_dt(self.dt))
+        set_field(self, "sleep", _checked_sleep(self.sleep))
         set_field(self, "solver", get_solver(self.solver).name)
         set_field(self, "fallback", tuple(get_solver(name).name for name in self.fallback))
         tolerance_value(self.tol)
@@ -134,6 +135,18 @@ class Settings:
 
 SETTING_NAMES: tuple[str, ...] = tuple(item.name for item in dataclasses.fields(Settings))
 """The fields of :class:`Settings`, in order (the keyword names of ``simulate``)."""
+
+
+def _checked_sleep(sleep: object) -> SleepSettings | None:
+    """``sleep`` as :class:`SleepSettings` or ``None``; :class:`InputError` for another type."""
+    if sleep is None or sleep is False:
+        return None
+    if sleep is True:
+        return SleepSettings()
+    if not isinstance(sleep, SleepSettings):
+        raise InputError(f"must be True, False, None or a SleepSettings, got {sleep!r}",
+                         field="sleep")
+    return sleep
 
 
 def checked_dt(dt: float) -> float:

@@ -511,19 +511,29 @@ def _face_gap(center: FloatArray, velocity: FloatArray, reference: FloatArray,
               point_cos: float, point_sin: float) -> tuple[float, float, int]:
     """A contact's gap (m) at ``tau`` (s), as the NumPy code's ``face_gaps_at``.
 
-    Its point's distance from its edge's line, or, if the point starts past the face's end
-    (``clearance`` above 0) and is still past it, from the face (the segment).  Also the
-    line distance (m) and where the point is (:func:`_ramp_margin`): :data:`ON_FACE` (it
-    started on the face), :data:`PAST_END` (it started past the face's end and still is)
-    or :data:`OVER_FACE` (it started past the end and has moved over the face).  ``cos``
-    and ``sin`` of the bodies' angles at ``tau``.
+    :func:`_corners_gap` of the edge's ends and the point at ``tau``; ``cos`` and ``sin``
+    of the bodies' angles at ``tau``.
     """
     p_i = _corner_at(center, velocity, reference, edge_body, corner_i, tau, edge_cos, edge_sin)
     p_j = _corner_at(center, velocity, reference, edge_body, corner_j, tau, edge_cos, edge_sin)
     p_k = _corner_at(center, velocity, reference, point_body, corner_k, tau, point_cos,
                      point_sin)
-    edge_x, edge_y = p_j[0] - p_i[0], p_j[1] - p_i[1]
-    offset_x, offset_y = p_k[0] - p_i[0], p_k[1] - p_i[1]
+    return _corners_gap(p_i[0], p_i[1], p_j[0], p_j[1], p_k[0], p_k[1], clearance)
+
+
+@compiled
+def _corners_gap(i_x: float, i_y: float, j_x: float, j_y: float, k_x: float, k_y: float,
+                 clearance: float) -> tuple[float, float, int]:
+    """The gap (m) of the point ``k`` from the edge ``i j`` (positions in m).
+
+    Its point's distance from its edge's line, or, if the point starts past the face's end
+    (``clearance`` above 0) and is still past it, from the face (the segment).  Also the
+    line distance (m) and where the point is (:func:`_ramp_margin`): :data:`ON_FACE` (it
+    started on the face), :data:`PAST_END` (it started past the face's end and still is)
+    or :data:`OVER_FACE` (it started past the end and has moved over the face).
+    """
+    edge_x, edge_y = j_x - i_x, j_y - i_y
+    offset_x, offset_y = k_x - i_x, k_y - i_y
     length = math.hypot(edge_x, edge_y)
     line: float = (edge_x * offset_y - edge_y * offset_x) / length
     gap, where = line, ON_FACE
@@ -535,6 +545,30 @@ def _face_gap(center: FloatArray, velocity: FloatArray, reference: FloatArray,
         else:
             where = OVER_FACE
     return gap, line, where
+
+
+@compiled
+def _sampled_corners(center: FloatArray, velocity: FloatArray, reference: FloatArray,
+                     cos: FloatArray, sin: FloatArray, grid: FloatArray,
+                     edge_body: IntArray, point_body: IntArray) -> FloatArray:
+    """Positions ``(B, 4, samples + 1, 2)`` (m) of the corners of the contacts' bodies.
+
+    Each body's corners at the sample times ``grid`` (s), by :func:`_corner_at`, once for
+    all the contacts that share the body (other bodies' entries are left unset).
+    """
+    positions = np.empty((reference.shape[0], 4, grid.shape[0], 2))
+    done = np.zeros(reference.shape[0], dtype=np.bool_)
+    for c in range(edge_body.shape[0]):
+        for body in (edge_body[c], point_body[c]):
+            if done[body]:
+                continue
+            done[body] = True
+            for q in range(4):
+                for s in range(grid.shape[0]):
+                    x, y, _, _ = _corner_at(center, velocity, reference, body, q, grid[s],
+                                            cos[body, s], sin[body, s])
+                    positions[body, q, s, 0], positions[body, q, s, 1] = x, y
+    return positions
 
 
 @compiled
@@ -617,12 +651,15 @@ def _sampled_approach(center: FloatArray, velocity: FloatArray, reference: Float
     where, on_line = np.empty(samples + 1, dtype=np.int64), np.empty(samples + 1, dtype=np.bool_)
     mean_rate = np.empty(samples + 1)
     lowest = np.inf
+    corners = _sampled_corners(center, velocity, reference, cos, sin, grid, edge_body,
+                               point_body)
     for c in range(m):
         a, b = edge_body[c], point_body[c]
+        i, j, k = edge_i[c] % 4, edge_j[c] % 4, point[c] % 4
         for s in range(samples + 1):
-            gaps[s], lines[s], where[s] = _face_gap(
-                center, velocity, reference, a, b, edge_i[c] % 4, edge_j[c] % 4, point[c] % 4,
-                clearance[c], grid[s], cos[a, s], sin[a, s], cos[b, s], sin[b, s])
+            gaps[s], lines[s], where[s] = _corners_gap(
+                corners[a, i, s, 0], corners[a, i, s, 1], corners[a, j, s, 0],
+                corners[a, j, s, 1], corners[b, k, s, 0], corners[b, k, s, 1], clearance[c])
         start, line_start = gaps[0], lines[0]
         rate = (_nan_min(0.0, gaps[0] + dt * push_speed) - gaps[0]) / dt
         line_rate = (_nan_min(0.0, lines[0] + dt * push_speed) - lines[0]) / dt

@@ -31,6 +31,7 @@ it is declared afresh on every step, with memory growing with the nonzeros.
 
 from __future__ import annotations
 
+import warnings
 from collections import OrderedDict
 from dataclasses import dataclass, field
 
@@ -39,12 +40,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..formulations.qp import PARAMETER_SLOTS, StepQP, upper_bounds
+from ..scenes.geometry import FloatArray
+from .adapters import Answer
+from .paths import COMPILED, DECLARED
 
 StructureKey = tuple[object, ...]
 
-DECLARED, COMPILED, NATIVE = "declared", "compiled", "native"
-"""The solve paths: a cvxpy problem per step, a cvxpy DPP problem per structure, or the
-solver's own API on the step QP's numbers (:mod:`wuerfel_cvx.solve.adapters`)."""
 
 DENSE_ENTRY_LIMIT = 1 << 20
 """Most dense entries (rows x columns) of a matrix parameter of a compiled structure: cvxpy
@@ -201,3 +202,41 @@ class CompiledQPCache:
 
     def __len__(self) -> int:
         return len(self._problems)
+
+
+def solve_declared(qp: StepQP, declared: DeclaredQP, solver: str,
+                   options: dict[str, object]) -> Answer:
+    """Solve a cvxpy ``declared`` problem holding ``qp`` with cvxpy's ``solver``."""
+    with warnings.catch_warnings():
+        # cvxpy reads its own sparse parameters densely while applying them
+        warnings.filterwarnings("ignore", "Reading from a sparse CVXPY expression",
+                                RuntimeWarning)
+        # an inaccurate optimum is judged by the residual check, not by a warning
+        warnings.filterwarnings("ignore", "Solution may be inaccurate", UserWarning)
+        # warm_start=False (in options): cvxpy's in-place OSQP update can be refused by
+        # OSQP ("Problem data validation") and then silently re-solves the old data.
+        declared.problem.solve(solver=solver, **options)
+    stats = declared.problem.solver_stats
+    value = declared.variable.value
+    ineq_dual = _dual(declared.ineq_constraint, qp.n_inequalities)
+    if declared.upper_constraint is not None:  # z = z_lower - z_upper
+        ineq_dual = ineq_dual.copy()
+        ineq_dual[qp.upper_rows] -= _dual(declared.upper_constraint, qp.upper_rows.size)
+    return Answer(
+        status=str(declared.problem.status),
+        x=None if value is None else np.asarray(value, dtype=np.float64),
+        eq_dual=_dual(declared.eq_constraint, qp.n_equalities),
+        ineq_dual=ineq_dual,
+        reported_time=(stats.solve_time if stats is not None and stats.solve_time is not None
+                       else np.nan),
+        iterations=stats.num_iters if stats is not None and stats.num_iters is not None else -1,
+    )
+
+
+def _dual(constraint: cp.Constraint | None, size: int) -> FloatArray:
+    if constraint is None or size == 0:
+        return np.zeros(0)
+    value = constraint.dual_value
+    if value is None:
+        return np.full(size, np.nan)
+    return np.atleast_1d(np.asarray(value, dtype=np.float64))

@@ -11,14 +11,13 @@ three residuals are below ``VERIFY_FACTOR * eps``.
 from __future__ import annotations
 
 import math
+import sys
 import time
-import warnings
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
-import cvxpy as cp
 import numpy as np
 
 from ..__main__ import relayed_presses
@@ -28,15 +27,6 @@ from ..scenes.geometry import FloatArray
 from . import residual_kernel
 from .adapters import Accept, Adapter, Answer, NativeData, adapter_for
 from .adapters._native import PatternChanged
-from .cvxpy_forms import (
-    COMPILED,
-    DECLARED,
-    NATIVE,
-    CompiledQPCache,
-    DeclaredQP,
-    declare,
-    structure_key,
-)
 from .kkt import (
     EXACT,
     EXACT_OUTCOMES,
@@ -64,12 +54,23 @@ from .scaling import (
 )
 from .warm_start import WarmStart, WarmStarts
 
+if TYPE_CHECKING:  # imported by the compiled and declared paths only: cvxpy takes a second
+    from .cvxpy_forms import CompiledQPCache
+
 #: A solution is verified when its relative residuals are below this multiple of ``eps``.
 #: Solvers measure their own stopping criteria in scaled or differently normed units, so
 #: the independent check allows two orders of magnitude of slack over ``eps``.
 VERIFY_FACTOR = 100.0
 
-SOLVED = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+DECLARED, COMPILED, NATIVE = "declared", "compiled", "native"
+"""The solve paths: a cvxpy problem per step, a cvxpy DPP problem per structure, or the
+solver's own API on the step QP's numbers (:mod:`wuerfel_cvx.solve.adapters`)."""
+
+OPTIMAL, OPTIMAL_INACCURATE = "optimal", "optimal_inaccurate"
+"""The statuses of a claimed optimum, cvxpy's names (``cvxpy.OPTIMAL``, ...), which every
+path reports; written here so that the ``native`` path runs without importing cvxpy."""
+
+SOLVED = (OPTIMAL, OPTIMAL_INACCURATE)
 
 SOLVE_PATHS = (NATIVE, COMPILED, DECLARED)
 """The solve paths (:class:`SolvePath`, :attr:`StepSolution.path`): the solver's own API on
@@ -154,7 +155,8 @@ class SolvePath:
             raise InputError(f"unknown solve path '{name}' (one of {', '.join(SOLVE_PATHS)})",
                              field="solve_path")
         self.name = name
-        self.compiled = CompiledQPCache(capacity=capacity, compile_after=compile_after)
+        self._compile_after = compile_after
+        self._compiled: CompiledQPCache | None = None
         self.warm_starts = WarmStarts() if warm_start else None
         self.capacity = capacity
         self.native_setups = 0
@@ -179,7 +181,7 @@ class SolvePath:
         """
         if not self.reuse_active_sets and step is None:
             return None
-        remembered = self._active_sets.get(structure_key(qp))
+        remembered = self._active_sets.get(qp.structure())
         if remembered is None or not (self.reuse_active_sets or remembered.step == step):
             return None
         reused = reuse_active_set(qp, remembered.active, remembered.x, remembered.eq_dual,
@@ -196,12 +198,22 @@ class SolvePath:
         if not self.reuse_active_sets:
             for other in [key for key, kept in self._active_sets.items() if kept.step != step]:
                 del self._active_sets[other]
-        key = structure_key(qp)
+        key = qp.structure()
         self._active_sets[key] = _KeptActiveSet(polished.active, polished.x, polished.eq_dual,
                                                 polished.ineq_dual, step)
         self._active_sets.move_to_end(key)
         if len(self._active_sets) > self.capacity:
             self._active_sets.popitem(last=False)
+
+    @property
+    def compiled(self) -> CompiledQPCache:
+        """The compiled problems by structure (made on first use: it imports cvxpy)."""
+        if self._compiled is None:
+            from .cvxpy_forms import CompiledQPCache
+
+            self._compiled = CompiledQPCache(capacity=self.capacity,
+                                             compile_after=self._compile_after)
+        return self._compiled
 
     def solve(self, qp: StepQP, spec: SolverSpec, options: dict[str, object],
               warm: WarmStart | None, accept: Accept | None = None) -> tuple[Answer, str]:
@@ -212,19 +224,21 @@ class SolvePath:
         """
         if spec.adapter is not None and (self.name == NATIVE or spec.native_only):
             return self._native(qp, spec, options, warm, accept), NATIVE
+        from .cvxpy_forms import declare, solve_declared
+
         if self.name == DECLARED:
             declared, path = declare(qp), DECLARED
         else:
             declared, path = self.compiled.prepare(qp)
-        return _solve_with_cvxpy(qp, declared, spec.cvxpy_name,
-                                 {"warm_start": False, **options}), path
+        return solve_declared(qp, declared, spec.cvxpy_name,
+                              {"warm_start": False, **options}), path
 
     def _native(self, qp: StepQP, spec: SolverSpec, options: dict[str, object],
                 warm: WarmStart | None, accept: Accept | None) -> Answer:
         assert spec.adapter is not None
         if self.warm_starts is None:
             options = {**options, "warm_start": False}
-        key = (spec.name, tuple(sorted(options.items())), structure_key(qp))
+        key = (spec.name, tuple(sorted(options.items())), qp.structure())
         data = NativeData(qp)
         adapter = self._adapters.get(key)
         if adapter is not None:
@@ -245,9 +259,10 @@ class SolvePath:
 
     def counts(self) -> dict[str, int]:
         """What the path did so far, for a trajectory's ``info`` (:data:`PATH_COUNTS`)."""
-        return {"compiled_structures": self.compiled.compiled,
-                "steps_reusing_a_compiled_structure": self.compiled.reused,
-                "canonicalised_qps": self.compiled.canonicalised,
+        compiled = self._compiled
+        return {"compiled_structures": 0 if compiled is None else compiled.compiled,
+                "steps_reusing_a_compiled_structure": 0 if compiled is None else compiled.reused,
+                "canonicalised_qps": 0 if compiled is None else compiled.canonicalised,
                 "native_setups": self.native_setups, "native_updates": self.native_updates,
                 "reused_active_sets": self.reused_active_sets}
 
@@ -305,7 +320,7 @@ def solve_step_qp(qp: StepQP, solver: str = "CLARABEL", tol: str | float = "defa
     else:
         residuals = kkt_residuals(qp, x, eq_dual, ineq_dual)
     verified = bool(residuals.worst() <= VERIFY_FACTOR * eps)
-    if answer.status == cp.OPTIMAL_INACCURATE and not verified:
+    if answer.status == OPTIMAL_INACCURATE and not verified:
         raise StepFailure(step, spec.name, answer.status,
                           f"residuals {residuals.worst():.2e} above {VERIFY_FACTOR * eps:.1e}")
     if warm_starts is not None and verified:
@@ -334,18 +349,19 @@ def _solve_or_reuse(seen: StepQP, spec: SolverSpec, eps: float, path: SolvePath,
     reused = path.reuse_active_set(seen, step if repeated else None) if polishing else None
     if reused is not None:
         return Answer(x=reused.x, eq_dual=reused.eq_dual, ineq_dual=reused.ineq_dual,
-                      status=cp.OPTIMAL, reported_time=0.0, iterations=0,
+                      status=OPTIMAL, reported_time=0.0, iterations=0,
                       native_time=0.0), REUSED, reused
     staged: list[Polish] = []
     try:
         warm = None if warm_starts is None else warm_starts.guess(spec.name, seen, scale)
         answer, taken = path.solve(seen, spec, spec.options(eps), warm,
                                    _stage_check(seen, eps, staged) if polishing else None)
-    except cp.error.SolverError as exc:
-        raise StepFailure(step, spec.name, "solver_error", str(exc).splitlines()[0]) from exc
     except Exception as exc:  # a solver library raising anything is a failed step
+        if _is_cvxpy_solver_error(exc):
+            raise StepFailure(step, spec.name, "solver_error",
+                              str(exc).splitlines()[0]) from exc
         raise StepFailure(step, spec.name, "exception", f"{type(exc).__name__}: {exc}") from exc
-    return answer, taken, staged[-1] if staged and answer.status == cp.OPTIMAL else None
+    return answer, taken, staged[-1] if staged and answer.status == OPTIMAL else None
 
 
 def _stage_check(seen: StepQP, eps: float, accepted: list[Polish]) -> Accept:
@@ -386,42 +402,10 @@ def _checked_answer(answer: Answer, step: int, solver: str
             np.asarray(answer.ineq_dual, dtype=np.float64))
 
 
-def _solve_with_cvxpy(qp: StepQP, declared: DeclaredQP, solver: str,
-                      options: dict[str, object]) -> Answer:
-    """Solve a cvxpy ``declared`` problem holding ``qp`` with cvxpy's ``solver``."""
-    with warnings.catch_warnings():
-        # cvxpy reads its own sparse parameters densely while applying them
-        warnings.filterwarnings("ignore", "Reading from a sparse CVXPY expression",
-                                RuntimeWarning)
-        # an inaccurate optimum is judged by the residual check, not by a warning
-        warnings.filterwarnings("ignore", "Solution may be inaccurate", UserWarning)
-        # warm_start=False (in options): cvxpy's in-place OSQP update can be refused by
-        # OSQP ("Problem data validation") and then silently re-solves the old data.
-        declared.problem.solve(solver=solver, **options)
-    stats = declared.problem.solver_stats
-    value = declared.variable.value
-    ineq_dual = _dual(declared.ineq_constraint, qp.n_inequalities)
-    if declared.upper_constraint is not None:  # z = z_lower - z_upper
-        ineq_dual = ineq_dual.copy()
-        ineq_dual[qp.upper_rows] -= _dual(declared.upper_constraint, qp.upper_rows.size)
-    return Answer(
-        status=str(declared.problem.status),
-        x=None if value is None else np.asarray(value, dtype=np.float64),
-        eq_dual=_dual(declared.eq_constraint, qp.n_equalities),
-        ineq_dual=ineq_dual,
-        reported_time=(stats.solve_time if stats is not None and stats.solve_time is not None
-                       else np.nan),
-        iterations=stats.num_iters if stats is not None and stats.num_iters is not None else -1,
-    )
-
-
-def _dual(constraint: cp.Constraint | None, size: int) -> FloatArray:
-    if constraint is None or size == 0:
-        return np.zeros(0)
-    value = constraint.dual_value
-    if value is None:
-        return np.full(size, np.nan)
-    return np.atleast_1d(np.asarray(value, dtype=np.float64))
+def _is_cvxpy_solver_error(exc: Exception) -> bool:
+    """Whether ``exc`` is cvxpy's ``SolverError`` (none can be where cvxpy is not imported)."""
+    cvxpy = sys.modules.get("cvxpy")
+    return cvxpy is not None and isinstance(exc, cvxpy.error.SolverError)
 
 
 def _checked_scales(qp: StepQP, step: int, solver: str) -> tuple[float, float]:

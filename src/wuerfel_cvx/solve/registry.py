@@ -11,6 +11,7 @@ tight setting used by the tests and as the reference.
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import os
 import sys
@@ -19,7 +20,6 @@ from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
 
-import cvxpy as cp
 import numpy as np
 
 from ..errors import InputError
@@ -223,25 +223,38 @@ SOLVERS: dict[str, SolverSpec] = {
 @cache
 def _installed_in_cvxpy() -> frozenset[str]:
     """Solvers cvxpy reports installed; asked once, as cvxpy probes every solver each call."""
+    import cvxpy as cp
+
     return frozenset(cp.installed_solvers())
+
+
+@cache
+def _installed(name: str) -> bool:
+    """Whether the solver ``name`` (a registry key) is installed.
+
+    A solver with an adapter: its module (named as its distribution, :attr:`SolverSpec.package`)
+    can be found, as cvxpy finds it, without importing cvxpy (which takes a second: the
+    ``native`` path never needs it); any other: cvxpy lists it.
+    """
+    spec = SOLVERS[name]
+    if spec.adapter is not None:
+        return importlib.util.find_spec(spec.package) is not None
+    return spec.cvxpy_name in _installed_in_cvxpy()
 
 
 def available_solvers() -> list[str]:
     """Registry names of the solvers installed in this environment."""
-    installed = _installed_in_cvxpy()
-    return [name for name, spec in SOLVERS.items() if spec.cvxpy_name in installed]
+    return [name for name in SOLVERS if _installed(name)]
 
 
 def get_solver(name: str) -> SolverSpec:
     """A solver by name, case-insensitive; :class:`InputError` lists the available ones."""
     key = name.strip().upper()
-    if key in SOLVERS and SOLVERS[key].cvxpy_name in _installed_in_cvxpy():
+    if key in SOLVERS and _installed(key):
         return SOLVERS[key]
-    available = available_solvers()
-    if key not in SOLVERS or key not in available:
-        why = "not installed" if key in SOLVERS else "unknown solver"
-        raise InputError(f"{why} '{name}' (available: {', '.join(available)})", field="solver")
-    return SOLVERS[key]
+    why = "not installed" if key in SOLVERS else "unknown solver"
+    raise InputError(f"{why} '{name}' (available: {', '.join(available_solvers())})",
+                     field="solver")
 
 
 def tolerance_value(tol: str | float) -> float:

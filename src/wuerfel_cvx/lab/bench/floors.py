@@ -47,9 +47,8 @@ from ...formulations import StepQP
 from ...scenes.scene import Scene
 from ...settings import Settings
 from ...solve.adapters import Accept, Answer
-from ...solve.cvxpy_forms import NATIVE
 from ...solve.kkt import ActiveSet, reduced_kkt
-from ...solve.paths import SolvePath
+from ...solve.paths import NATIVE, SolvePath
 from ...solve.registry import SolverSpec
 from ...solve.warm_start import WarmStart
 from ...step.simulation import Simulation

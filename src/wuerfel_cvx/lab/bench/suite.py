@@ -53,8 +53,7 @@ from typing import Any
 from ...errors import InputError
 from ...formulations import DEFAULT_FORMULATION, FRICTION_MODELS
 from ...settings import Settings
-from ...solve.cvxpy_forms import NATIVE
-from ...solve.paths import SOLVE_PATHS
+from ...solve.paths import NATIVE, SOLVE_PATHS
 from ...step.sleep import SleepSettings
 from ..peers import PEER_ENGINES
 

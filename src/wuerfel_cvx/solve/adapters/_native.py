@@ -32,10 +32,11 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from ..._numba import compiled
 from ..._sparse import canonical_csc
 from ...formulations.qp import StepQP
 from ...scenes.geometry import FloatArray
-from .. import residual_kernel
+from ..residual_kernel import csr_product
 from ..warm_start import WarmStart
 
 
@@ -163,38 +164,38 @@ class NativeData:
         """Whether ``P = 2 W`` alone: fixed by the structure (its weights are part of it)."""
         return self.qp.cost_factor is None or not self.qp.n_cost_rows
 
-    @cached_property
-    def _at_target(self) -> FloatArray:
-        return _product(self.qp.ineq_matrix, self.qp.target)
-
     @property
     def target(self) -> FloatArray:
         """``t``: the unknowns are ``x = t + d``."""
         return self.qp.target
 
-    @cached_property
+    def _bounds(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``(e - E t, h - G t, u - G t)``, together on first use (:func:`_deviation_bounds`)."""
+        bounds: tuple[FloatArray, FloatArray, FloatArray] | None = self.__dict__.get("_bounds_")
+        if bounds is None:
+            qp = self.qp
+            eq, ineq = qp.eq_matrix, qp.ineq_matrix
+            bounds = _deviation_bounds(
+                eq.data, eq.indices, eq.indptr, qp.eq_rhs, ineq.data, ineq.indices,
+                ineq.indptr, qp.ineq_rhs, _NO_BOUNDS if qp.ineq_upper is None else qp.ineq_upper,
+                qp.upper_rows, np.asarray(qp.target, dtype=np.float64))
+            self.__dict__["_bounds_"] = bounds
+        return bounds
+
+    @property
     def eq_rhs(self) -> FloatArray:
         """``e - E t``."""
-        if not self.qp.n_equalities:
-            return np.zeros(0)
-        return np.asarray(self.qp.eq_rhs - _product(self.qp.eq_matrix, self.qp.target),
-                          dtype=np.float64)
+        return self._bounds()[0]
 
-    @cached_property
+    @property
     def lower(self) -> FloatArray:
         """``h - G t``."""
-        return np.asarray(self.qp.ineq_rhs - self._at_target, dtype=np.float64)
+        return self._bounds()[1]
 
-    @cached_property
+    @property
     def upper(self) -> FloatArray:
         """``u - G t`` per row of ``G`` (``+inf`` where there is none)."""
-        qp = self.qp
-        upper = np.full(qp.n_inequalities, np.inf)
-        if qp.upper_rows.size:
-            assert qp.ineq_upper is not None
-            bounded = qp.upper_rows
-            upper[bounded] = qp.ineq_upper[bounded] - self._at_target[bounded]
-        return upper
+        return self._bounds()[2]
 
     @property
     def linear(self) -> FloatArray:
@@ -218,10 +219,28 @@ class NativeData:
                           dtype=np.float64)
 
 
-def _product(rows: sp.csr_array, x: FloatArray) -> FloatArray:
-    """``A x`` (scipy's product, bit for bit, without its per-call checks)."""
-    return residual_kernel.csr_product(rows.data, rows.indices, rows.indptr,
-                                       np.asarray(x, dtype=np.float64))
+_NO_BOUNDS = np.zeros(0)
+"""The upper bounds handed to :func:`_deviation_bounds` for a QP without any."""
+
+
+@compiled
+def _deviation_bounds(eq_data: FloatArray, eq_indices: np.ndarray, eq_indptr: np.ndarray,
+                      eq_rhs: FloatArray, ineq_data: FloatArray, ineq_indices: np.ndarray,
+                      ineq_indptr: np.ndarray, ineq_rhs: FloatArray, ineq_upper: FloatArray,
+                      upper_rows: np.ndarray, target: FloatArray,
+                      ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``e - E t``, ``h - G t`` and ``u - G t`` (``+inf`` off ``upper_rows``), one call.
+
+    The products summed as scipy's (:func:`~wuerfel_cvx.solve.residual_kernel.csr_product`),
+    each difference one subtraction, as the NumPy expressions they replace.
+    """
+    eq = eq_rhs - csr_product(eq_data, eq_indices, eq_indptr, target)
+    at_target = csr_product(ineq_data, ineq_indices, ineq_indptr, target)
+    lower = ineq_rhs - at_target
+    upper = np.full(at_target.shape[0], np.inf)
+    for r in upper_rows:
+        upper[r] = ineq_upper[r] - at_target[r]
+    return eq, lower, upper
 
 
 RowBlock = tuple[sp.csr_array, float, "np.ndarray | None"]
