@@ -13,6 +13,9 @@ product), the largest magnitudes propagating NaN (as ``np.max``) and combined as
 magnitudes their scaling is chosen by) in one pass.
 :func:`guessed_rows` and :func:`repaired_rows` are the polish's guess of an answer's active
 set and its repair (:mod:`wuerfel_cvx.solve.kkt`), comparisons only, for any QP.
+:func:`attempt` is a polish attempt on the QPs of :func:`residuals` (reduced solve, repair,
+the solved point's residuals, as ``kkt._polished_on``), and :func:`first_polish` the
+polish's first steps on them (the check, the guess, the attempt) in one call.
 """
 
 from __future__ import annotations
