@@ -129,6 +129,59 @@ def test_the_polish_kernels_are_the_references_on_step_qps(scene: str, formulati
         _assert_one_call_solves_the_system(qp, active, (noisy_x, noisy_z), start)
 
 
+@pytest.mark.parametrize(("scene", "formulation", "steps"), CASES)
+def test_the_compiled_attempts_are_the_numpy_routes(scene: str, formulation: str, steps: int,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """A small common QP's polish is its NumPy route's bit for bit.
+
+    Compiled: the check, guess and attempts (``first_polish``, ``attempt``); at exact,
+    perturbed and wrong answers.
+    """
+    rng = np.random.default_rng(11)
+    cases = []
+    for qp, x, z in _answers(scene, formulation, steps)[::3]:
+        y = np.zeros(qp.n_equalities)
+        for size in (0.0, 1e-9, 1e-6, 1e-3):
+            cases.append((qp, x + rng.normal(scale=size, size=x.shape), y,
+                          z + rng.normal(scale=1e3 * size, size=z.shape)))
+    _assert_same_polishes(cases, monkeypatch)
+
+
+def test_the_compiled_attempts_are_the_numpy_routes_on_random_qps(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """As above, on random answers to random QPs with parallel rows: rejected ones too."""
+    _assert_same_polishes([_random_common_case(seed) for seed in range(60)], monkeypatch)
+
+
+def _random_common_case(seed: int) -> tuple[StepQP, np.ndarray, np.ndarray, np.ndarray]:
+    """A QP of four unknowns, one equality and 18 rows (six parallel to others), an answer."""
+    rng = np.random.default_rng(seed)
+    n, m = 4, 12
+    cyclic = sp.csr_array((np.ones(m), (np.arange(m), np.arange(m) % n)), shape=(m, n))
+    rows = sp.csr_array(sp.random_array((m, n), density=0.5, random_state=rng) + cyclic)
+    rows = sp.csr_array(sp.vstack([rows, -rows[:3], 2.0 * rows[3:6]]))
+    qp = declare_qp(rng.uniform(0.5, 2.0, n), rng.normal(size=n),
+                    sp.csr_array(rng.normal(size=(1, n))), rng.normal(size=1), rows,
+                    rng.normal(size=rows.shape[0]), Contacts.empty())
+    z = np.abs(rng.normal(size=rows.shape[0])) * (rng.random(rows.shape[0]) < 0.5)
+    return qp, rng.normal(size=n), rng.normal(size=1), z
+
+
+def _assert_same_polishes(cases: list[tuple[StepQP, np.ndarray, np.ndarray, np.ndarray]],
+                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """``polish`` of each case compiled (small common QPs) and by the NumPy route: equal."""
+    compiled = [kkt.polish(*case) for case in cases]
+    monkeypatch.setattr(kkt, "_small_common", lambda _: False)
+    for case, ours in zip(cases, compiled, strict=True):
+        theirs = kkt.polish(*case)
+        assert (ours.outcome, ours.reason) == (theirs.outcome, theirs.reason)
+        for field in ("x", "eq_dual", "ineq_dual"):
+            assert getattr(ours, field).tobytes() == getattr(theirs, field).tobytes()
+        assert np.array_equal(ours.active.lower, theirs.active.lower)
+        assert np.array_equal(ours.active.upper, theirs.active.upper)
+        assert dataclasses.astuple(ours.residuals) == dataclasses.astuple(theirs.residuals)
+
+
 def test_the_checks_scales_are_the_general_codes() -> None:
     """The compiled check's scales (common QPs) equal ``_scales``'s NumPy ones."""
     for qp, x, z in _answers("stack-5", "rigid", 30):

@@ -639,17 +639,15 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     of at most :data:`DENSE_UNKNOWNS` unknowns: where no guess from the answer is right), and
     if all fail, :data:`REJECTED` with the first attempt's reason.  The acceptance checks are
     the same for every attempt; an attempt runs only where the ones before it were rejected,
-    so a later one changes no polish an earlier one accepts.
+    so a later one changes no polish an earlier one accepts.  A small QP of the common kind
+    (:func:`_small_common`) has its check, guess and first attempt made by one compiled call
+    (:func:`~wuerfel_cvx.solve.residual_kernel.first_polish`).
     """
-    checked, scales = _checked(qp, x, eq_dual, ineq_dual)
-    residuals = checked if residuals is None else residuals
     answer = (x, eq_dual, ineq_dual)
-    active = guess_active_set(qp, x, ineq_dual, scales)
-    if checked.worst() <= EXACT_RESIDUAL:  # nothing for a polish to correct
-        return Polish(EXACT, "", x, eq_dual, ineq_dual, checked, active)
-    first = _polished_on(qp, active, answer, scales, residuals)
-    if first.outcome == POLISHED or first.reason == "singular":
+    checked, scales, active, first = _first_attempt(qp, answer, residuals)
+    if first.outcome in (EXACT, POLISHED) or first.reason == "singular":
         return first
+    residuals = checked if residuals is None else residuals
     strict = guess_active_set(qp, x, ineq_dual, scales, CLEAR_MARGIN)
     guesses = [active]
     if not _same(strict, active):
@@ -674,6 +672,76 @@ def polish(qp: StepQP, x: FloatArray, eq_dual: FloatArray, ineq_dual: FloatArray
     return first
 
 
+def _first_attempt(qp: StepQP, answer: tuple[FloatArray, FloatArray, FloatArray],
+                   residuals: Residuals | None) -> tuple[Residuals, _Scales, ActiveSet, Polish]:
+    """The answer's check and scales, the active set guessed from it, and the first polish.
+
+    The polish is :data:`EXACT` (the answer itself) if the answer's residuals are all at
+    most :data:`EXACT_RESIDUAL`, else :func:`_polished_on`'s from the guess, judged against
+    ``residuals`` (the check's if ``None``).
+    """
+    x, eq_dual, ineq_dual = answer
+    if _small_common(qp):
+        eq, ineq = qp.eq_matrix, qp.ineq_matrix
+        check, lower, upper, attempted = residual_kernel.first_polish(
+            qp.weights, qp.target, np.asarray(x, dtype=np.float64), eq.data, eq.indices,
+            eq.indptr, qp.eq_rhs, np.asarray(eq_dual, dtype=np.float64), ineq.data,
+            ineq.indices, ineq.indptr, qp.ineq_rhs, np.asarray(ineq_dual, dtype=np.float64),
+            EXACT_RESIDUAL, REGULARISATION, REFINEMENTS, REPAIRS, ROUND_OFF)
+        checked, scales = Residuals(*check[:3]), _Scales(*check[3:])
+        active = ActiveSet(lower=lower, upper=upper)
+        if attempted[0] == residual_kernel.EXACT:
+            return checked, scales, active, Polish(EXACT, "", *answer, checked, active)
+        reference = checked if residuals is None else residuals
+        return checked, scales, active, _judged(answer, reference, attempted)
+    checked, scales = _checked(qp, x, eq_dual, ineq_dual)
+    active = guess_active_set(qp, x, ineq_dual, scales)
+    if checked.worst() <= EXACT_RESIDUAL:  # nothing for a polish to correct
+        return checked, scales, active, Polish(EXACT, "", *answer, checked, active)
+    reference = checked if residuals is None else residuals
+    return checked, scales, active, _polished_on(qp, active, answer, scales, reference)
+
+
+def _small_common(qp: StepQP) -> bool:
+    """Whether ``qp`` is polished by the compiled attempts.
+
+    The compiled check's QPs (no coupling cost, upper bounds or linear cost) below
+    :data:`~wuerfel_cvx._sparse.DISSECTION_MIN_UNKNOWNS` unknowns.
+    """
+    return (qp.cost_factor is None and qp.ineq_upper is None and qp.linear is None
+            and qp.n_variables < DISSECTION_MIN_UNKNOWNS)
+
+
+def _judged(answer: tuple[FloatArray, FloatArray, FloatArray], residuals: Residuals,
+            attempted: residual_kernel.Attempted) -> Polish:
+    """The polish of a compiled attempt that ended as ``attempted``.
+
+    ``answer`` and its ``residuals`` as for :func:`_polished_on`; ``attempted``:
+    :func:`~wuerfel_cvx.solve.residual_kernel.attempt`'s results.
+    """
+    stage, lower, upper, x_new, y_new, z_new, primal, dual, complementarity = attempted
+    active = ActiveSet(lower=lower, upper=upper)
+    if stage == residual_kernel.SINGULAR:
+        return _rejected("singular", *answer, residuals, active)
+    if stage == residual_kernel.UNREPAIRED:
+        return _rejected("active set", *answer, residuals, active)
+    return _accepted(answer, residuals, active, (x_new, y_new, z_new),
+                     Residuals(primal, dual, complementarity))
+
+
+def _accepted(answer: tuple[FloatArray, FloatArray, FloatArray], residuals: Residuals,
+              active: ActiveSet, point: tuple[FloatArray, FloatArray, FloatArray],
+              polished: Residuals) -> Polish:
+    """``point`` as :data:`POLISHED`, or the answer rejected as ``worse``.
+
+    ``point`` is feasible and sign-consistent on ``active`` (its repair changed nothing),
+    with residuals ``polished``; it is rejected if they exceed the answer's ``residuals``.
+    """
+    if not polished.worst() <= max(residuals.worst(), ROUND_OFF):
+        return _rejected("worse", *answer, residuals, active)
+    return Polish(POLISHED, "", *point, polished, active)
+
+
 def _same(active: ActiveSet, other: ActiveSet) -> bool:
     return bool(np.array_equal(active.lower, other.lower)
                 and np.array_equal(active.upper, other.upper))
@@ -690,6 +758,14 @@ def _polished_on(qp: StepQP, active: ActiveSet,
     given.  With ``repairs`` given, an active set met a second time ends the attempt.
     """
     x, eq_dual, ineq_dual = answer
+    if repairs is None and _small_common(qp):  # the compiled attempt
+        eq, ineq = qp.eq_matrix, qp.ineq_matrix
+        return _judged(answer, residuals, residual_kernel.attempt(
+            qp.weights, qp.target, eq.data, eq.indices, eq.indptr, qp.eq_rhs, ineq.data,
+            ineq.indices, ineq.indptr, qp.ineq_rhs, active.lower, active.upper,
+            np.asarray(x, dtype=np.float64), np.asarray(eq_dual, dtype=np.float64),
+            np.asarray(ineq_dual, dtype=np.float64), scales.primal, scales.dual,
+            REGULARISATION, REFINEMENTS, REPAIRS, ROUND_OFF))
     x_new, y_new, z_new = x, eq_dual, ineq_dual if start is None else start
     seen: set[bytes] = set()
     order = None if repairs is None else _unknowns_order(qp, active)
@@ -710,10 +786,8 @@ def _polished_on(qp: StepQP, active: ActiveSet,
         active = repaired
     else:
         return _rejected("active set", x, eq_dual, ineq_dual, residuals, active)
-    polished = kkt_residuals(qp, x_new, y_new, z_new)
-    if not polished.worst() <= max(residuals.worst(), ROUND_OFF):
-        return _rejected("worse", x, eq_dual, ineq_dual, residuals, active)
-    return Polish(POLISHED, "", x_new, y_new, z_new, polished, active)
+    return _accepted(answer, residuals, active, (x_new, y_new, z_new),
+                     kkt_residuals(qp, x_new, y_new, z_new))
 
 
 def _unknowns_order(qp: StepQP, active: ActiveSet) -> np.ndarray | None:

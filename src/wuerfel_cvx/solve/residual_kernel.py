@@ -13,6 +13,9 @@ product), the largest magnitudes propagating NaN (as ``np.max``) and combined as
 magnitudes their scaling is chosen by) in one pass.
 :func:`guessed_rows` and :func:`repaired_rows` are the polish's guess of an answer's active
 set and its repair (:mod:`wuerfel_cvx.solve.kkt`), comparisons only, for any QP.
+:func:`attempt` is a polish attempt on the QPs of :func:`residuals` (reduced solve, repair,
+the solved point's residuals, as ``kkt._polished_on``), and :func:`first_polish` the
+polish's first steps on them (the check, the guess, the attempt) in one call.
 """
 
 from __future__ import annotations
@@ -22,9 +25,11 @@ import math
 import numpy as np
 
 from .._numba import compiled
+from .._sparse import reduced_solution
 from ..scenes.geometry import FloatArray
 
-__all__ = ["csr_product", "data_summary", "guessed_rows", "repaired_rows", "residuals"]
+__all__ = ["attempt", "csr_product", "data_summary", "first_polish", "guessed_rows",
+           "repaired_rows", "residuals"]
 
 
 @compiled
@@ -95,6 +100,19 @@ def residuals(weights: FloatArray, target: FloatArray, x: FloatArray,
     :func:`wuerfel_cvx.solve.kkt.kkt_residuals` defines them (dimensionless), followed by
     the primal and dual scales they are relative to (the polish's, ``_scales``).
     """
+    return _measured(weights, target, x, eq_data, eq_indices, eq_indptr, eq_rhs, eq_dual,
+                     ineq_data, ineq_indices, ineq_indptr, ineq_rhs, ineq_dual,
+                     csr_product(ineq_data, ineq_indices, ineq_indptr, x))
+
+
+@compiled
+def _measured(weights: FloatArray, target: FloatArray, x: FloatArray,
+              eq_data: FloatArray, eq_indices: np.ndarray, eq_indptr: np.ndarray,
+              eq_rhs: FloatArray, eq_dual: FloatArray,
+              ineq_data: FloatArray, ineq_indices: np.ndarray, ineq_indptr: np.ndarray,
+              ineq_rhs: FloatArray, ineq_dual: FloatArray, ineq_lhs: FloatArray
+              ) -> tuple[float, float, float, float, float]:
+    """:func:`residuals` with ``G x`` (``ineq_lhs``, :func:`csr_product`'s) given."""
     n = x.shape[0]
     gradient = np.empty(n)
     for k in range(n):
@@ -109,7 +127,6 @@ def residuals(weights: FloatArray, target: FloatArray, x: FloatArray,
     dual = _first_max(_largest(stationarity), _largest_negative(ineq_dual)) / dual_scale
 
     eq_lhs = csr_product(eq_data, eq_indices, eq_indptr, x)
-    ineq_lhs = csr_product(ineq_data, ineq_indices, ineq_indptr, x)
     eq_violation = eq_lhs - eq_rhs
     slack = ineq_lhs - ineq_rhs
     primal_scale = 1.0 + _first_max(_first_max(_first_max(_largest(eq_rhs), _largest(ineq_rhs)),
@@ -214,3 +231,90 @@ def repaired_rows(tight_lower: np.ndarray, tight_upper: np.ndarray, ineq_dual: F
             lower[r] = (lower[r] and not wrong_lower) or violated_lower
             upper[r] = (upper[r] and not wrong_upper) or violated_upper
     return changed, np.flatnonzero(lower).astype(np.int64), np.flatnonzero(upper).astype(np.int64)
+
+
+SOLVED, SINGULAR, UNREPAIRED, EXACT = 0, 1, 2, 3
+"""How :func:`attempt` and :func:`first_polish` end: a point solved on an active set its
+repair leaves as it is; a reduced system that did not factor to a finite point; corrections
+run out; the answer already exact (no solve)."""
+
+Attempted = tuple[int, np.ndarray, np.ndarray, FloatArray, FloatArray, FloatArray, float, float,
+                  float]
+"""What :func:`attempt` returns: the stage, the last active set's rows on their lower and
+upper bounds, the last point ``(x, y, z)`` and its relative residuals (primal, dual,
+complementarity; zeros unless :data:`SOLVED`)."""
+
+
+@compiled
+def attempt(weights: FloatArray, target: FloatArray, eq_data: FloatArray,
+            eq_indices: np.ndarray, eq_indptr: np.ndarray, eq_rhs: FloatArray,
+            ineq_data: FloatArray, ineq_indices: np.ndarray, ineq_indptr: np.ndarray,
+            ineq_rhs: FloatArray, lower: np.ndarray, upper: np.ndarray, x: FloatArray,
+            eq_dual: FloatArray, ineq_dual: FloatArray, primal_scale: float,
+            dual_scale: float, regularisation: float, sweeps: int, repairs: int,
+            round_off: float) -> Attempted:
+    """A polish attempt (``kkt._polished_on``) on the QP of :func:`residuals`, from a guess.
+
+    Solves the reduced system of the rows ``lower`` tight
+    (:func:`~wuerfel_cvx._sparse.reduced_solution`, the objective's Hessian ``2 w`` and
+    gradient at zero ``-2 w t``), refined from ``(x, y, z)``, corrects the rows
+    (:func:`repaired_rows`, tolerances ``round_off`` times the scales) and solves again, at
+    most ``repairs`` times.  Returns the stage (:data:`SOLVED`, :data:`SINGULAR`,
+    :data:`UNREPAIRED`), the last active set (lower, upper rows), the last point and, if
+    :data:`SOLVED`, its relative residuals (:func:`residuals`; else zeros).
+    """
+    n = weights.shape[0]
+    h_data, gradient_at_zero = np.empty(n), np.empty(n)
+    for k in range(n):
+        h_data[k] = 2.0 * weights[k]
+        gradient_at_zero[k] = -2.0 * weights[k] * target[k]
+    h_ptr, h_rows, no_bounds = np.arange(n + 1), np.arange(n), np.zeros(0)
+    for _ in range(repairs + 1):
+        x, eq_dual, ineq_dual, finite = reduced_solution(
+            h_ptr, h_rows, h_data, gradient_at_zero, eq_data, eq_indices, eq_indptr, eq_rhs,
+            ineq_data, ineq_indices, ineq_indptr, ineq_rhs, no_bounds, lower, upper, x,
+            eq_dual, ineq_dual, regularisation, sweeps)
+        if not finite:
+            return SINGULAR, lower, upper, x, eq_dual, ineq_dual, 0.0, 0.0, 0.0
+        lhs = csr_product(ineq_data, ineq_indices, ineq_indptr, x)
+        changed, new_lower, new_upper = repaired_rows(
+            lower, upper, ineq_dual, lhs, ineq_rhs, no_bounds, round_off * dual_scale,
+            round_off * primal_scale)
+        if not changed:
+            primal, dual, complementarity, _, _ = _measured(
+                weights, target, x, eq_data, eq_indices, eq_indptr, eq_rhs, eq_dual,
+                ineq_data, ineq_indices, ineq_indptr, ineq_rhs, ineq_dual, lhs)
+            return SOLVED, lower, upper, x, eq_dual, ineq_dual, primal, dual, complementarity
+        lower, upper = new_lower, new_upper
+    return UNREPAIRED, lower, upper, x, eq_dual, ineq_dual, 0.0, 0.0, 0.0
+
+
+@compiled
+def first_polish(weights: FloatArray, target: FloatArray, x: FloatArray, eq_data: FloatArray,
+                 eq_indices: np.ndarray, eq_indptr: np.ndarray, eq_rhs: FloatArray,
+                 eq_dual: FloatArray, ineq_data: FloatArray, ineq_indices: np.ndarray,
+                 ineq_indptr: np.ndarray, ineq_rhs: FloatArray, ineq_dual: FloatArray,
+                 exact_residual: float, regularisation: float, sweeps: int, repairs: int,
+                 round_off: float) -> tuple[tuple[float, float, float, float, float],
+                                            np.ndarray, np.ndarray, Attempted]:
+    """``kkt.polish``'s first steps on the QP of :func:`residuals`, in one call.
+
+    The answer's check (:func:`residuals`: residuals and scales), the active set guessed
+    from it (:func:`guessed_rows`, margin 1), and unless every residual is at most
+    ``exact_residual`` (stage :data:`EXACT`, the guess, empty points, zeros) the attempt
+    from the guess (:func:`attempt`).  ``G x`` of each point is computed once.  Returns the
+    check, the guess (lower, upper rows) and :func:`attempt`'s results.
+    """
+    lhs = csr_product(ineq_data, ineq_indices, ineq_indptr, x)
+    checked = _measured(weights, target, x, eq_data, eq_indices, eq_indptr, eq_rhs, eq_dual,
+                        ineq_data, ineq_indices, ineq_indptr, ineq_rhs, ineq_dual, lhs)
+    primal, dual, complementarity, primal_scale, dual_scale = checked
+    lower, upper = guessed_rows(ineq_dual, dual_scale, lhs, ineq_rhs, np.zeros(0),
+                                primal_scale)
+    if primal <= exact_residual and dual <= exact_residual and complementarity <= exact_residual:
+        empty = np.empty(0)
+        return checked, lower, upper, (EXACT, lower, upper, empty, empty, empty, 0.0, 0.0, 0.0)
+    return checked, lower, upper, attempt(
+        weights, target, eq_data, eq_indices, eq_indptr, eq_rhs, ineq_data, ineq_indices,
+        ineq_indptr, ineq_rhs, lower, upper, x, eq_dual, ineq_dual, primal_scale, dual_scale,
+        regularisation, sweeps, repairs, round_off)
