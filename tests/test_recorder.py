@@ -76,7 +76,7 @@ def _typed(rows: list[dict[str, Any]], dtypes: dict[str, str]) -> pd.DataFrame |
 
 def _inferred(rows: list[dict[str, Any]], dtypes: dict[str, str]) -> pd.DataFrame:
     points, velocities = _states(len(rows))
-    return inferred_metrics(rows, points, velocities, _model(), dtypes)
+    return inferred_metrics(rows, state_metrics(_model(), points[1:], velocities[1:]), dtypes)
 
 
 def _assert_identical(typed: pd.DataFrame, inferred: pd.DataFrame) -> None:
@@ -143,8 +143,9 @@ def test_a_run_records_the_frame_pandas_would_infer(scene: str, options: dict[st
     for _ in range(25):
         simulation.step()
     run = simulation.trajectory()
-    inferred = inferred_metrics(simulation.recorder.rows, run.points, run.velocities,
-                                simulation.model, dict(NULLABLE_COLUMNS))
+    inferred = inferred_metrics(simulation.recorder.rows,
+                                state_metrics(simulation.model, run.points[1:],
+                                              run.velocities[1:]), dict(NULLABLE_COLUMNS))
     _assert_identical(run.metrics, inferred)
 
 

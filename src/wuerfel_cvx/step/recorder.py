@@ -148,30 +148,27 @@ class TrajectoryRecorder:
         points = np.array(self.points[:states])
         velocities = np.array(self.velocities[:states])
         dtypes = {**NULLABLE_COLUMNS, **self.column_dtypes}
-        metrics = None
-        if self.rows:  # each step's row: the state after it
-            computed = state_metrics(self.model, points[1:], velocities[1:])
-            metrics = typed_metrics(self.rows[:states - 1], computed, dtypes)
+        # each step's row: the state after it
+        computed = state_metrics(self.model, points[1:], velocities[1:]) if self.rows else {}
+        metrics = typed_metrics(self.rows, computed, dtypes) if self.rows else None
         if metrics is None:
-            metrics = inferred_metrics(self.rows[:states - 1], points, velocities, self.model,
-                                       dtypes)
+            metrics = inferred_metrics(self.rows, computed, dtypes)
         return Trajectory(times=np.array(self.times[:states]), points=points,
                           velocities=velocities, metrics=metrics,
                           table_points=self.model.table_points.copy(), info=dict(self.info))
 
 
-def inferred_metrics(rows: list[dict[str, Any]], points: FloatArray, velocities: FloatArray,
-                     model: Model, dtypes: dict[str, str]) -> pd.DataFrame:
+def inferred_metrics(rows: list[dict[str, Any]], computed: dict[str, FloatArray],
+                     dtypes: dict[str, str]) -> pd.DataFrame:
     """The metrics frame of ``rows``, each column's dtype as pandas infers it from the rows.
 
-    The state columns computed from ``points`` and ``velocities`` ``(T, 4 n, 2)`` (m, m/s),
-    the state before the first row first; ``dtypes`` cast the columns they name.  The
-    reference :func:`typed_metrics` agrees with, and the frame of a run without rows.
+    ``computed``: the :data:`~wuerfel_cvx.step.metrics.STATE_COLUMNS` of the rows' states
+    (none without rows); ``dtypes`` cast the columns they name.  The reference that
+    :func:`typed_metrics` agrees with, and the frame of a run without rows.
     """
     metrics = pd.DataFrame(rows, columns=list(METRIC_COLUMNS))
-    if rows:
-        for column, values in state_metrics(model, points[1:], velocities[1:]).items():
-            metrics[column] = values
+    for column, values in computed.items():
+        metrics[column] = values
     for column, dtype in dtypes.items():
         # column by column: the frame's astype copies every column
         metrics[column] = metrics[column].astype(pandas_dtype(dtype))
