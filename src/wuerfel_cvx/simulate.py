@@ -98,8 +98,8 @@ def simulate(
     simulation = Simulation(scene, dt, solver, formulation, tol, settings=settings, **options)
     with _noticing_ctrl_c() as ctrl_c:
         try:
-            for _ in tqdm(range(int(steps)), disable=not progress, unit="step",
-                          desc=scene.name):
+            for _ in (tqdm(range(steps), unit="step", desc=scene.name) if progress
+                      else range(steps)):
                 record = simulation.step()
                 if ctrl_c.is_set():  # a solver took the Ctrl-C and still answered
                     raise KeyboardInterrupt
