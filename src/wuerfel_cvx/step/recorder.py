@@ -8,12 +8,10 @@ same functions of :mod:`wuerfel_cvx.step.metrics`, and the same ``info``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from operator import itemgetter
 from typing import Any
 
 import numpy as np
 import pandas as pd
-from pandas.api.extensions import ExtensionDtype
 from pandas.api.types import pandas_dtype
 
 from ..formulations import Formulation, get_formulation
@@ -147,98 +145,13 @@ class TrajectoryRecorder:
         states = len(self.rows) + 1
         points = np.array(self.points[:states])
         velocities = np.array(self.velocities[:states])
-        dtypes = {**NULLABLE_COLUMNS, **self.column_dtypes}
-        # each step's row: the state after it
-        computed = state_metrics(self.model, points[1:], velocities[1:]) if self.rows else {}
-        metrics = typed_metrics(self.rows, computed, dtypes) if self.rows else None
-        if metrics is None:
-            metrics = inferred_metrics(self.rows, computed, dtypes)
+        metrics = pd.DataFrame(self.rows, columns=list(METRIC_COLUMNS))
+        if self.rows:  # each step's row: the state after it
+            for column, values in state_metrics(self.model, points[1:], velocities[1:]).items():
+                metrics[column] = values
+        for column, dtype in {**NULLABLE_COLUMNS, **self.column_dtypes}.items():
+            # column by column: the frame's astype copies every column
+            metrics[column] = metrics[column].astype(pandas_dtype(dtype))
         return Trajectory(times=np.array(self.times[:states]), points=points,
                           velocities=velocities, metrics=metrics,
                           table_points=self.model.table_points.copy(), info=dict(self.info))
-
-
-def inferred_metrics(rows: list[dict[str, Any]], computed: dict[str, FloatArray],
-                     dtypes: dict[str, str]) -> pd.DataFrame:
-    """The metrics frame of ``rows``, each column's dtype as pandas infers it from the rows.
-
-    ``computed``: the :data:`~wuerfel_cvx.step.metrics.STATE_COLUMNS` of the rows' states
-    (none without rows); ``dtypes`` cast the columns they name.  The reference that
-    :func:`typed_metrics` agrees with, and the frame of a run without rows.
-    """
-    metrics = pd.DataFrame(rows, columns=list(METRIC_COLUMNS))
-    for column, values in computed.items():
-        metrics[column] = values
-    for column, dtype in dtypes.items():
-        # column by column: the frame's astype copies every column
-        metrics[column] = metrics[column].astype(pandas_dtype(dtype))
-    return metrics
-
-
-def typed_metrics(rows: list[dict[str, Any]], computed: dict[str, FloatArray],
-                  dtypes: dict[str, str]) -> pd.DataFrame | None:
-    """The frame of :func:`inferred_metrics`, built column by column with known dtypes.
-
-    ``computed``: the :data:`~wuerfel_cvx.step.metrics.STATE_COLUMNS` of the rows' states.
-    Each column is made from its values in one call whose dtype is what pandas infers
-    from values of those types (:func:`_typed_column`), then cast to its ``dtypes`` entry
-    as pandas casts it; ``None`` when a column holds values of other types or a ``dtypes``
-    entry is not an extension dtype (then :func:`inferred_metrics` builds the frame).  A
-    row without a column holds NaN there, as in the frame pandas makes of such rows.
-    """
-    casts = {name: pandas_dtype(dtype) for name, dtype in dtypes.items()}
-    if not all(isinstance(dtype, ExtensionDtype) for dtype in casts.values()):
-        return None
-    strings = pandas_dtype(str)  # pandas' dtype for inferred strings (else a NumPy one)
-    names = [name for name in METRIC_COLUMNS if name not in computed]
-    try:
-        table = list(zip(*map(itemgetter(*names), rows), strict=True))
-    except KeyError:  # a row without some columns (a peer's): NaN, as pandas fills them
-        table = list(zip(*([row.get(name, np.nan) for name in names] for row in rows),
-                         strict=True))
-    columns: dict[str, Any] = dict(computed)
-    for name, values in zip(names, table, strict=True):
-        column = _typed_column(values, casts.get(name), strings)
-        if column is None:
-            return None
-        columns[name] = column
-    return pd.DataFrame({name: columns[name] for name in METRIC_COLUMNS})
-
-
-_FLOATS = frozenset({float, np.float64})
-_INTEGERS = frozenset({int, np.int64})
-_BOOLEANS = frozenset({bool, np.bool_})
-_STRINGS = frozenset({str})
-_MISSING = type(pd.NA)
-
-
-def _typed_column(values: tuple[Any, ...], cast: Any, strings: Any) -> Any:
-    """One metrics column of ``values`` (one a row): an array, or ``None`` if not typed here.
-
-    The dtype is pandas' inference from a column of such values: float64 for floats,
-    int64 for integers (``None`` past its range), bool for booleans, ``strings`` for
-    strings (pandas' string dtype; ``None`` if pandas leaves strings as objects) and
-    object for a column with ``pd.NA``.  An extension dtype ``cast`` casts the array as
-    ``Series.astype`` does (the dtype's ``_from_sequence`` of the array).
-    """
-    kinds = set(map(type, values))
-    array: Any = None
-    if kinds <= _FLOATS:
-        array = np.array(values, dtype=np.float64)
-    elif kinds <= _INTEGERS:
-        try:
-            array = np.array(values, dtype=np.int64)
-        except OverflowError:  # pandas infers uint64 or object
-            return None
-    elif kinds <= _BOOLEANS:
-        array = np.array(values, dtype=np.bool_)
-    elif kinds <= _STRINGS:
-        if cast is not None or not isinstance(strings, ExtensionDtype):
-            return None
-        array = np.array(values, dtype=object)
-        cast = strings  # pandas infers an object column of strings as its string dtype
-    elif _MISSING in kinds:  # pandas leaves a column with pd.NA as objects
-        array = np.array(values, dtype=object)
-    if array is None or cast is None:
-        return None if array is None or array.dtype == object else array
-    return pd.array(array, dtype=cast)
