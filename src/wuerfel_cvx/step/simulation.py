@@ -336,8 +336,10 @@ class Simulation:
         """Take ``state`` as the state after ``step``: search its contacts, record the row.
 
         The search is the next step's ``search`` stage; the metrics and the recording are
-        this step's ``record`` stage (``clock``'s last lap).
+        this step's ``record`` stage, before the search (the caller's ``row``, and a
+        gradient's tape) and after it (``clock``'s last lap).
         """
+        clock.lap("record")
         self.state = state
         self.step_index = step
         self.contacts, self._search_time = self._search(state)
