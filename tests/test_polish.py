@@ -193,6 +193,19 @@ def test_parallel_rows_are_merged_into_the_most_binding_one() -> None:
     np.testing.assert_allclose(start, [0.0, (z[:2] @ norms) / norms[1], 0.0], rtol=1e-15)
 
 
+def test_merging_takes_a_tight_row_without_stored_entries_last() -> None:
+    # a zero row stores no entry; last among the tight rows, its start is past the entries
+    # (np.add.reduceat raised IndexError there)
+    qp = _qp([1, 1], [0, 0], [[1, 1], [0, 0]], [2, 0])
+    x, z = np.array([1.0, 1.0]), np.array([2.0, 0.0])
+    _, scales = kkt._checked(qp, x, np.zeros(0), z)
+    tight = kkt.ActiveSet(lower=np.array([0, 1], dtype=np.int64),
+                          upper=np.zeros(0, dtype=np.int64))
+    merged, start = kkt.merge_parallel_rows(qp, tight, z, scales)
+    assert list(merged.lower) == [0, 1] and not merged.upper.size  # nothing parallel
+    np.testing.assert_array_equal(start, z)
+
+
 def test_a_wrong_guess_of_parallel_rows_is_polished_exactly(
         monkeypatch: pytest.MonkeyPatch) -> None:
     # both guesses keep the two rows tight; solved together, the first row's multiplier

@@ -345,8 +345,10 @@ def _kept_rows(matrix: sp.csr_array, bounds: FloatArray, tight: np.ndarray,
     offsets = np.cumsum(lengths) - lengths
     entries = np.repeat(starts - offsets, lengths) + np.arange(int(lengths.sum()))
     values = matrix.data[entries]
-    norms = np.sqrt(np.add.reduceat(values**2, offsets)) if values.size else np.ones(0)
-    norms[lengths == 0] = 1.0  # reduceat's value for an empty row is not its sum
+    norms = np.ones(tight.size)  # an empty row's (no entry stored): left 1
+    stored = lengths > 0  # reduceat over their starts sums each stored row's entries
+    if values.size:
+        norms[stored] = np.sqrt(np.add.reduceat(values**2, offsets[stored]))
     # + 0.0: rounding leaves -0.0, whose bytes are not 0.0's
     quantised = np.rint(values * np.repeat(PARALLEL_GRID / norms, lengths)) + 0.0
     levels = side * bounds[tight] / norms
