@@ -102,12 +102,9 @@ class _RigidRectangle:
         """Corner positions ``(4, 2)`` (m), counter-clockwise from the lower-left one."""
         return rectangle_corners(self.center, self.width, self.height, self.angle)
 
-    def corner_velocities(self, corners: FloatArray | None = None) -> FloatArray:
-        """Corner velocities ``(4, 2)`` (m/s) of the rigid motion: ``v + omega rot90(r)``.
-
-        ``corners``: the body's :meth:`corners` (m), when they are at hand.
-        """
-        offsets = (self.corners() if corners is None else corners) - np.asarray(self.center)
+    def corner_velocities(self) -> FloatArray:
+        """Corner velocities ``(4, 2)`` (m/s) of the rigid motion: ``v + omega rot90(r)``."""
+        offsets = self.corners() - np.asarray(self.center)
         return np.asarray(self.velocity) + self.angular_velocity * rot90(offsets)
 
 

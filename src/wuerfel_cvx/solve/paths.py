@@ -259,10 +259,11 @@ class SolvePath:
 
     def counts(self) -> dict[str, int]:
         """What the path did so far, for a trajectory's ``info`` (:data:`PATH_COUNTS`)."""
-        compiled = self._compiled
-        return {"compiled_structures": 0 if compiled is None else compiled.compiled,
-                "steps_reusing_a_compiled_structure": 0 if compiled is None else compiled.reused,
-                "canonicalised_qps": 0 if compiled is None else compiled.canonicalised,
+        cache = self._compiled  # none made: no QP went through cvxpy
+        compiled, reused, canonicalised = ((0, 0, 0) if cache is None else
+                                           (cache.compiled, cache.reused, cache.canonicalised))
+        return {"compiled_structures": compiled, "steps_reusing_a_compiled_structure": reused,
+                "canonicalised_qps": canonicalised,
                 "native_setups": self.native_setups, "native_updates": self.native_updates,
                 "reused_active_sets": self.reused_active_sets}
 

@@ -143,12 +143,5 @@ class State:
 
     @classmethod
     def initial(cls, scene: Scene) -> State:
-        """The scene's initial state.
-
-        :meth:`Scene.initial_points` and :meth:`Scene.initial_velocities`, each body's
-        corners computed once for both.
-        """
-        bodies = scene.bodies
-        corners = [body.corners() for body in bodies]
-        return cls(np.concatenate(corners), np.concatenate(
-            [body.corner_velocities(own) for body, own in zip(bodies, corners, strict=True)]))
+        """The scene's initial state."""
+        return cls(scene.initial_points(), scene.initial_velocities())

@@ -368,17 +368,13 @@ class Simulation:
 def _solved_row(qps: list[StepQP], solution: StepSolution, primary_status: str,
                 passes: int) -> dict[str, Any]:
     """The solver columns of a step's metrics row (its QPs summed; times but the stages')."""
-    variables = equalities = inequalities = contacts = 0
-    for qp in qps:  # one pass over the QPs for the four sums
-        variables += qp.n_variables
-        equalities += qp.n_equalities
-        inequalities += qp.n_inequalities
-        contacts += len(qp.contacts)
     return {
         "solver": solution.solver, "status": solution.status,
         "primary_status": primary_status, "verified": solution.verified,
-        "n_variables": variables, "n_equalities": equalities,
-        "n_inequalities": inequalities, "n_contacts": contacts,
+        "n_variables": sum(qp.n_variables for qp in qps),
+        "n_equalities": sum(qp.n_equalities for qp in qps),
+        "n_inequalities": sum(qp.n_inequalities for qp in qps),
+        "n_contacts": sum(len(qp.contacts) for qp in qps),
         "solver_time_s": solution.solver_time, "polish_time_s": solution.polish_time,
         "iterations": solution.iterations,
         "primal_residual": solution.residuals.primal, "dual_residual": solution.residuals.dual,

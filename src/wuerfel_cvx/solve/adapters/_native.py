@@ -145,6 +145,7 @@ class NativeData:
 
     def __init__(self, qp: StepQP):
         self.qp = qp
+        self._bounds: tuple[FloatArray, FloatArray, FloatArray] | None = None
 
     @cached_property
     def hessian(self) -> sp.csc_matrix:
@@ -169,33 +170,31 @@ class NativeData:
         """``t``: the unknowns are ``x = t + d``."""
         return self.qp.target
 
-    def _bounds(self) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """``(e - E t, h - G t, u - G t)``, together on first use (:func:`_deviation_bounds`)."""
-        bounds: tuple[FloatArray, FloatArray, FloatArray] | None = self.__dict__.get("_bounds_")
-        if bounds is None:
+    def bounds(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``(e - E t, h - G t, u - G t)``, made on first use (:func:`_deviation_bounds`)."""
+        if self._bounds is None:
             qp = self.qp
             eq, ineq = qp.eq_matrix, qp.ineq_matrix
-            bounds = _deviation_bounds(
+            self._bounds = _deviation_bounds(
                 eq.data, eq.indices, eq.indptr, qp.eq_rhs, ineq.data, ineq.indices,
                 ineq.indptr, qp.ineq_rhs, _NO_BOUNDS if qp.ineq_upper is None else qp.ineq_upper,
                 qp.upper_rows, np.asarray(qp.target, dtype=np.float64))
-            self.__dict__["_bounds_"] = bounds
-        return bounds
+        return self._bounds
 
     @property
     def eq_rhs(self) -> FloatArray:
         """``e - E t``."""
-        return self._bounds()[0]
+        return self.bounds()[0]
 
     @property
     def lower(self) -> FloatArray:
         """``h - G t``."""
-        return self._bounds()[1]
+        return self.bounds()[1]
 
     @property
     def upper(self) -> FloatArray:
         """``u - G t`` per row of ``G`` (``+inf`` where there is none)."""
-        return self._bounds()[2]
+        return self.bounds()[2]
 
     @property
     def linear(self) -> FloatArray:
